@@ -35,10 +35,25 @@ def test_anti_windup_recovers_at_once_when_error_changes_sign():
 
 
 def test_reset_where_only_touches_selected_elements():
-    state = PIDState(np.array([1.0, 2.0]), np.array([0.5, 0.5]))
+    state = PIDState(np.array([1.0, 2.0]), np.array([0.5, 0.5]), np.array([3.0, 3.0]))
     state.reset_where(np.array([False, True]))
     np.testing.assert_array_equal(state.integral, [1.0, 0.0])
+    np.testing.assert_array_equal(state.derivative, [3.0, 0.0])
     assert state.prev_error[0] == 0.5 and np.isnan(state.prev_error[1])
+
+
+def test_derivative_filter_smooths_a_step_in_the_error():
+    raw = PIDGains(kp=0.0, ki=0.0, kd=1.0, out_min=-1e9, out_max=1e9)
+    filtered = PIDGains(kp=0.0, ki=0.0, kd=1.0, out_min=-1e9, out_max=1e9, derivative_filter_s=0.2)
+    outputs = {}
+    for name, gains in (("raw", raw), ("filtered", filtered)):
+        state = PIDState.zeros((1,))
+        _, state = pid_step(gains, state, np.array([0.0]), DT)
+        u, state = pid_step(gains, state, np.array([1.0]), DT)
+        outputs[name] = u[0]
+    assert outputs["raw"] == pytest.approx(1.0 / DT)
+    # First-order filter: alpha = dt / (tau + dt) of the raw derivative on the first tick.
+    assert outputs["filtered"] == pytest.approx(DT / (0.2 + DT) * (1.0 / DT))
 
 
 @pytest.mark.parametrize(

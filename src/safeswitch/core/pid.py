@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import clamp
+
 FloatArray = NDArray[np.float64]
 
 
@@ -25,6 +27,9 @@ class PIDGains:
         kd: Derivative gain [output unit · s / error unit].
         out_min: Lower bound of the output.
         out_max: Upper bound of the output.
+        derivative_filter_s: Time constant of a first-order low-pass filter on the derivative
+            term [s]; 0 leaves it unfiltered. A derivative of a noisy or quickly changing
+            measurement (a per-tick acceleration, say) otherwise makes the output chatter.
     """
 
     kp: float
@@ -32,13 +37,14 @@ class PIDGains:
     kd: float
     out_min: float
     out_max: float
+    derivative_filter_s: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("kp", "ki", "kd", "out_min", "out_max"):
+        for name in ("kp", "ki", "kd", "out_min", "out_max", "derivative_filter_s"):
             value = getattr(self, name)
             if not math.isfinite(value):
                 raise ValueError(f"PIDGains.{name} must be finite, got {value!r}")
-        for name in ("kp", "ki", "kd"):
+        for name in ("kp", "ki", "kd", "derivative_filter_s"):
             if getattr(self, name) < 0:
                 raise ValueError(f"PIDGains.{name} must be >= 0, got {getattr(self, name)!r}")
         if not self.out_min < self.out_max:
@@ -55,23 +61,32 @@ class PIDState:
     Attributes:
         integral: Integral of the error, shape ``[...]``.
         prev_error: Error of the previous tick, NaN before the first tick (no derivative kick).
+        derivative: The (filtered) derivative of the error of the previous tick.
     """
 
     integral: FloatArray
     prev_error: FloatArray
+    derivative: FloatArray
 
     @classmethod
     def zeros(cls, shape: tuple[int, ...], integral: float = 0.0) -> PIDState:
         """A fresh state for a batch of the given shape."""
-        return cls(np.full(shape, float(integral)), np.full(shape, np.nan))
+        return cls(np.full(shape, float(integral)), np.full(shape, np.nan), np.zeros(shape))
 
     def copy(self) -> PIDState:
-        return PIDState(self.integral.copy(), self.prev_error.copy())
+        return PIDState(self.integral.copy(), self.prev_error.copy(), self.derivative.copy())
+
+    def assign_where(self, mask: NDArray[np.bool_], other: PIDState) -> None:
+        """Overwrite the elements selected by ``mask`` with ``other``'s, in place."""
+        self.integral[mask] = other.integral[mask]
+        self.prev_error[mask] = other.prev_error[mask]
+        self.derivative[mask] = other.derivative[mask]
 
     def reset_where(self, mask: NDArray[np.bool_], integral: float | FloatArray = 0.0) -> None:
         """Reset the elements selected by ``mask`` in place."""
         self.integral[mask] = np.broadcast_to(integral, self.integral.shape)[mask]
         self.prev_error[mask] = np.nan
+        self.derivative[mask] = 0.0
 
 
 def pid_step(
@@ -94,7 +109,12 @@ def pid_step(
         The clamped output and the new state.
     """
     error = np.asarray(error, dtype=np.float64)
-    derivative = np.where(np.isnan(state.prev_error), 0.0, (error - state.prev_error) / dt)
+    raw = np.where(np.isnan(state.prev_error), 0.0, (error - state.prev_error) / dt)
+    if gains.derivative_filter_s > 0:
+        alpha = dt / (gains.derivative_filter_s + dt)
+        derivative = state.derivative + alpha * (raw - state.derivative)
+    else:
+        derivative = raw
     integral_candidate = state.integral + error * dt
     unclamped = gains.kp * error + gains.ki * integral_candidate + gains.kd * derivative
     winding_up = ((unclamped > gains.out_max) & (error > 0)) | (
@@ -102,4 +122,4 @@ def pid_step(
     )
     integral = np.where(winding_up, state.integral, integral_candidate)
     output = gains.kp * error + gains.ki * integral + gains.kd * derivative
-    return np.minimum(np.maximum(output, gains.out_min), gains.out_max), PIDState(integral, error)
+    return clamp(output, gains.out_min, gains.out_max), PIDState(integral, error, derivative)

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import clamp
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
@@ -180,7 +182,7 @@ class RouteSet:
         self, base: IntArray, s: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """x [m], y [m] and heading [rad] at arc lengths ``s``; ``base`` from :meth:`base_index`."""
-        k = np.clip(np.floor(s / self.spacing).astype(np.intp), 0, self.size - 2)
+        k = clamp(np.floor(s / self.spacing).astype(np.intp), 0, self.size - 2)
         i = base + k
         frac = s - k * self.spacing
         x = self._px.take(i) + frac * self._dx.take(i)
@@ -219,17 +221,17 @@ class RouteSet:
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """:meth:`project` with ``base`` from :meth:`base_index` and coordinates split."""
         k_max = self.size - 2
-        k = np.clip(np.floor(s_guess / self.spacing).astype(np.intp), 0, k_max)
+        k = clamp(np.floor(s_guess / self.spacing).astype(np.intp), 0, k_max)
         for _ in range(self.WALK_STEPS):
             i = base + k
             along = (x - self._px.take(i)) * self._dx.take(i) + (y - self._py.take(i)) * (
                 self._dy.take(i)
             )
-            k = np.clip(k + np.floor(along / self.spacing).astype(np.intp), 0, k_max)
+            k = clamp(k + np.floor(along / self.spacing).astype(np.intp), 0, k_max)
         i = base + k
         rx, ry = x - self._px.take(i), y - self._py.take(i)
         dx, dy = self._dx.take(i), self._dy.take(i)
-        along = np.clip(rx * dx + ry * dy, 0.0, self.spacing)
+        along = clamp(rx * dx + ry * dy, 0.0, self.spacing)
         return k * self.spacing + along, dx * ry - dy * rx, self._heading_at(i, along)
 
     def project_global(

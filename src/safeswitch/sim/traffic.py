@@ -8,8 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from safeswitch.core.arrays import clamp
 from safeswitch.core.pid import PIDGains, PIDState, pid_step
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import VehicleParams, steady_state_throttle
@@ -46,4 +45,4 @@ def autopilot_pedals(
     """
     correction, pid = pid_step(params.speed_gains, pid, target_speed - speed, dt)
     pedal = steady_state_throttle(vehicle, target_speed) + correction
-    return np.clip(pedal, 0.0, 1.0), np.clip(-pedal, 0.0, 1.0), pid
+    return clamp(pedal, 0.0, 1.0), clamp(-pedal, 0.0, 1.0), pid

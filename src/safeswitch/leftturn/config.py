@@ -1,0 +1,411 @@
+"""Configuration of the left-turn case study: every value the paper leaves open, named.
+
+Values from the paper carry "(paper)"; values we chose carry "(ours)" and a reason. All units
+are SI unless the name says otherwise (``_kmh``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Literal
+
+from safeswitch.core.config import ConfigError, check, from_dict
+from safeswitch.core.pid import PIDGains
+from safeswitch.sim.road import IntersectionGeometry
+from safeswitch.sim.vehicle import VehicleParams
+
+Switching = Literal["paper", "certified", "none"]
+LearnedScope = Literal["window", "episode"]
+ScenarioName = Literal["cut", "yield1", "yield2"]
+
+SWITCHING_VALUES: tuple[str, ...] = ("paper", "certified", "none")
+SCENARIO_NAMES: tuple[str, ...] = ("cut", "yield1", "yield2")
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """The ego's rule-based controllers (paper Table I) and their set points.
+
+    Attributes:
+        speed_limit_kmh: Speed limit ``v_lim`` of the road, set point of ``PID_th`` (paper).
+        throttle_pid: ``PID_th`` on ``v_lim − v`` [m/s] → throttle in [0, 0.7] (paper).
+        brake_pid: ``PID_b``, the Safety controller, on ``a_max − a_decel`` [m/s²] → brake in
+            [0, 1] (paper gains). ``a_decel`` is the measured deceleration (positive when
+            slowing). Ours: a 0.2 s filter on the derivative term (unfiltered, kd·Δa/Δt of a
+            per-tick acceleration makes the brake chatter between 0 and 1 every tick and the
+            mean deceleration fall to 4.7 m/s²), and the integral starts at the brake that
+            gives ``emergency_decel`` on a level road (bumpless start).
+        lane_pid: ``PID_lka`` on the look-ahead lateral offset [m] → steering in [-1, 1]
+            (paper gains).
+        lane_lookahead_m: Look-ahead distance of ``PID_lka``'s error signal (ours: the paper
+            does not define its "lka" error; the lateral offset of the route point 5 m ahead,
+            in the car's frame, keeps the Table I gains within 0.41 m of the route through the
+            11.75 m turn at 25 km/h; 4 m and 7 m give 0.78 m and 0.97 m).
+        emergency_decel: ``a_max_lon``, the deceleration ``PID_b`` tracks and Eq. 3 uses
+            [m/s²] (ours: above the 5 m/s² comfort limit — the Safety controller may sacrifice
+            comfort — and well inside the tyres' 8.3 m/s²).
+    """
+
+    speed_limit_kmh: float = 25.0
+    throttle_pid: PIDGains = field(default_factory=lambda: PIDGains(1.5, 0.05, 0.002, 0.0, 0.7))
+    brake_pid: PIDGains = field(
+        default_factory=lambda: PIDGains(0.3, 0.40, 0.100, 0.0, 1.0, derivative_filter_s=0.2)
+    )
+    lane_pid: PIDGains = field(default_factory=lambda: PIDGains(0.2, 0.01, 0.020, -1.0, 1.0))
+    lane_lookahead_m: float = 5.0
+    emergency_decel: float = 6.0
+
+    def __post_init__(self) -> None:
+        o = "controllers"
+        check(
+            0 < self.speed_limit_kmh <= 130,
+            o,
+            "speed_limit_kmh",
+            self.speed_limit_kmh,
+            "must be in (0, 130]",
+        )
+        check(
+            0 < self.lane_lookahead_m <= 30,
+            o,
+            "lane_lookahead_m",
+            self.lane_lookahead_m,
+            "must be in (0, 30]",
+        )
+        check(
+            0 < self.emergency_decel <= 9.0,
+            o,
+            "emergency_decel",
+            self.emergency_decel,
+            "must be in (0, 9] m/s²",
+        )
+
+    @property
+    def speed_limit(self) -> float:
+        """``v_lim`` [m/s]."""
+        return self.speed_limit_kmh / 3.6
+
+
+@dataclass(frozen=True)
+class PaperSwitchingConfig:
+    """The paper's emergency-braking switching logic (Algorithm 1, read as its text says).
+
+    Attributes:
+        ttr_threshold_s: Smallest ``TTR_n − TTR_e`` for which cutting in front counts as an
+            option [s] (ours). At 25 km/h the ego needs about 1.1 s from the conflict point until
+            its rear clears the north car's path, and a north car at up to 35 km/h reaches the
+            conflict point about 0.5 s after its front enters the ego's path: 1.6 s, plus 0.4 s
+            for the constant-speed assumption of Eq. 2.
+        stop_margin_m: Distance added to ``d_safe`` (Eq. 3) before the stopping point [m]
+            (ours): ``PID_b`` reaches its target deceleration only gradually; measured on the
+            plant, its stop from 10 m/s with the throttle still at 1 is 0.8 m longer than
+            ``d_safe + v·latency`` (``tests/leftturn/test_controllers.py``).
+        latency_s: Time before full braking takes hold [s] (ours): one 20 ms tick plus the
+            brake actuator's 80 ms lag; the car travels ``v·latency`` more.
+        min_speed: Speed below which Eq. 2 uses this value instead (guard against v → 0)
+            [m/s] (ours).
+    """
+
+    ttr_threshold_s: float = 2.0
+    stop_margin_m: float = 1.5
+    latency_s: float = 0.1
+    min_speed: float = 0.1
+
+    def __post_init__(self) -> None:
+        o = "paper"
+        check(
+            0 <= self.ttr_threshold_s <= 20,
+            o,
+            "ttr_threshold_s",
+            self.ttr_threshold_s,
+            "must be in [0, 20] s",
+        )
+        check(
+            0 <= self.stop_margin_m <= 20,
+            o,
+            "stop_margin_m",
+            self.stop_margin_m,
+            "must be in [0, 20] m",
+        )
+        check(0 <= self.latency_s <= 2, o, "latency_s", self.latency_s, "must be in [0, 2] s")
+        check(0 < self.min_speed <= 5, o, "min_speed", self.min_speed, "must be in (0, 5] m/s")
+
+
+def _check_piecewise(
+    owner: str, name: str, points: tuple[float, ...], values: tuple[float, ...]
+) -> None:
+    check(
+        len(points) >= 2 and len(points) == len(values),
+        owner,
+        name,
+        points,
+        f"needs >= 2 breakpoints and as many values ({len(values)})",
+    )
+    check(all(math.isfinite(p) for p in points + values), owner, name, points, "must be finite")
+    check(
+        all(b > a for a, b in itertools.pairwise(points)),
+        owner,
+        name,
+        points,
+        "must be strictly increasing",
+    )
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """The five reward terms of Eq. 5, each piecewise linear through its breakpoints.
+
+    The shapes of Fig. 4 are not in the text; SPEC §2 fixes them. Each term's best value is +1;
+    outside the breakpoints the end values hold.
+
+    Attributes:
+        adas_penalty: ``R_ADAS`` on a tick where the safety action was executed (paper Eq. 4).
+        speed_points_kmh: Breakpoints of ``R_v`` [km/h]: a penalty below 5 km/h, +1 at the 25 km/h
+            limit, tolerated speeding to 30 km/h, 0 at 35 km/h and a penalty above (paper, SPEC).
+        speed_values: ``R_v`` at those breakpoints.
+        lateral_points_m: Breakpoints of ``R_lka`` on ``|lateral deviation|`` [m] (0 at 1.5 m).
+        lateral_values: ``R_lka`` at those breakpoints.
+        accel_lon_points: Breakpoints of ``R_a_lon`` on ``|a_lon|`` [m/s²] (0 at 5 m/s²).
+        accel_lon_values: ``R_a_lon`` at those breakpoints.
+        accel_lat_points: Breakpoints of ``R_a_lat`` on ``|a_lat|`` [m/s²] (0 at 3 m/s²).
+        accel_lat_values: ``R_a_lat`` at those breakpoints.
+        collision_penalty: Reward on the tick of a collision (ours; 0 keeps Eq. 5 — a collision
+            ends the episode, which already forfeits the positive reward of the remaining ticks).
+        comfort_accel_lon: Comfort limit on ``|a_lon|`` [m/s²] (paper, after UN ECE guidance);
+            a tick beyond it counts as a comfort violation in the metrics.
+        comfort_accel_lat: Comfort limit on ``|a_lat|`` [m/s²] (paper).
+    """
+
+    adas_penalty: float = -25.0
+    speed_points_kmh: tuple[float, ...] = (0.0, 5.0, 25.0, 30.0, 35.0, 45.0)
+    speed_values: tuple[float, ...] = (-1.0, 0.0, 1.0, 1.0, 0.0, -1.0)
+    lateral_points_m: tuple[float, ...] = (0.0, 1.5, 3.0)
+    lateral_values: tuple[float, ...] = (1.0, 0.0, -1.0)
+    accel_lon_points: tuple[float, ...] = (0.0, 5.0, 10.0)
+    accel_lon_values: tuple[float, ...] = (1.0, 0.0, -1.0)
+    accel_lat_points: tuple[float, ...] = (0.0, 3.0, 6.0)
+    accel_lat_values: tuple[float, ...] = (1.0, 0.0, -1.0)
+    collision_penalty: float = 0.0
+    comfort_accel_lon: float = 5.0
+    comfort_accel_lat: float = 3.0
+
+    def __post_init__(self) -> None:
+        o = "rewards"
+        check(
+            self.comfort_accel_lon > 0,
+            o,
+            "comfort_accel_lon",
+            self.comfort_accel_lon,
+            "must be > 0",
+        )
+        check(
+            self.comfort_accel_lat > 0,
+            o,
+            "comfort_accel_lat",
+            self.comfort_accel_lat,
+            "must be > 0",
+        )
+        check(
+            math.isfinite(self.adas_penalty) and self.adas_penalty <= 0,
+            o,
+            "adas_penalty",
+            self.adas_penalty,
+            "must be <= 0",
+        )
+        check(
+            math.isfinite(self.collision_penalty) and self.collision_penalty <= 0,
+            o,
+            "collision_penalty",
+            self.collision_penalty,
+            "must be <= 0",
+        )
+        _check_piecewise(o, "speed_points_kmh", self.speed_points_kmh, self.speed_values)
+        _check_piecewise(o, "lateral_points_m", self.lateral_points_m, self.lateral_values)
+        _check_piecewise(o, "accel_lon_points", self.accel_lon_points, self.accel_lon_values)
+        _check_piecewise(o, "accel_lat_points", self.accel_lat_points, self.accel_lat_values)
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """The random scenario distribution (each value uniform between its two bounds).
+
+    The north car's arrival is set relative to the ego's: ``arrival_offset_s`` is the time
+    between the ego reaching the conflict point (cruising at the speed limit from its start) and
+    the north car reaching it (at its own constant speed). Negative: the north car arrives
+    first. The default range makes cutting in front right in about 45 % of episodes, yielding in
+    about 35 % and leaves the rest without interaction (measured by the tests).
+
+    Attributes:
+        ego_start_distance_m: Ego's path distance to the conflict point at the start [m].
+        ego_speed_kmh: Ego's initial speed [km/h].
+        north_speed_kmh: North car's (constant target) speed [km/h].
+        arrival_offset_s: North arrival time minus ego arrival time [s].
+    """
+
+    ego_start_distance_m: tuple[float, float] = (32.0, 40.0)
+    ego_speed_kmh: tuple[float, float] = (18.0, 25.0)
+    north_speed_kmh: tuple[float, float] = (20.0, 32.0)
+    arrival_offset_s: tuple[float, float] = (-3.0, 5.0)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            low, high = getattr(self, f.name)
+            check(
+                math.isfinite(low) and math.isfinite(high) and low <= high,
+                "scenarios",
+                f.name,
+                (low, high),
+                "must be finite (low, high) with low <= high",
+            )
+        check(
+            self.ego_start_distance_m[0] >= 20,
+            "scenarios",
+            "ego_start_distance_m",
+            self.ego_start_distance_m,
+            "must start at least 20 m before the conflict point",
+        )
+        check(
+            self.north_speed_kmh[0] > 0,
+            "scenarios",
+            "north_speed_kmh",
+            self.north_speed_kmh,
+            "must be > 0",
+        )
+        check(
+            self.ego_speed_kmh[0] >= 0,
+            "scenarios",
+            "ego_speed_kmh",
+            self.ego_speed_kmh,
+            "must be >= 0",
+        )
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Episode timing and who drives when.
+
+    Attributes:
+        dt: Control and simulation tick [s] (paper: 50 Hz).
+        horizon_s: Fixed episode length [s] (ours). A fixed horizon means a faster safe crossing
+            always earns more: its extra ticks are spent near the speed limit instead of slow
+            (no reward for dawdling, SPEC §2). 12 s covers the approach, a yield of several
+            seconds and the exit.
+        approach_distance_m: A car is "at the intersection" from this path distance before its
+            conflict point until it has left its conflict zone [m] (ours): at 35 km/h that is
+            3.1 s ahead, more than the TTR threshold plus a full stop, so every conflict the rule
+            must resolve starts inside the window.
+        learned_scope: ``"window"`` — Algorithm 1: ``PID_th`` drives unless both cars are at the
+            intersection, then the learned controller (under the switching logic);
+            ``"episode"`` — the learned controller drives the whole episode.
+        conflict_margin_m: Clearance added to both footprints when the conflict zones are
+            computed [m] (ours).
+    """
+
+    dt: float = 0.02
+    horizon_s: float = 12.0
+    approach_distance_m: float = 30.0
+    learned_scope: LearnedScope = "window"
+    conflict_margin_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        o = "episode"
+        check(0 < self.dt <= 0.1, o, "dt", self.dt, "must be in (0, 0.1] s")
+        check(1 <= self.horizon_s <= 120, o, "horizon_s", self.horizon_s, "must be in [1, 120] s")
+        check(
+            5 <= self.approach_distance_m <= 100,
+            o,
+            "approach_distance_m",
+            self.approach_distance_m,
+            "must be in [5, 100] m",
+        )
+        check(
+            0 <= self.conflict_margin_m <= 2,
+            o,
+            "conflict_margin_m",
+            self.conflict_margin_m,
+            "must be in [0, 2] m",
+        )
+
+    @property
+    def horizon_ticks(self) -> int:
+        return round(self.horizon_s / self.dt)
+
+
+@dataclass(frozen=True)
+class LeftTurnConfig:
+    """Everything that defines the left-turn environment.
+
+    Attributes:
+        switching: Switching logic: ``"paper"`` (Algorithm 1), ``"certified"`` (safety filter)
+            or ``"none"`` (the learned action always).
+        adas_penalty: Whether ``R_ADAS`` is part of the reward (off: the paper's ablation).
+        scenario: ``None`` for the random distribution, or a named scenario of Section VI.
+        episode: Timing and scope of the learned controller.
+        controllers: The rule-based controllers.
+        paper: Parameters of the paper's switching logic.
+        rewards: Reward terms.
+        scenarios: The random scenario distribution.
+        geometry: The intersection.
+        vehicle: Vehicle parameters (both cars).
+    """
+
+    switching: Switching = "paper"
+    adas_penalty: bool = True
+    scenario: ScenarioName | None = None
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    controllers: ControllerConfig = field(default_factory=ControllerConfig)
+    paper: PaperSwitchingConfig = field(default_factory=PaperSwitchingConfig)
+    rewards: RewardConfig = field(default_factory=RewardConfig)
+    scenarios: ScenarioConfig = field(default_factory=ScenarioConfig)
+    geometry: IntersectionGeometry = field(default_factory=IntersectionGeometry)
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+
+    def __post_init__(self) -> None:
+        if self.switching not in SWITCHING_VALUES:
+            raise ConfigError(
+                f"switching={self.switching!r} is not one of {list(SWITCHING_VALUES)}"
+            )
+        if self.scenario is not None and self.scenario not in SCENARIO_NAMES:
+            raise ConfigError(
+                f"scenario={self.scenario!r} is not None or one of {list(SCENARIO_NAMES)}"
+            )
+        if not isinstance(self.adas_penalty, bool):
+            raise ConfigError(f"adas_penalty={self.adas_penalty!r} must be True or False")
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None) -> LeftTurnConfig:
+        """Build from plain nested data (e.g. YAML); unknown keys raise :class:`ConfigError`."""
+        return from_dict(cls, data)
+
+
+class _FromConfig:
+    """Default of the environments' keyword arguments: "keep the configuration's value"."""
+
+    def __repr__(self) -> str:
+        return "<from config>"
+
+
+#: Sentinel default of ``switching``, ``adas_penalty`` and ``scenario`` in the environments'
+#: constructors: the value then comes from ``config`` (whose defaults are ``"paper"``, ``True``
+#: and ``None``). ``scenario=None`` must stay expressible, so ``None`` cannot be the sentinel.
+FROM_CONFIG: Any = _FromConfig()
+
+
+def resolve_config(
+    config: LeftTurnConfig | dict[str, Any] | None = None, **overrides: Any
+) -> LeftTurnConfig:
+    """A config from a config, a dict or nothing, with top-level fields overridden (overrides
+    equal to :data:`FROM_CONFIG` are ignored)."""
+    overrides = {k: v for k, v in overrides.items() if v is not FROM_CONFIG}
+    if config is None:
+        config = LeftTurnConfig()
+    elif isinstance(config, dict):
+        config = LeftTurnConfig.from_dict(config)
+    elif not isinstance(config, LeftTurnConfig):
+        raise ConfigError(f"config must be a LeftTurnConfig, a dict or None, got {config!r}")
+    valid = {f.name for f in fields(LeftTurnConfig)}
+    for key in overrides:
+        if key not in valid:
+            raise ConfigError(f"unknown environment argument {key!r} (valid: {sorted(valid)})")
+    return replace(config, **overrides)

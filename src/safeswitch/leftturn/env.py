@@ -1,0 +1,118 @@
+"""The Gymnasium environment ``safeswitch/LeftTurn-v0``: a thin shell over a batch of one."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig, resolve_config
+from safeswitch.leftturn.info import step_info
+from safeswitch.leftturn.spaces import action_space, observation_space
+from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
+
+
+class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """Unprotected left turn in front of a non-yielding oncoming car (paper Section IV).
+
+    Observation: ``(x_e, y_e, v_e, x_n, y_n, v_n)`` float32. Action: ``Box(-1, 1, (1,))``,
+    throttle ``= (a + 1) / 2``. Reward: Eq. 5. ``terminated`` on a collision, ``truncated`` at
+    the fixed horizon. Each step's ``info`` is described in
+    :func:`safeswitch.leftturn.info.step_info`.
+
+    The ``k``-th episode after ``reset(seed=s)`` plays the scenario drawn from ``(s, env_index,
+    k)``: the same as environment ``env_index`` of a :class:`LeftTurnVecEnv` with seed ``s``.
+
+    Args:
+        switching: ``"paper"``, ``"certified"`` or ``"none"``.
+        adas_penalty: Whether ``R_ADAS`` is in the reward.
+        scenario: ``None`` (random), ``"cut"``, ``"yield1"`` or ``"yield2"``.
+        config: Full configuration (a :class:`LeftTurnConfig` or a dict). The three arguments
+            above override its fields when given; left out, the configuration's values hold
+            (by default ``"paper"``, ``True`` and ``None``).
+        render_mode: ``None`` or ``"rgb_array"``.
+        env_index: Which stream of scenarios this environment draws from.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012 (gym API)
+
+    def __init__(
+        self,
+        switching: str = FROM_CONFIG,
+        adas_penalty: bool = FROM_CONFIG,
+        scenario: str | None = FROM_CONFIG,
+        config: LeftTurnConfig | dict[str, Any] | None = None,
+        render_mode: str | None = None,
+        env_index: int = 0,
+    ) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.config = resolve_config(
+            config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
+        )
+        self.task = LeftTurnTask(self.config)
+        self.render_mode = render_mode
+        self.observation_space = observation_space()  # type: ignore[assignment]
+        self.action_space = action_space()  # type: ignore[assignment]
+        self.env_index = int(env_index)
+        self._seed: int | None = None
+        self._episode = 0
+        self._state: TaskState | None = None
+        self._record: StepRecord | None = None
+
+    @property
+    def state(self) -> TaskState:
+        """The task state, a batch of one (after :meth:`reset`)."""
+        if self._state is None:
+            raise RuntimeError("call reset() before step() or render()")
+        return self._state
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"LeftTurnEnv.reset takes no options, got {sorted(options)}")
+        if seed is not None:
+            self._seed, self._episode = int(seed), 0
+        elif self._seed is None:
+            self._seed = int(self.np_random.integers(0, 2**63 - 1))
+        scenarios = self.task.draw_scenarios(
+            self._seed, np.array([self.env_index]), np.array([self._episode])
+        )
+        self._episode += 1
+        self._state = self.task.initial(scenarios)
+        self._record = None
+        s = self._state.scenarios
+        info = {
+            "scenario": {
+                "ego_start_distance": float(s.ego_start_distance[0]),
+                "ego_speed": float(s.ego_speed[0]),
+                "north_speed": float(s.north_speed[0]),
+                "arrival_offset": float(s.arrival_offset[0]),
+            }
+        }
+        return self.task.observe(self._state)[0], info
+
+    def step(
+        self, action: NDArray[np.float32]
+    ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
+        self._state, record = self.task.step(self.state, np.asarray(action, np.float64).reshape(1))
+        self._record = record
+        return (
+            record.observation[0],
+            float(record.reward[0]),
+            bool(record.terminated[0]),
+            bool(record.truncated[0]),
+            step_info(record, 0, self.task.reasons),
+        )
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode='rgb_array'")
+            return None
+        from safeswitch.leftturn.render import render_scene
+
+        return render_scene(self.task, self.state, 0, self._record)

@@ -1,0 +1,197 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import safeswitch
+from safeswitch.core.config import ConfigError
+from safeswitch.leftturn import LeftTurnEnv, make_vec_env
+from safeswitch.leftturn.rewards import REWARD_TERMS
+
+IMPLEMENTED = ("paper", "none")
+
+
+@pytest.mark.parametrize("switching", IMPLEMENTED)
+def test_gymnasium_and_sb3_env_checkers_pass(switching):
+    env = gym.make(safeswitch.ENV_ID, switching=switching, render_mode="rgb_array")
+    check_env(env.unwrapped)
+    sb3_check_env(env.unwrapped)
+
+
+def test_info_has_the_documented_fields():
+    env = gym.make(safeswitch.ENV_ID, scenario="yield1")
+    env.reset(seed=0)
+    _, reward, _, _, info = env.step(np.array([0.0], dtype=np.float32))
+    for key in (
+        "collision",
+        "safety_active",
+        "reward_terms",
+        "reason",
+        "learned_throttle",
+        "safety_brake",
+        "throttle",
+        "brake",
+        "controller",
+    ):
+        assert key in info
+    assert set(info["reward_terms"]) == set(REWARD_TERMS)
+    assert reward == pytest.approx(sum(info["reward_terms"].values()))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        ({"switching": "bogus"}, "bogus"),
+        ({"scenario": "sideways"}, "sideways"),
+        ({"config": {"episode": {"horizon_sec": 3}}}, "horizon_sec"),
+        ({"config": {"paper": {"ttr_threshold_s": -1.0}}}, "ttr_threshold_s"),
+        ({"config": {"vehicle": {"mass": -1.0}}}, "mass"),
+        ({"config": {"episode": {"learned_scope": "always"}}}, "always"),
+    ],
+)
+def test_invalid_configuration_names_the_bad_value(kwargs, named):
+    with pytest.raises(ConfigError, match=named):
+        LeftTurnEnv(**kwargs)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_nan_or_inf_action_never_reaches_the_plant(bad):
+    env = LeftTurnEnv(scenario="cut", config={"episode": {"learned_scope": "episode"}})
+    env.reset(seed=0)
+    obs, _, _, _, info = env.step(np.array([bad], dtype=np.float32))
+    assert info["safety_active"] and info["reason"] == "invalid_learned_action"
+    assert info["controller"] == "safety"
+    assert np.isfinite([info["throttle"], info["brake"]]).all()
+    assert info["throttle"] == 0.0 and info["brake"] > 0
+    assert np.isfinite(obs).all()
+
+
+def test_out_of_range_actions_are_clipped():
+    outcomes = []
+    for action in (1.0, 7.5):
+        env = LeftTurnEnv(scenario="cut", config={"episode": {"learned_scope": "episode"}})
+        env.reset(seed=0)
+        for _ in range(20):
+            obs, *_ = env.step(np.array([action], dtype=np.float32))
+        outcomes.append(obs)
+    np.testing.assert_array_equal(outcomes[0], outcomes[1])
+
+
+def rollout_env(env, actions):
+    observations, rewards = [], []
+    for a in actions:
+        obs, reward, terminated, truncated, _ = env.step(np.array([a], dtype=np.float32))
+        observations.append(obs)
+        rewards.append(reward)
+        if terminated or truncated:
+            observations.append(env.reset()[0])
+    return np.array(observations), np.array(rewards)
+
+
+def test_same_seed_same_trajectory_in_the_env():
+    actions = np.random.default_rng(0).uniform(-1, 1, 700)
+    runs = []
+    for _ in range(2):
+        env = LeftTurnEnv(switching="paper")
+        first, _ = env.reset(seed=42)
+        obs, rewards = rollout_env(env, actions)
+        runs.append((first, obs, rewards))
+    for a, b in zip(runs[0], runs[1], strict=True):
+        np.testing.assert_array_equal(a, b)
+    other = LeftTurnEnv(switching="paper")
+    assert not np.array_equal(other.reset(seed=43)[0], runs[0][0])
+
+
+def test_vec_env_matches_single_envs_and_batch_size_does_not_matter():
+    ticks = 200
+    rng = np.random.default_rng(1)
+    actions = rng.uniform(-1, 1, (ticks, 8, 1)).astype(np.float32)
+    big = make_vec_env(8, seed=5)
+    big_obs = [big.reset()]
+    big_rewards = []
+    for t in range(ticks):
+        obs, reward, _, _ = big.step(actions[t])
+        big_obs.append(obs)
+        big_rewards.append(reward)
+    big_obs, big_rewards = np.array(big_obs), np.array(big_rewards)
+    for i in (0, 3):
+        env = LeftTurnEnv(env_index=i)
+        first, _ = env.reset(seed=5)
+        np.testing.assert_array_equal(first, big_obs[0, i])
+        for t in range(ticks):
+            obs, reward, *_ = env.step(actions[t, i])
+            np.testing.assert_array_equal(obs, big_obs[t + 1, i])
+            assert np.float32(reward) == big_rewards[t, i]
+    small = make_vec_env(1, seed=5)
+    obs = small.reset()
+    for t in range(ticks):
+        obs, *_ = small.step(actions[t, :1])
+    np.testing.assert_array_equal(obs[0], big_obs[-1, 0])
+
+
+def test_vec_env_auto_resets_like_sb3_expects():
+    horizon = {"episode": {"horizon_s": 1.0}}  # 50 ticks
+    vec = make_vec_env(3, seed=9, config=horizon)
+    vec.reset()
+    refs = [LeftTurnEnv(config=horizon, env_index=i) for i in range(3)]
+    for env in refs:
+        env.reset(seed=9)
+    action = np.full((3, 1), 0.2)
+    for tick in range(50):
+        obs, _, dones, infos = vec.step(action)
+        ref = [env.step(action[i].astype(np.float32)) for i, env in enumerate(refs)]
+        if tick < 49:
+            assert not dones.any()
+            assert "terminal_observation" not in infos[0]
+    assert dones.all()
+    for i, env in enumerate(refs):
+        last_obs, _, terminated, truncated, _ = ref[i]
+        assert truncated and not terminated
+        np.testing.assert_array_equal(infos[i]["terminal_observation"], last_obs)
+        assert infos[i]["TimeLimit.truncated"] is True
+        assert infos[i]["episode"]["l"] == 50
+        next_first, _ = env.reset()  # the second episode of environment i
+        np.testing.assert_array_equal(obs[i], next_first)
+        assert not np.array_equal(obs[i], last_obs)
+
+
+def test_keyword_arguments_override_the_config_only_when_given():
+    config = {"switching": "none", "scenario": "cut", "adas_penalty": False}
+    assert make_vec_env(1, config=config).config.scenario == "cut"
+    env = LeftTurnEnv(config=config, switching="paper")
+    assert (env.config.switching, env.config.scenario, env.config.adas_penalty) == (
+        "paper",
+        "cut",
+        False,
+    )
+    assert LeftTurnEnv().config.switching == "paper"
+
+
+def test_a_collision_terminates_and_is_not_a_time_limit():
+    vec = make_vec_env(
+        1,
+        switching="none",
+        scenario="yield1",
+        seed=0,
+        config={"episode": {"learned_scope": "episode"}},
+    )
+    vec.reset()
+    for _ in range(600):
+        _, _, dones, infos = vec.step(np.array([[-0.6]]))
+        if dones[0]:
+            break
+    assert dones[0] and infos[0]["collision"]
+    assert infos[0]["TimeLimit.truncated"] is False
+    assert infos[0]["episode"]["collision"]
+
+
+def test_render_draws_both_cars():
+    env = LeftTurnEnv(scenario="yield1", render_mode="rgb_array")
+    env.reset(seed=0)
+    for _ in range(100):  # until both cars are in view
+        env.step(np.array([0.0], dtype=np.float32))
+    frame = env.render()
+    assert frame.shape == (480, 480, 3) and frame.dtype == np.uint8
+    colours = {tuple(c) for c in frame.reshape(-1, 3)}
+    assert (40, 110, 230) in colours and (240, 150, 30) in colours  # ego blue, north orange

@@ -1,0 +1,91 @@
+import math
+
+import numpy as np
+import pytest
+
+from safeswitch.core.switching import INVALID_LEARNED_ACTION, NeverSwitch, reason_names, supervise
+from safeswitch.leftturn.config import PaperSwitchingConfig
+from safeswitch.leftturn.scenarios import named_scenarios
+from safeswitch.leftturn.switching import (
+    ConflictState,
+    PaperSwitching,
+    braking_distance,
+    time_to_reach,
+)
+
+CFG = PaperSwitchingConfig()
+DECEL = 6.0
+
+
+def test_ttr_uses_the_path_distance_along_the_curve(task):
+    g = task.config.geometry
+    radius = g.box_half_size + g.lane_width / 2
+    # Hand computation: the conflict point on the 11.75 m arc centred at (-10, -10), where the
+    # north car's lane (x = -1.75) crosses it; the ego stands at the stop line, where the arc
+    # starts, so the path distance is R·θ (not the 8.4 m straight line).
+    theta = math.acos((-g.lane_width / 2 + g.box_half_size) / radius)
+    state = task.initial(named_scenarios("cut", 1))
+    state.world.progress[0, 0] = g.approach_length  # the stop line
+    conflict = task.conflict_state(state)
+    assert conflict.ego_to_conflict[0] == pytest.approx(radius * theta, abs=0.01)
+    straight_line = np.linalg.norm(
+        task.conflict.point - np.array([g.lane_width / 2, -g.box_half_size])
+    )
+    assert radius * theta > straight_line + 0.2
+    ttr = time_to_reach(conflict.ego_to_conflict, np.array([5.0]), CFG.min_speed)
+    assert ttr[0] == pytest.approx(radius * theta / 5.0, abs=0.01)
+
+
+def test_ttr_guards_zero_speed_and_braking_distance_is_eq3():
+    assert time_to_reach(np.array([10.0]), np.array([0.0]), 0.1)[0] == pytest.approx(100.0)
+    assert braking_distance(np.array([7.0]), 6.0)[0] == pytest.approx(49 / 12)
+
+
+def make_state(ego_to_stop, ego_speed=7.0, gap=0.0, at=True):
+    """A state whose ``TTR_n - TTR_e`` is ``CFG.ttr_threshold_s + gap``."""
+    ego_to_conflict = ego_to_stop + 5.0
+    ttr_e = ego_to_conflict / ego_speed
+    north_speed = 8.0
+    north_to_conflict = (ttr_e + CFG.ttr_threshold_s + gap) * north_speed
+    return ConflictState(
+        *(
+            np.array([v])
+            for v in (ego_to_conflict, ego_to_stop, ego_speed, north_to_conflict, north_speed)
+        ),
+        both_at_intersection=np.array([at]),
+    )
+
+
+def decide(state):
+    logic = PaperSwitching(CFG, DECEL)
+    use, reason = logic.decide(state, np.zeros((1, 2)), np.zeros((1, 2)))
+    return bool(use[0]), logic.reasons[int(reason[0])]
+
+
+def test_paper_logic_switches_exactly_at_the_braking_point():
+    v = 7.0
+    boundary = v**2 / (2 * DECEL) + v * CFG.latency_s + CFG.stop_margin_m
+    assert decide(make_state(boundary + 1e-6, v, gap=-0.1)) == (False, "learned")
+    assert decide(make_state(boundary - 1e-6, v, gap=-0.1)) == (True, "no_gap_at_braking_point")
+
+
+def test_paper_logic_switches_exactly_at_the_time_gap_threshold():
+    assert decide(make_state(1.0, gap=+1e-6))[0] is False  # there is time to cut in front
+    assert decide(make_state(1.0, gap=-1e-6))[0] is True
+
+
+def test_paper_logic_is_silent_unless_both_cars_are_at_the_intersection():
+    assert decide(make_state(0.5, gap=-1.0, at=False))[0] is False
+    assert decide(make_state(0.5, gap=-1.0, at=True))[0] is True
+
+
+def test_supervisor_never_executes_nan_and_clips_out_of_range():
+    logic = NeverSwitch()
+    learned = np.array([[np.nan, 0.0], [np.inf, 0.0], [1.7, -0.3], [0.4, 0.0]])
+    safe = np.array([[0.0, 0.8]] * 4)
+    sup = supervise(logic, None, learned, safe, 0.0, 1.0)
+    names = reason_names(logic)
+    assert sup.safety_active.tolist() == [True, True, False, False]
+    assert [names[r] for r in sup.reason] == [INVALID_LEARNED_ACTION] * 2 + ["learned"] * 2
+    np.testing.assert_array_equal(sup.executed, [[0, 0.8], [0, 0.8], [1.0, 0.0], [0.4, 0.0]])
+    assert np.isnan(sup.learned[0, 0])  # the record keeps what was proposed
