@@ -17,7 +17,7 @@ from safeswitch.sim.road import IntersectionGeometry
 from safeswitch.sim.vehicle import VehicleParams
 
 Switching = Literal["paper", "certified", "none"]
-LearnedScope = Literal["window", "episode"]
+LearnedScope = Literal["window", "episode", "never"]
 ScenarioName = Literal["cut", "yield1", "yield2"]
 
 SWITCHING_VALUES: tuple[str, ...] = ("paper", "certified", "none")
@@ -297,7 +297,9 @@ class EpisodeConfig:
             must resolve starts inside the window.
         learned_scope: ``"window"`` — Algorithm 1: ``PID_th`` drives unless both cars are at the
             intersection, then the learned controller (under the switching logic);
-            ``"episode"`` — the learned controller drives the whole episode.
+            ``"episode"`` — the learned controller drives the whole episode; ``"never"`` —
+            ``PID_th`` always proposes (the purely rule-based baseline; the switching logic
+            still applies).
         conflict_margin_m: Clearance added to both footprints when the conflict zones are
             computed [m] (ours).
     """

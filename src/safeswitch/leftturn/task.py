@@ -318,7 +318,7 @@ class LeftTurnTask:
         if c.episode.learned_scope == "window":
             learned_in_charge = conflict.both_at_intersection
         else:
-            learned_in_charge = np.ones(batch, dtype=bool)
+            learned_in_charge = np.full(batch, c.episode.learned_scope == "episode")
         zeros = np.zeros(batch)
         proposed_throttle = np.where(learned_in_charge, learned_throttle, rule_throttle)
 
