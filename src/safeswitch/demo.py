@@ -27,7 +27,8 @@ def _rule_in_scenario(name: str, out: Path) -> dict[str, Any]:
     config = resolve_config({"episode": {"learned_scope": "never"}}, switching="paper")
     task = LeftTurnTask(config)
     state = task.initial(named_scenarios(name, 1))
-    frames, safety, min_speed, cleared = [], 0, np.inf, None
+    frames: list[np.ndarray] = []
+    safety, min_speed, cleared = 0, np.inf, None
     for tick in range(config.episode.horizon_ticks):
         state, record = task.step(state, np.zeros(1))
         safety += int(record.safety_active[0])
