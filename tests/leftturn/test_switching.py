@@ -47,19 +47,22 @@ def make_state(ego_to_stop, ego_speed=7.0, gap=0.0, at=True):
     ttr_e = ego_to_conflict / ego_speed
     north_speed = 8.0
     north_to_conflict = (ttr_e + CFG.ttr_threshold_s + gap) * north_speed
+    zero = np.zeros(1)
+    values = (ego_to_conflict, ego_to_stop, ego_speed, north_to_conflict, north_speed)
     return ConflictState(
-        *(
-            np.array([v])
-            for v in (ego_to_conflict, ego_to_stop, ego_speed, north_to_conflict, north_speed)
-        ),
+        *(np.array([v]) for v in values),
         both_at_intersection=np.array([at]),
+        ego_progress=zero,
+        north_progress=zero,
+        ego_throttle=zero,
+        ego_brake=zero,
     )
 
 
 def decide(state):
     logic = PaperSwitching(CFG, DECEL)
-    use, reason = logic.decide(state, np.zeros((1, 2)), np.zeros((1, 2)))
-    return bool(use[0]), logic.reasons[int(reason[0])]
+    decision = logic.decide(state, np.zeros((1, 2)), np.zeros((1, 2)))
+    return bool(decision.use_safety[0]), logic.reasons[int(decision.reason[0])]
 
 
 def test_paper_logic_switches_exactly_at_the_braking_point():

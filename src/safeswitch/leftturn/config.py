@@ -132,6 +132,96 @@ class PaperSwitchingConfig:
         check(0 < self.min_speed <= 5, o, "min_speed", self.min_speed, "must be in (0, 5] m/s")
 
 
+@dataclass(frozen=True)
+class CertifiedConfig:
+    """Assumptions and margins of the certified switching logic (all ours).
+
+    The guarantee — no collision for any learned action sequence — holds while the assumptions
+    hold. When they are broken the filter still acts (best effort: stop before the conflict zone
+    when possible), and the benchmarks measure what then happens.
+
+    Attributes:
+        north_max_accel: Assumption: the north car accelerates at most this much [m/s²]
+            (a brisk but ordinary urban acceleration; its autopilot holds its speed).
+        north_max_speed_kmh: Assumption: the north car never drives faster [km/h] (20 km/h
+            over the 30 km/h zone its scenarios use).
+        ego_max_lateral_m: Assumption: the ego stays this close to its route [m]. ``PID_lka``
+            keeps it within 0.51 m even at full throttle through the turn (18 m/s).
+        zone_margin_m: Clearance added to both footprints when the certified conflict zones are
+            computed [m]; at least ``2 · ego_max_lateral_m``.
+        progress_factor: Bound on the ratio between the ego's progress along the route and the
+            distance it drives (at 0.6 m inside an 11.75 m arc: 1.05) — stopping distances are
+            scaled up by it, clearing distances likewise.
+        time_margin_s: The ego must have cleared its zone this long before the north car can
+            first enter its own [s].
+        lag_ticks: Ticks of the actuator lags simulated exactly in the backups' bounds; beyond
+            them the weakest remaining deceleration (or acceleration) is assumed.
+        clear_speed_cap: Speed up to which the clearing bound's acceleration is valid [m/s].
+    """
+
+    north_max_accel: float = 2.5
+    north_max_speed_kmh: float = 50.0
+    ego_max_lateral_m: float = 0.6
+    zone_margin_m: float = 1.2
+    progress_factor: float = 1.05
+    time_margin_s: float = 0.1
+    lag_ticks: int = 10
+    clear_speed_cap: float = 20.0
+
+    def __post_init__(self) -> None:
+        o = "certified"
+        check(
+            0 < self.north_max_accel <= 10,
+            o,
+            "north_max_accel",
+            self.north_max_accel,
+            "must be in (0, 10] m/s²",
+        )
+        check(
+            0 < self.north_max_speed_kmh <= 200,
+            o,
+            "north_max_speed_kmh",
+            self.north_max_speed_kmh,
+            "must be in (0, 200] km/h",
+        )
+        check(
+            0 <= self.ego_max_lateral_m <= 2,
+            o,
+            "ego_max_lateral_m",
+            self.ego_max_lateral_m,
+            "must be in [0, 2] m",
+        )
+        check(
+            2 * self.ego_max_lateral_m <= self.zone_margin_m <= 5,
+            o,
+            "zone_margin_m",
+            self.zone_margin_m,
+            "must be at least 2 · ego_max_lateral_m and at most 5 m",
+        )
+        check(
+            1 <= self.progress_factor <= 1.5,
+            o,
+            "progress_factor",
+            self.progress_factor,
+            "must be in [1, 1.5]",
+        )
+        check(
+            0 <= self.time_margin_s <= 5,
+            o,
+            "time_margin_s",
+            self.time_margin_s,
+            "must be in [0, 5] s",
+        )
+        check(1 <= self.lag_ticks <= 100, o, "lag_ticks", self.lag_ticks, "must be in [1, 100]")
+        check(
+            5 <= self.clear_speed_cap <= 60,
+            o,
+            "clear_speed_cap",
+            self.clear_speed_cap,
+            "must be in [5, 60] m/s",
+        )
+
+
 def _check_piecewise(
     owner: str, name: str, points: tuple[float, ...], values: tuple[float, ...]
 ) -> None:
@@ -346,6 +436,7 @@ class LeftTurnConfig:
         episode: Timing and scope of the learned controller.
         controllers: The rule-based controllers.
         paper: Parameters of the paper's switching logic.
+        certified: Assumptions and margins of the certified switching logic.
         rewards: Reward terms.
         scenarios: The random scenario distribution.
         geometry: The intersection.
@@ -358,6 +449,7 @@ class LeftTurnConfig:
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
     controllers: ControllerConfig = field(default_factory=ControllerConfig)
     paper: PaperSwitchingConfig = field(default_factory=PaperSwitchingConfig)
+    certified: CertifiedConfig = field(default_factory=CertifiedConfig)
     rewards: RewardConfig = field(default_factory=RewardConfig)
     scenarios: ScenarioConfig = field(default_factory=ScenarioConfig)
     geometry: IntersectionGeometry = field(default_factory=IntersectionGeometry)

@@ -129,3 +129,21 @@ def named_scenarios(name: str, batch: int) -> Scenarios:
         north_speed=v["north_speed_kmh"] / 3.6 * ones,
         arrival_offset=v["arrival_offset"] * ones,
     )
+
+
+def scenario_grid(
+    arrival_offsets: FloatArray,
+    north_speeds_kmh: FloatArray,
+    ego_speeds_kmh: FloatArray,
+    ego_start_distance: float = 36.0,
+) -> Scenarios:
+    """Every combination of the given values, flattened to a batch (for exhaustive sweeps)."""
+    offset, north, ego = np.meshgrid(
+        arrival_offsets, north_speeds_kmh, ego_speeds_kmh, indexing="ij"
+    )
+    return Scenarios(
+        ego_start_distance=np.full(offset.size, float(ego_start_distance)),
+        ego_speed=ego.ravel() / 3.6,
+        north_speed=north.ravel() / 3.6,
+        arrival_offset=offset.ravel().astype(np.float64),
+    )

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from safeswitch.core.switching import BoolArray, FloatArray, IntArray
+from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import PaperSwitchingConfig
 
 
@@ -46,6 +46,10 @@ class ConflictState:
         north_speed: ``v_n`` [m/s].
         both_at_intersection: Algorithm 1's While condition: both cars are at the
             intersection and neither has left its conflict zone.
+        ego_progress: Ego's arc length along its route [m].
+        north_progress: North car's arc length along its route [m].
+        ego_throttle: Ego's actual throttle position (after the actuator lag).
+        ego_brake: Ego's actual brake position.
     """
 
     ego_to_conflict: FloatArray
@@ -54,6 +58,10 @@ class ConflictState:
     north_to_conflict: FloatArray
     north_speed: FloatArray
     both_at_intersection: BoolArray
+    ego_progress: FloatArray
+    north_progress: FloatArray
+    ego_throttle: FloatArray
+    ego_brake: FloatArray
 
 
 def time_to_reach(distance: FloatArray, speed: FloatArray, min_speed: float) -> FloatArray:
@@ -97,8 +105,6 @@ class PaperSwitching:
         )
         return s.ego_to_stop <= reach
 
-    def decide(
-        self, state: ConflictState, learned: FloatArray, safe: FloatArray
-    ) -> tuple[BoolArray, IntArray]:
+    def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
         use = state.both_at_intersection & self.no_gap(state) & self.at_braking_point(state)
-        return use, use.astype(np.int8)
+        return Decision(use, use.astype(np.int8), safe)

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from safeswitch.core.arrays import columns
 from safeswitch.core.pid import PIDState, pid_step
 from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names, supervise
+from safeswitch.leftturn.certified import CertifiedSwitching
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
 from safeswitch.leftturn.scenarios import (
@@ -35,7 +36,7 @@ from safeswitch.leftturn.scenarios import (
 )
 from safeswitch.leftturn.switching import ConflictState, PaperSwitching
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
-from safeswitch.sim.geometry import FloatArray
+from safeswitch.sim.geometry import FloatArray, Route
 from safeswitch.sim.road import Intersection
 from safeswitch.sim.traffic import AutopilotParams, autopilot_pedals
 from safeswitch.sim.vehicle import steady_state_throttle
@@ -155,15 +156,21 @@ class StepRecord:
     ego_cleared: BoolArray
 
 
-def make_switching(config: LeftTurnConfig) -> SwitchingLogic[ConflictState]:
+def make_switching(
+    config: LeftTurnConfig, ego_route: Route, north_route: Route
+) -> SwitchingLogic[ConflictState]:
     """The switching logic named by ``config.switching``."""
     if config.switching == "paper":
         return PaperSwitching(config.paper, config.controllers.emergency_decel)
-    if config.switching == "none":
-        return NeverSwitch()
-    raise NotImplementedError(
-        f"switching={config.switching!r} is not implemented yet (available: 'paper', 'none')"
-    )
+    if config.switching == "certified":
+        footprint = (config.vehicle.length, config.vehicle.width)
+        zones = conflict_geometry(
+            ego_route, north_route, footprint, footprint, margin=config.certified.zone_margin_m
+        )
+        return CertifiedSwitching(
+            config.certified, config.vehicle, config.episode.dt, zones.zone_a, zones.zone_b
+        )
+    return NeverSwitch()
 
 
 class LeftTurnTask:
@@ -189,7 +196,7 @@ class LeftTurnTask:
             footprint,
             margin=config.episode.conflict_margin_m,
         )
-        self.switching = make_switching(config)
+        self.switching = make_switching(config, *self.world.routes)
         self.reasons = reason_names(self.switching)
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
@@ -264,13 +271,18 @@ class LeftTurnTask:
         north_to_conflict = geo.s_point_b - s_n
         ego_at = (ego_to_conflict <= approach) & (s_e <= geo.zone_a[1])
         north_at = (north_to_conflict <= approach) & (s_n <= geo.zone_b[1])
+        v = state.world.vehicles
         return ConflictState(
             ego_to_conflict=ego_to_conflict,
             ego_to_stop=geo.zone_a[0] - s_e,
-            ego_speed=state.world.vehicles.speed[:, 0],
+            ego_speed=v.speed[:, 0],
             north_to_conflict=north_to_conflict,
-            north_speed=state.world.vehicles.speed[:, 1],
+            north_speed=v.speed[:, 1],
             both_at_intersection=ego_at & north_at,
+            ego_progress=s_e,
+            north_progress=s_n,
+            ego_throttle=v.throttle[:, 0],
+            ego_brake=v.brake[:, 0],
         )
 
     def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:

@@ -1,0 +1,128 @@
+"""Batched episodes of the left-turn task under any controller, with per-episode summaries."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
+from safeswitch.leftturn.vec_env import EpisodeStatistics
+
+#: A controller for the rollouts: (observation ``[B, 6]``, task state, tick) → actions ``[B]``
+#: in [-1, 1]. Adversaries may read the task state; a learned policy uses the observation only.
+Policy = Callable[[NDArray[np.float32], TaskState, int], NDArray[np.float64]]
+
+
+@dataclass
+class RolloutResult:
+    """Per-episode results of a batch, each array ``[B]``.
+
+    Attributes:
+        collision: The episode ended in a collision.
+        safety_steps: Ticks on which a safety action was executed.
+        invalid_steps: Ticks on which the learned action was NaN or infinite.
+        min_speed: Lowest ego speed [m/s].
+        time_to_clear: Time until the ego left its conflict zone [s] (NaN if it never did).
+        outcome: Who crossed first: 0 undecided, 1 cut, 2 yield.
+        comfort_violation_steps: Ticks beyond a comfort limit.
+        ticks: Episode length in ticks.
+        episode_return: Sum of rewards.
+        min_separation: Smallest gap between the two footprints [m].
+    """
+
+    collision: NDArray[np.bool_]
+    safety_steps: NDArray[np.int64]
+    invalid_steps: NDArray[np.int64]
+    min_speed: NDArray[np.float64]
+    time_to_clear: NDArray[np.float64]
+    outcome: NDArray[np.int8]
+    comfort_violation_steps: NDArray[np.int64]
+    ticks: NDArray[np.int64]
+    episode_return: NDArray[np.float64]
+    min_separation: NDArray[np.float64]
+
+
+def rollout(
+    task: LeftTurnTask,
+    scenarios: Scenarios,
+    policy: Policy,
+    on_tick: Callable[[TaskState, StepRecord, int], None] | None = None,
+) -> RolloutResult:
+    """Play one episode per scenario, all in one batch, until every episode has ended.
+
+    Args:
+        task: The task (its configuration sets the switching logic and the horizon).
+        scenarios: One scenario per episode ``[B]``.
+        policy: The learned controller (or adversary).
+        on_tick: Called after every tick with the new state, the record and the tick index
+            (e.g. to break an assumption mid-episode, or to log).
+    """
+    config: LeftTurnConfig = task.config
+    state = task.initial(scenarios)
+    batch = state.batch_size
+    stats = EpisodeStatistics(batch)
+    live = np.ones(batch, dtype=bool)
+    invalid = np.zeros(batch, dtype=np.int64)
+    min_separation = np.full(batch, np.inf)
+    ended_outcome = np.zeros(batch, dtype=np.int8)
+    observation = task.observe(state)
+    invalid_code = task.reasons.index("invalid_learned_action")
+    for tick in range(config.episode.horizon_ticks):
+        actions = policy(observation, state, tick)
+        state, record = task.step(state, actions)
+        # Ended episodes keep stepping (no reset) but no longer count.
+        _freeze(stats, record, live, config)
+        invalid += live & (record.reason == invalid_code)
+        min_separation = np.where(
+            live, np.minimum(min_separation, record.separation), min_separation
+        )
+        ended_outcome = np.where(live, record.outcome, ended_outcome)
+        if on_tick is not None:
+            on_tick(state, record, tick)
+        live &= ~(record.terminated | record.truncated)
+        observation = record.observation
+        if not live.any():
+            break
+    return RolloutResult(
+        collision=stats.collision,
+        safety_steps=stats.safety_steps,
+        invalid_steps=invalid,
+        min_speed=stats.min_speed,
+        time_to_clear=stats.time_to_clear,
+        outcome=ended_outcome,
+        comfort_violation_steps=stats.comfort_violation_steps,
+        ticks=stats.length,
+        episode_return=stats.ret,
+        min_separation=min_separation,
+    )
+
+
+def _freeze(
+    stats: EpisodeStatistics, record: StepRecord, live: NDArray[np.bool_], config: LeftTurnConfig
+) -> None:
+    """Update the statistics of the live episodes only."""
+    before = {
+        name: getattr(stats, name).copy()
+        for name in (
+            "ret",
+            "length",
+            "collision",
+            "safety_steps",
+            "min_speed",
+            "comfort_violation_steps",
+            "time_to_clear",
+            "max_lateral",
+        )
+    }
+    terms_before = {k: v.copy() for k, v in stats.terms.items()}
+    stats.update(record, config)
+    dead = ~live
+    for name, value in before.items():
+        getattr(stats, name)[dead] = value[dead]
+    for name, value in terms_before.items():
+        stats.terms[name][dead] = value[dead]

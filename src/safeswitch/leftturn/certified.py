@@ -1,0 +1,264 @@
+"""The certified switching logic: a Simplex-style safety filter with two backups.
+
+**Backups** (rule-based, each with a closed-form bound on what it achieves on the plant model):
+
+* *stop* — full brake until standstill, then hold. Its stopping distance is bounded from the
+  current speed and actual pedal positions: the first ``lag_ticks`` ticks follow the actuator
+  lags exactly (throttle decaying, brake building up; drive force at its maximum, every
+  resistance ignored), after which the weakest remaining deceleration is assumed. Full brake
+  rather than ``PID_b``: the bound must be provable, and only the intervention ticks pay in comfort.
+* *clear* — full throttle until the ego has left its conflict zone. Its time to cover a distance
+  is bounded the same way from below on the acceleration (drive force at the clearing speed cap,
+  full engine braking, resistances at the cap).
+
+**Certificate.** A state is *safe* when the north car has left its zone, or the ego has left
+its own, or the stop backup ends before the ego's zone entry, or the clear backup leaves the
+ego's zone ``time_margin_s`` before the north car can first enter its zone (accelerating at
+``north_max_accel`` up to ``north_max_speed_kmh``). The learned action is executed exactly when
+the state after one tick of it — predicted with the plant's own longitudinal model, actuator
+lags included — is safe. Otherwise the filter executes a backup that is feasible now, preferring
+*stop* (it is robust to any behaviour of the north car once the ego stands before the zone).
+
+**Invariant.** From a safe state, either action keeps the state safe: the learned one by the
+check, a backup because its bound at the next tick is no larger than at this one (the bounds are
+monotone along their own trajectories) while the north car, within the assumptions, cannot
+arrive earlier than its bound said. Safe states never collide: the zones are computed from the
+footprints with a margin covering the ego's lateral deviation. So no learned action sequence —
+random, adversarial, NaN — leads to a collision while the assumptions hold.
+
+If no backup is feasible (only when the assumptions were broken), the filter brakes fully while
+the ego is still before its zone and accelerates fully once it is inside (best effort), and the
+reason says so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.core.arrays import clamp
+from safeswitch.core.switching import BoolArray, Decision, FloatArray
+from safeswitch.leftturn.config import CertifiedConfig
+from safeswitch.leftturn.switching import ConflictState
+from safeswitch.sim.vehicle import GRAVITY, VehicleParams, lag_factor, longitudinal_force
+
+STOP, CLEAR = 1, 2
+
+
+class CertifiedSwitching:
+    """The certified switching logic (see the module docstring).
+
+    Args:
+        config: Assumptions and margins.
+        vehicle: Ego vehicle parameters (the plant model the bounds are computed on).
+        dt: Tick length [s].
+        ego_zone: ``(enter, exit)`` arc lengths of the ego's conflict zone [m], computed with
+            ``config.zone_margin_m``.
+        north_zone: ``(enter, exit)`` of the north car's conflict zone [m].
+    """
+
+    reasons: tuple[str, ...] = (
+        "learned",
+        "backup_stop",
+        "backup_clear",
+        "no_certified_backup_brake",
+        "no_certified_backup_clear",
+    )
+
+    def __init__(
+        self,
+        config: CertifiedConfig,
+        vehicle: VehicleParams,
+        dt: float,
+        ego_zone: tuple[float, float],
+        north_zone: tuple[float, float],
+    ) -> None:
+        self.config = config
+        self.vehicle = vehicle
+        self.dt = dt
+        self.ego_zone = ego_zone
+        self.north_zone = north_zone
+        p = vehicle
+        grip = p.friction_coefficient * p.mass * GRAVITY
+        self._alpha_throttle = lag_factor(p.throttle_time_constant, dt)
+        self._alpha_brake = lag_factor(p.brake_time_constant, dt)
+        k = np.arange(1, config.lag_ticks + 1, dtype=np.float64)
+        self._throttle_decay = (1.0 - self._alpha_throttle) ** k  # ρ_t^k, [K]
+        self._brake_decay = (1.0 - self._alpha_brake) ** k  # ρ_b^k, [K]
+        # Forces that bound the backups [N].
+        self._drive_max = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
+        self._brake_max = min(p.max_brake_force, grip)
+        cap = config.clear_speed_cap
+        self._drive_at_cap = min(self._drive_max, p.max_power / cap)
+        self._resist_at_cap = (
+            p.rolling_resistance * p.mass * GRAVITY + 0.5 * 1.2 * p.drag_area * cap * cap
+        )
+        self._north_max_speed = config.north_max_speed_kmh / 3.6
+
+    # -- bounds ------------------------------------------------------------------------------
+
+    def stop_distance(
+        self, speed: FloatArray, throttle: FloatArray, brake: FloatArray
+    ) -> FloatArray:
+        """Upper bound on the distance driven under full brake until standstill [m].
+
+        Args:
+            speed: Current speed [m/s] ``[N]``.
+            throttle: Actual throttle position ``[N]`` (it decays with the actuator lag).
+            brake: Actual brake position ``[N]`` (it builds up with the lag).
+        """
+        p, dt = self.vehicle, self.dt
+        # Deceleration lower bound on tick k: brake force minus the largest drive force.
+        decel = (
+            self._brake_max * (1.0 - (1.0 - brake)[:, None] * self._brake_decay)
+            - self._drive_max * throttle[:, None] * self._throttle_decay
+        ) / p.mass
+        # It grows with k, so once the speed reaches 0 it stays there: clamping is exact.
+        v = np.maximum(speed[:, None] - dt * np.cumsum(decel, axis=1), 0.0)
+        v_prev = np.concatenate([speed[:, None], v[:, :-1]], axis=1)
+        lag_distance = 0.5 * dt * (v_prev + v).sum(axis=1)
+        tail = v[:, -1] ** 2 / (2.0 * decel[:, -1])
+        return lag_distance + tail
+
+    def clear_time(
+        self, distance: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
+    ) -> FloatArray:
+        """Upper bound on the time to drive ``distance`` [m] under full throttle [s]."""
+        p, dt, cap = self.vehicle, self.dt, self.config.clear_speed_cap
+        throttle_k = 1.0 - (1.0 - throttle)[:, None] * self._throttle_decay
+        brake_k = brake[:, None] * self._brake_decay
+        engine_brake = p.max_engine_brake_force * (1.0 - throttle_k)
+        accel = (
+            throttle_k * self._drive_at_cap
+            - engine_brake
+            - brake_k * self._brake_max
+            - self._resist_at_cap
+        ) / p.mass
+        # Lower bound on the speed (clamping at 0 and at the cap only lowers it further).
+        v = clamp(speed[:, None] + dt * np.cumsum(accel, axis=1), 0.0, cap)
+        v_prev = np.concatenate([speed[:, None], v[:, :-1]], axis=1)
+        covered = 0.5 * dt * np.cumsum(v_prev + v, axis=1)
+        reached = covered >= distance[:, None]
+        first = np.argmax(reached, axis=1)
+        time = np.where(reached.any(axis=1), (first + 1) * dt, np.inf)
+        # Beyond the lag phase: constant acceleration a_K up to the cap, then the cap.
+        a, v_k = accel[:, -1], v[:, -1]
+        rest = np.maximum(distance - covered[:, -1], 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            to_cap = np.where(a > 0, (cap * cap - v_k * v_k) / (2.0 * a), np.inf)
+            accelerating = np.where(
+                a > 0,
+                (np.sqrt(v_k * v_k + 2.0 * a * rest) - v_k) / a,
+                np.where(v_k > 0, rest / v_k, np.inf),
+            )
+            capped = np.where(a > 0, (cap - v_k) / a + (rest - to_cap) / cap, np.inf)
+        tail = np.where(rest <= to_cap, accelerating, capped)
+        lag_time = self.config.lag_ticks * dt
+        return np.where(np.isfinite(time), time, lag_time + tail)
+
+    def north_arrival(self, progress: FloatArray, speed: FloatArray) -> FloatArray:
+        """Earliest time the north car can enter its conflict zone, within the assumptions [s]
+        (0 if it is inside, ``inf`` if it has left)."""
+        a = self.config.north_max_accel
+        top = np.maximum(self._north_max_speed, speed)  # best effort if already faster
+        distance = np.maximum(self.north_zone[0] - progress, 0.0)
+        to_top = (top * top - speed * speed) / (2.0 * a)
+        time = np.where(
+            distance <= to_top,
+            (np.sqrt(speed * speed + 2.0 * a * distance) - speed) / a,
+            (top - speed) / a + (distance - to_top) / top,
+        )
+        return np.where(progress > self.north_zone[1], np.inf, time)
+
+    # -- the certificate --------------------------------------------------------------------
+
+    def stop_feasible(
+        self, progress: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
+    ) -> BoolArray:
+        """Full braking ends before the ego's conflict-zone entry."""
+        reach = self.config.progress_factor * self.stop_distance(speed, throttle, brake)
+        return progress + reach <= self.ego_zone[0]
+
+    def clear_feasible(
+        self,
+        progress: FloatArray,
+        speed: FloatArray,
+        throttle: FloatArray,
+        brake: FloatArray,
+        north_arrival: FloatArray,
+    ) -> BoolArray:
+        """Full throttle leaves the ego's zone ``time_margin_s`` before the north car can enter."""
+        distance = self.config.progress_factor * np.maximum(self.ego_zone[1] - progress, 0.0)
+        deadline = north_arrival - self.config.time_margin_s
+        return self.clear_time(distance, speed, throttle, brake) <= deadline
+
+    def safe(
+        self,
+        progress: FloatArray,
+        speed: FloatArray,
+        throttle: FloatArray,
+        brake: FloatArray,
+        north_arrival: FloatArray,
+    ) -> BoolArray:
+        """The certificate: some backup still avoids sharing the zone with the north car."""
+        ok = np.isinf(north_arrival) | (progress > self.ego_zone[1])
+        ok |= self.stop_feasible(progress, speed, throttle, brake)
+        rest = np.flatnonzero(~ok)
+        if rest.size:
+            ok[rest] = self.clear_feasible(
+                progress[rest], speed[rest], throttle[rest], brake[rest], north_arrival[rest]
+            )
+        return ok
+
+    def predict(
+        self, state: ConflictState, pedals: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The ego one tick ahead under ``pedals`` ``[B, 2]`` (throttle, brake), with the plant's
+        own longitudinal model: progress bounds (low, high), speed, throttle and brake."""
+        p, dt = self.vehicle, self.dt
+        throttle = state.ego_throttle + self._alpha_throttle * (pedals[:, 0] - state.ego_throttle)
+        brake = state.ego_brake + self._alpha_brake * (pedals[:, 1] - state.ego_brake)
+        accel = longitudinal_force(p, state.ego_speed, throttle, brake) / p.mass
+        speed = np.maximum(state.ego_speed + accel * dt, 0.0)
+        step = 0.5 * (state.ego_speed + speed) * dt
+        f = self.config.progress_factor
+        return (
+            state.ego_progress + step / f,
+            state.ego_progress + step * f,
+            speed,
+            throttle,
+            brake,
+        )
+
+    def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
+        batch = learned.shape[0]
+        arrival = self.north_arrival(state.north_progress, state.north_speed)
+        low, high, speed, throttle, brake = self.predict(state, learned)
+        # After the tick: stop judged at the highest progress, clear at the lowest.
+        ok = np.isinf(arrival) | (low > self.ego_zone[1])
+        ok |= self.stop_feasible(high, speed, throttle, brake)
+        rest = np.flatnonzero(~ok)
+        if rest.size:
+            ok[rest] = self.clear_feasible(
+                low[rest], speed[rest], throttle[rest], brake[rest], arrival[rest] - self.dt
+            )
+        use = ~ok
+        reason = np.zeros(batch, dtype=np.int8)
+        action = np.zeros((batch, 2))
+        idx = np.flatnonzero(use)
+        if idx.size:
+            reason[idx], action[idx] = self._backup(state, arrival, idx)
+        return Decision(use, reason, action)
+
+    def _backup(
+        self, s: ConflictState, arrival: FloatArray, idx: NDArray[np.intp]
+    ) -> tuple[NDArray[np.int8], FloatArray]:
+        """Reason codes and pedals of the backup for the elements ``idx``."""
+        args = (s.ego_progress[idx], s.ego_speed[idx], s.ego_throttle[idx], s.ego_brake[idx])
+        stop = self.stop_feasible(*args)
+        clear = ~stop & self.clear_feasible(*args, arrival[idx])
+        before_zone = s.ego_progress[idx] < self.ego_zone[0]
+        reason = np.where(stop, 1, np.where(clear, 2, np.where(before_zone, 3, 4)))
+        go = (reason == 2) | (reason == 4)
+        pedals = np.stack([go.astype(np.float64), (~go).astype(np.float64)], axis=1)
+        return reason.astype(np.int8), pedals
