@@ -260,3 +260,20 @@ def test_invariant_on_200k_random_states_including_the_intervention_boundary(log
     )
     assert (safe & sup.safety_active).sum() > 100
     assert not (safe & ~is_safe(logic, after)).any()
+
+
+def test_the_quick_stop_bound_never_undercuts_the_exact_one_nor_the_plant(logic):
+    rng = np.random.default_rng(4)
+    n = 20_000
+    speed, throttle, brake = rng.uniform(0, 20, n), rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    exact = logic.stop_distance(speed, throttle, brake)
+    assert (logic.quick_stop_distance(speed) >= exact - 1e-9).all()
+    # And the exact bound holds on the plant itself: brake fully and measure.
+    from safeswitch.sim.vehicle import VehicleState, vehicle_step
+
+    state = VehicleState.at(np.zeros(n), 0.0, 0.0, speed, throttle)
+    state.brake[:] = brake
+    for _ in range(800):
+        state, _ = vehicle_step(logic.vehicle, state, 0.0, 1.0, 0.0, logic.dt)
+    assert (state.speed == 0).all()
+    assert (state.x <= exact + 1e-9).all()

@@ -195,3 +195,18 @@ def test_render_draws_both_cars():
     assert frame.shape == (480, 480, 3) and frame.dtype == np.uint8
     colours = {tuple(c) for c in frame.reshape(-1, 3)}
     assert (40, 110, 230) in colours and (240, 150, 30) in colours  # ego blue, north orange
+
+
+def test_lazy_infos_answer_bookkeeping_and_full_keys_alike():
+    vec = make_vec_env(2, seed=1, config={"episode": {"horizon_s": 1.0}})  # 50 ticks
+    vec.reset()
+    _, _, _, infos = vec.step(np.zeros((2, 1)))
+    assert infos[0].get("episode") is None and "terminal_observation" not in infos[0]
+    assert infos[1]["collision"] is False and "reward_terms" in infos[1]
+    for _ in range(49):
+        _, _, dones, infos = vec.step(np.zeros((2, 1)))
+    assert dones.all()
+    assert infos[0]["episode"]["l"] == 50
+    infos[0]["terminal_observation"] = "replaced"  # VecNormalize writes into infos
+    assert infos[0]["terminal_observation"] == "replaced"
+    assert set(dict(infos[1])) >= {"collision", "episode", "TimeLimit.truncated"}

@@ -19,6 +19,7 @@ FloatArray = NDArray[np.float64]
 
 def uniform(rng: np.random.Generator) -> Policy:
     """A fresh uniform action in [-1, 1] every tick."""
+
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
         return np.asarray(rng.uniform(-1.0, 1.0, int(obs.shape[0])), dtype=np.float64)
 

@@ -40,7 +40,13 @@ from safeswitch.core.arrays import clamp
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import CertifiedConfig
 from safeswitch.leftturn.switching import ConflictState
-from safeswitch.sim.vehicle import GRAVITY, VehicleParams, lag_factor, longitudinal_force
+from safeswitch.sim.vehicle import (
+    AIR_DENSITY,
+    GRAVITY,
+    VehicleParams,
+    lag_factor,
+    longitudinal_force,
+)
 
 STOP, CLEAR = 1, 2
 
@@ -91,9 +97,23 @@ class CertifiedSwitching:
         cap = config.clear_speed_cap
         self._drive_at_cap = min(self._drive_max, p.max_power / cap)
         self._resist_at_cap = (
-            p.rolling_resistance * p.mass * GRAVITY + 0.5 * 1.2 * p.drag_area * cap * cap
+            p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * cap * cap
         )
         self._north_max_speed = config.north_max_speed_kmh / 3.6
+        # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
+        # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
+        # whole lag phase, then brake at the lag phase's last (weakest) deceleration.
+        self._lag_time = config.lag_ticks * dt
+        self._accel_max = self._drive_max / p.mass
+        self._decel_tail_worst = (
+            self._brake_max * (1.0 - self._brake_decay[-1])
+            - self._drive_max * self._throttle_decay[-1]
+        ) / p.mass
+        if self._decel_tail_worst <= 0:
+            raise ValueError(
+                f"certified.lag_ticks={config.lag_ticks} is too short: after it the brake "
+                "cannot yet overcome a fully open throttle; increase it"
+            )
 
     # -- bounds ------------------------------------------------------------------------------
 
@@ -115,10 +135,15 @@ class CertifiedSwitching:
         ) / p.mass
         # It grows with k, so once the speed reaches 0 it stays there: clamping is exact.
         v = np.maximum(speed[:, None] - dt * np.cumsum(decel, axis=1), 0.0)
-        v_prev = np.concatenate([speed[:, None], v[:, :-1]], axis=1)
-        lag_distance = 0.5 * dt * (v_prev + v).sum(axis=1)
-        tail = v[:, -1] ** 2 / (2.0 * decel[:, -1])
-        return lag_distance + tail
+        # Trapezoids: sum_k (v_{k-1} + v_k) / 2 = sum_k v_k + (v_0 - v_K) / 2.
+        lag_distance = dt * (v.sum(axis=1) + 0.5 * (speed - v[:, -1]))
+        return lag_distance + v[:, -1] ** 2 / (2.0 * decel[:, -1])
+
+    def quick_stop_distance(self, speed: FloatArray) -> FloatArray:
+        """A looser upper bound on :meth:`stop_distance`, valid for any pedal positions [m]."""
+        t, a = self._lag_time, self._accel_max
+        top = speed + a * t
+        return (speed + 0.5 * a * t) * t + top * top / (2.0 * self._decel_tail_worst)
 
     def clear_time(
         self, distance: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
@@ -136,11 +161,10 @@ class CertifiedSwitching:
         ) / p.mass
         # Lower bound on the speed (clamping at 0 and at the cap only lowers it further).
         v = clamp(speed[:, None] + dt * np.cumsum(accel, axis=1), 0.0, cap)
-        v_prev = np.concatenate([speed[:, None], v[:, :-1]], axis=1)
-        covered = 0.5 * dt * np.cumsum(v_prev + v, axis=1)
+        # Trapezoids up to tick k: sum_{j<=k} v_j + (v_0 - v_k) / 2.
+        covered = dt * (np.cumsum(v, axis=1) + 0.5 * (speed[:, None] - v))
         reached = covered >= distance[:, None]
-        first = np.argmax(reached, axis=1)
-        time = np.where(reached.any(axis=1), (first + 1) * dt, np.inf)
+        time = np.where(reached.any(axis=1), (np.argmax(reached, axis=1) + 1) * dt, np.inf)
         # Beyond the lag phase: constant acceleration a_K up to the cap, then the cap.
         a, v_k = accel[:, -1], v[:, -1]
         rest = np.maximum(distance - covered[:, -1], 0.0)
@@ -153,8 +177,7 @@ class CertifiedSwitching:
             )
             capped = np.where(a > 0, (cap - v_k) / a + (rest - to_cap) / cap, np.inf)
         tail = np.where(rest <= to_cap, accelerating, capped)
-        lag_time = self.config.lag_ticks * dt
-        return np.where(np.isfinite(time), time, lag_time + tail)
+        return np.where(np.isfinite(time), time, self._lag_time + tail)
 
     def north_arrival(self, progress: FloatArray, speed: FloatArray) -> FloatArray:
         """Earliest time the north car can enter its conflict zone, within the assumptions [s]
@@ -176,8 +199,12 @@ class CertifiedSwitching:
         self, progress: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
     ) -> BoolArray:
         """Full braking ends before the ego's conflict-zone entry."""
-        reach = self.config.progress_factor * self.stop_distance(speed, throttle, brake)
-        return progress + reach <= self.ego_zone[0]
+        room = (self.ego_zone[0] - progress) / self.config.progress_factor
+        ok = self.quick_stop_distance(speed) <= room
+        near = np.flatnonzero(~ok & (room >= 0))
+        if near.size:
+            ok[near] = self.stop_distance(speed[near], throttle[near], brake[near]) <= room[near]
+        return ok
 
     def clear_feasible(
         self,
@@ -201,12 +228,30 @@ class CertifiedSwitching:
         north_arrival: FloatArray,
     ) -> BoolArray:
         """The certificate: some backup still avoids sharing the zone with the north car."""
-        ok = np.isinf(north_arrival) | (progress > self.ego_zone[1])
-        ok |= self.stop_feasible(progress, speed, throttle, brake)
+        return self._certify(progress, progress, speed, throttle, brake, north_arrival)
+
+    def _certify(
+        self,
+        progress_low: FloatArray,
+        progress_high: FloatArray,
+        speed: FloatArray,
+        throttle: FloatArray,
+        brake: FloatArray,
+        north_arrival: FloatArray,
+    ) -> BoolArray:
+        """:meth:`safe` with the ego's progress known only within ``[low, high]``: the stop
+        backup is judged at the highest progress, the clear backup at the lowest. Cheap tests
+        first; the exact bounds run only on what they leave undecided."""
+        ok = np.isinf(north_arrival) | (progress_low > self.ego_zone[1])
         rest = np.flatnonzero(~ok)
         if rest.size:
+            ok[rest] = self.stop_feasible(
+                progress_high[rest], speed[rest], throttle[rest], brake[rest]
+            )
+            rest = rest[~ok[rest]]
+        if rest.size:
             ok[rest] = self.clear_feasible(
-                progress[rest], speed[rest], throttle[rest], brake[rest], north_arrival[rest]
+                progress_low[rest], speed[rest], throttle[rest], brake[rest], north_arrival[rest]
             )
         return ok
 
@@ -234,15 +279,8 @@ class CertifiedSwitching:
         batch = learned.shape[0]
         arrival = self.north_arrival(state.north_progress, state.north_speed)
         low, high, speed, throttle, brake = self.predict(state, learned)
-        # After the tick: stop judged at the highest progress, clear at the lowest.
-        ok = np.isinf(arrival) | (low > self.ego_zone[1])
-        ok |= self.stop_feasible(high, speed, throttle, brake)
-        rest = np.flatnonzero(~ok)
-        if rest.size:
-            ok[rest] = self.clear_feasible(
-                low[rest], speed[rest], throttle[rest], brake[rest], arrival[rest] - self.dt
-            )
-        use = ~ok
+        # The north car may arrive one tick sooner after the learned tick.
+        use = ~self._certify(low, high, speed, throttle, brake, arrival - self.dt)
         reason = np.zeros(batch, dtype=np.int8)
         action = np.zeros((batch, 2))
         idx = np.flatnonzero(use)

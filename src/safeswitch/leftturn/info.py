@@ -8,7 +8,7 @@ arrays directly from :attr:`BatchInfos.record`.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, MutableMapping, Sequence
 from typing import Any, overload
 
 import numpy as np
@@ -51,7 +51,63 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
     }
 
 
-class BatchInfos(Sequence[dict[str, Any]]):
+#: Keys SB3 reads from every environment's info on every step; answered without building the
+#: full dict.
+_BOOKKEEPING = ("episode", "terminal_observation", "TimeLimit.truncated", "is_success")
+
+
+class LazyInfo(MutableMapping[str, Any]):
+    """One environment's info: SB3's bookkeeping keys are answered at once, the full
+    :func:`step_info` dict is built on the first access to any other key."""
+
+    __slots__ = ("_extra", "_full", "_index", "_owner")
+
+    def __init__(self, owner: BatchInfos, index: int, extra: dict[str, Any]) -> None:
+        self._owner, self._index, self._extra = owner, index, extra
+        self._full: dict[str, Any] | None = None
+
+    def _materialise(self) -> dict[str, Any]:
+        if self._full is None:
+            full = step_info(self._owner.record, self._index, self._owner.reasons)
+            full.update(self._extra)
+            self._full, self._extra = full, full
+        return self._full
+
+    def __getitem__(self, key: str) -> Any:
+        if self._full is None and key in _BOOKKEEPING:
+            return self._extra[key]
+        return self._materialise()[key]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        if self._full is None and key in _BOOKKEEPING:
+            return self._extra.get(key, default)
+        return self._materialise().get(key, default)
+
+    def __contains__(self, key: object) -> bool:
+        if self._full is None and key in _BOOKKEEPING:
+            return key in self._extra
+        return key in self._materialise()
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        if self._full is None:
+            self._extra[key] = value
+        else:
+            self._full[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        del self._materialise()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._materialise())
+
+    def __len__(self) -> int:
+        return len(self._materialise())
+
+    def __repr__(self) -> str:
+        return repr(self._materialise())
+
+
+class BatchInfos(Sequence[MutableMapping[str, Any]]):
     """The list of info dicts of one ``VecEnv.step``, built on access.
 
     Args:
@@ -79,18 +135,20 @@ class BatchInfos(Sequence[dict[str, Any]]):
         self._done_slot[np.flatnonzero(done)] = np.arange(int(done.sum()))
         self._terminal_observation = terminal_observation
         self._episode = episode
-        self._cache: dict[int, dict[str, Any]] = {}
+        self._cache: dict[int, LazyInfo] = {}
 
     def __len__(self) -> int:
         return int(self.done.shape[0])
 
     @overload
-    def __getitem__(self, index: int) -> dict[str, Any]: ...
+    def __getitem__(self, index: int) -> MutableMapping[str, Any]: ...
 
     @overload
-    def __getitem__(self, index: slice) -> list[dict[str, Any]]: ...
+    def __getitem__(self, index: slice) -> list[MutableMapping[str, Any]]: ...
 
-    def __getitem__(self, index: int | slice) -> dict[str, Any] | list[dict[str, Any]]:
+    def __getitem__(
+        self, index: int | slice
+    ) -> MutableMapping[str, Any] | list[MutableMapping[str, Any]]:
         if isinstance(index, slice):
             return [self[i] for i in range(*index.indices(len(self)))]
         n = len(self)
@@ -99,20 +157,20 @@ class BatchInfos(Sequence[dict[str, Any]]):
         index %= n
         cached = self._cache.get(index)
         if cached is None:
-            cached = step_info(self.record, index, self.reasons)
+            extra: dict[str, Any] = {}
             slot = self._done_slot[index]
             if slot >= 0:
-                cached["terminal_observation"] = self._terminal_observation[slot]
-                cached["TimeLimit.truncated"] = bool(
+                extra["terminal_observation"] = self._terminal_observation[slot]
+                extra["TimeLimit.truncated"] = bool(
                     self.record.truncated[index] and not self.record.terminated[index]
                 )
-                cached["episode"] = {
+                extra["episode"] = {
                     key: _scalar(values[slot]) for key, values in self._episode.items()
                 }
-            self._cache[index] = cached
+            cached = self._cache[index] = LazyInfo(self, index, extra)
         return cached
 
-    def __iter__(self) -> Iterator[dict[str, Any]]:
+    def __iter__(self) -> Iterator[MutableMapping[str, Any]]:
         for i in range(len(self)):
             yield self[i]
 
