@@ -20,9 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-import _common
 import numpy as np
 
+import _common
 from safeswitch.evaluation.adversaries import catalogue, noisy_cruise
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
