@@ -110,7 +110,15 @@ def assumption_breaks(count: int) -> list[dict[str, object]]:
         for label, (speed_kmh, before) in cases.items():
             triggered = np.zeros(count, dtype=bool)
 
-            def hook(state, record, tick, speed_kmh=speed_kmh, before=before, triggered=triggered):
+            def hook(
+                state,
+                record,
+                tick,
+                speed_kmh=speed_kmh,
+                before=before,
+                triggered=triggered,
+                north_entry=north_entry,
+            ):
                 near = state.world.progress[:, 1] > north_entry - before
                 state.scenarios.north_speed[near & ~triggered] = speed_kmh / 3.6
                 triggered |= near
