@@ -159,6 +159,18 @@ class LeftTurnVecEnv(VecEnv):
             raise RuntimeError("call reset() before stepping or reading the state")
         return self._state
 
+    @property
+    def episode_counters(self) -> NDArray[np.int64]:
+        """How many episodes each environment has started (its next scenario's index)."""
+        return self._episodes.copy()
+
+    @episode_counters.setter
+    def episode_counters(self, value: NDArray[np.int64]) -> None:
+        value = np.asarray(value, dtype=np.int64)
+        if value.shape != (self.num_envs,):
+            raise ValueError(f"episode_counters needs shape ({self.num_envs},), got {value.shape}")
+        self._episodes = value.copy()
+
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Set the base seed; the next :meth:`reset` starts every environment's episode count
         again from 0."""

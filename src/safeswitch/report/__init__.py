@@ -1,0 +1,1 @@
+"""Figures, animations and reports: the only package that imports matplotlib."""

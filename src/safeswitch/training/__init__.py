@@ -1,0 +1,1 @@
+"""Stable-Baselines3 glue: the training configuration, callbacks, checkpoints and runs."""

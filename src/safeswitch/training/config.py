@@ -1,0 +1,153 @@
+"""The training configuration: PPO with the paper's Table II as defaults.
+
+Every field is documented; the docstrings double as the reference for ``configs/*.yaml``. A
+configuration is loaded from YAML with unknown keys rejected by name, and the resolved
+configuration is saved with every run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+from safeswitch.core.config import ConfigError, check, from_dict, to_dict
+from safeswitch.leftturn.config import LeftTurnConfig
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyper-parameters (paper Table II unless marked).
+
+    Attributes:
+        learning_rate: Adam step size.
+        n_steps: Horizon: ticks collected per environment per update.
+        n_minibatches: Minibatches per epoch (SB3's ``batch_size = n_steps · n_envs / this``).
+        n_epochs: Passes over each rollout.
+        gamma: Discount factor.
+        gae_lambda: GAE λ.
+        clip_range: PPO clipping ε.
+        ent_coef: Entropy coefficient.
+        vf_coef: Value-function loss coefficient.
+        max_grad_norm: Gradient clipping threshold.
+        net_arch: Hidden units per layer, for the policy and (separately) the value network.
+        activation: Hidden-layer non-linearity (Table II: Tanh; the text's "ReLU" is the
+            alternative).
+        normalize_observations: Running observation normalisation (``VecNormalize``).
+        normalize_rewards: Running return-based reward scaling (``VecNormalize``).
+    """
+
+    learning_rate: float = 2.5e-4
+    n_steps: int = 128
+    n_minibatches: int = 4
+    n_epochs: int = 4
+    gamma: float = 0.99
+    gae_lambda: float = 0.9
+    clip_range: float = 0.2
+    ent_coef: float = 0.01
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    net_arch: tuple[int, ...] = (128, 128, 128)
+    activation: Literal["tanh", "relu"] = "tanh"
+    normalize_observations: bool = True
+    normalize_rewards: bool = True
+
+    def __post_init__(self) -> None:
+        o = "ppo"
+        check(
+            0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
+        )
+        check(self.n_steps >= 2, o, "n_steps", self.n_steps, "must be >= 2")
+        check(self.n_minibatches >= 1, o, "n_minibatches", self.n_minibatches, "must be >= 1")
+        check(self.n_epochs >= 1, o, "n_epochs", self.n_epochs, "must be >= 1")
+        for name in ("gamma", "gae_lambda"):
+            value = getattr(self, name)
+            check(0 < value <= 1, o, name, value, "must be in (0, 1]")
+        for name in ("clip_range", "ent_coef", "vf_coef", "max_grad_norm"):
+            value = getattr(self, name)
+            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
+        check(
+            len(self.net_arch) >= 1 and all(n >= 1 for n in self.net_arch),
+            o,
+            "net_arch",
+            self.net_arch,
+            "must list one or more positive layer sizes",
+        )
+        if self.activation not in ("tanh", "relu"):
+            raise ConfigError(f"ppo.activation={self.activation!r} is not 'tanh' or 'relu'")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run.
+
+    Attributes:
+        timesteps: Environment ticks to train for, summed over environments (Table II: 1.2 M).
+        n_envs: Environments stepped as one batch (ours: 16 keeps 4 minibatches of 512).
+        seed: Seed of PPO, of the networks and of the training scenarios.
+        torch_threads: CPU threads torch may use.
+        checkpoint_every: Save a resumable checkpoint every this many timesteps.
+        eval_episodes: Random scenarios of the final evaluation.
+        eval_seed: Seed of the final evaluation's scenarios (never used in training).
+        ppo: PPO hyper-parameters.
+        env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
+    """
+
+    timesteps: int = 1_200_000
+    n_envs: int = 16
+    seed: int = 0
+    torch_threads: int = 2
+    checkpoint_every: int = 200_000
+    eval_episodes: int = 1000
+    eval_seed: int = 1_000_003
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
+
+    def __post_init__(self) -> None:
+        o = "train"
+        check(self.timesteps >= 1, o, "timesteps", self.timesteps, "must be >= 1")
+        check(self.n_envs >= 1, o, "n_envs", self.n_envs, "must be >= 1")
+        check(self.torch_threads >= 1, o, "torch_threads", self.torch_threads, "must be >= 1")
+        check(
+            self.checkpoint_every >= 1, o, "checkpoint_every", self.checkpoint_every, "must be >= 1"
+        )
+        check(self.eval_episodes >= 0, o, "eval_episodes", self.eval_episodes, "must be >= 0")
+        check(
+            self.eval_seed != self.seed,
+            o,
+            "eval_seed",
+            self.eval_seed,
+            "must differ from the training seed",
+        )
+        rollout = self.ppo.n_steps * self.n_envs
+        check(
+            rollout % self.ppo.n_minibatches == 0,
+            o,
+            "n_envs",
+            self.n_envs,
+            f"times ppo.n_steps ({self.ppo.n_steps}) must be divisible by ppo.n_minibatches",
+        )
+
+    @property
+    def batch_size(self) -> int:
+        """SB3's minibatch size."""
+        return self.ppo.n_steps * self.n_envs // self.ppo.n_minibatches
+
+
+def load_config(path: str | Path) -> TrainConfig:
+    """A :class:`TrainConfig` from a YAML file (missing keys keep their defaults)."""
+    with open(path, encoding="utf-8") as handle:
+        data = yaml.safe_load(handle)
+    return from_dict(TrainConfig, data or {})
+
+
+def dump_config(config: TrainConfig) -> str:
+    """The configuration as YAML (every value, defaults included)."""
+    return yaml.safe_dump(to_dict(config), sort_keys=False)
+
+
+def config_from_data(data: dict[str, Any]) -> TrainConfig:
+    return from_dict(TrainConfig, data)

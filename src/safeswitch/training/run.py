@@ -1,0 +1,251 @@
+"""A training run: PPO on the batched left-turn VecEnv, with a run directory that is safe to
+interrupt and resume.
+
+Run directory::
+
+    config.yaml          the resolved configuration
+    progress.csv         one row per rollout (see training.callbacks)
+    tb/                  TensorBoard logs
+    checkpoints/step_N/  model.zip, vecnormalize.pkl, state.json (written whole, then renamed)
+    model.zip            final policy
+    vecnormalize.pkl     its observation/reward statistics
+    training_curves.png  the paper's Fig. 5 from progress.csv
+    metrics.json         written last: a run is complete exactly when this file exists
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import VecNormalize
+
+from safeswitch.evaluation.metrics import summarize
+from safeswitch.evaluation.policies import TrainedPolicy
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training.callbacks import TrainingMonitor
+from safeswitch.training.config import TrainConfig, dump_config, load_config
+
+
+class RunDirectoryError(RuntimeError):
+    """The run directory cannot be used as asked (exists, incomplete, or has no checkpoint)."""
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write a text file so that readers see either nothing or all of it."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _activation(name: str) -> type[torch.nn.Module]:
+    return torch.nn.Tanh if name == "tanh" else torch.nn.ReLU
+
+
+def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | None) -> PPO:
+    """PPO with the configured hyper-parameters (Table II by default)."""
+    ppo = config.ppo
+    arch = list(ppo.net_arch)
+    return PPO(
+        "MlpPolicy",
+        env,
+        learning_rate=ppo.learning_rate,
+        n_steps=ppo.n_steps,
+        batch_size=config.batch_size,
+        n_epochs=ppo.n_epochs,
+        gamma=ppo.gamma,
+        gae_lambda=ppo.gae_lambda,
+        clip_range=ppo.clip_range,
+        ent_coef=ppo.ent_coef,
+        vf_coef=ppo.vf_coef,
+        max_grad_norm=ppo.max_grad_norm,
+        seed=config.seed,
+        device="cpu",
+        policy_kwargs={
+            "net_arch": {"pi": arch, "vf": arch},
+            "activation_fn": _activation(ppo.activation),
+        },
+        tensorboard_log=str(tensorboard_log) if tensorboard_log else None,
+        verbose=0,
+    )
+
+
+def _checkpoints(run: Path) -> list[Path]:
+    folder = run / "checkpoints"
+    if not folder.is_dir():
+        return []
+    done = [
+        p for p in folder.iterdir() if p.name.startswith("step_") and (p / "state.json").is_file()
+    ]
+    return sorted(done, key=lambda p: int(p.name.split("_")[1]))
+
+
+def _save_checkpoint(
+    run: Path, model: PPO, env: VecNormalize, vec: LeftTurnVecEnv, monitor: TrainingMonitor
+) -> Path:
+    folder = run / "checkpoints"
+    folder.mkdir(exist_ok=True)
+    final = folder / f"step_{model.num_timesteps:09d}"
+    tmp = folder / f".tmp_{model.num_timesteps:09d}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    model.save(tmp / "model.zip")
+    env.save(str(tmp / "vecnormalize.pkl"))
+    state = {
+        "timesteps": model.num_timesteps,
+        "totals": monitor.totals,
+        "episode_counters": vec.episode_counters.tolist(),
+    }
+    (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
+    shutil.rmtree(final, ignore_errors=True)
+    os.replace(tmp, final)
+    for old in _checkpoints(run)[:-2]:  # keep the last two
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def evaluate_trained(
+    policy: TrainedPolicy, config: TrainConfig, episodes: int, seed: int
+) -> dict[str, Any]:
+    """Deterministic evaluation on ``episodes`` random scenarios drawn with ``seed``."""
+    task = LeftTurnTask(config.env)
+    scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
+    return summarize(rollout(task, scenarios, policy.as_policy()))
+
+
+def train(
+    config: TrainConfig, out: str | Path, resume: bool = False, progress_bar: bool = True
+) -> dict[str, Any]:
+    """Train (or resume) a run; returns the contents of ``metrics.json``.
+
+    Raises:
+        RunDirectoryError: ``out`` holds another run and ``resume`` is off, or ``resume`` is on
+            and there is nothing to resume.
+        KeyboardInterrupt: after saving a checkpoint, if interrupted.
+    """
+    run = Path(out)
+    torch.set_num_threads(config.torch_threads)
+    totals: dict[str, float] | None = None
+    counters: list[int] | None = None
+    if resume:
+        if not (run / "config.yaml").is_file():
+            raise RunDirectoryError(f"--resume: {run} holds no run (no config.yaml)")
+        if (run / "metrics.json").is_file():
+            raise RunDirectoryError(f"--resume: the run in {run} is already complete")
+        config = load_config(run / "config.yaml")
+        checkpoints = _checkpoints(run)
+        if not checkpoints:
+            raise RunDirectoryError(f"--resume: {run} has no complete checkpoint yet")
+        latest = checkpoints[-1]
+        state = json.loads((latest / "state.json").read_text(encoding="utf-8"))
+        totals, counters = state["totals"], state["episode_counters"]
+    else:
+        if run.exists() and any(run.iterdir()):
+            raise RunDirectoryError(
+                f"{run} is not empty; choose another --out, or --resume an interrupted run"
+            )
+        run.mkdir(parents=True, exist_ok=True)
+        write_atomic(run / "config.yaml", dump_config(config))
+
+    vec = LeftTurnVecEnv(config.n_envs, config=config.env, seed=config.seed)
+    if counters is not None:
+        vec.episode_counters = np.asarray(counters, dtype=np.int64)
+    if resume:
+        env = VecNormalize.load(str(latest / "vecnormalize.pkl"), vec)
+        model = PPO.load(
+            latest / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
+        )
+    else:
+        env = VecNormalize(
+            vec,
+            norm_obs=config.ppo.normalize_observations,
+            norm_reward=config.ppo.normalize_rewards,
+            gamma=config.ppo.gamma,
+        )
+        model = build_model(config, env, run / "tb")
+
+    monitor = TrainingMonitor(
+        run / "progress.csv",
+        config.checkpoint_every,
+        lambda m: _save_checkpoint(run, model, env, vec, m),
+        totals,
+    )
+    remaining = config.timesteps - model.num_timesteps
+    try:
+        if remaining > 0:
+            model.learn(
+                total_timesteps=remaining,
+                callback=monitor,
+                progress_bar=progress_bar,
+                reset_num_timesteps=not resume,
+                tb_log_name="ppo",
+            )
+    except KeyboardInterrupt:
+        monitor.totals["wall_time_s"] = monitor.wall_time_s
+        path = _save_checkpoint(run, model, env, vec, monitor)
+        print(
+            f"\ninterrupted at {model.num_timesteps:,} timesteps; checkpoint {path}; "
+            f"continue with: safeswitch train --resume --out {run}"
+        )
+        raise
+    wall = monitor.wall_time_s
+
+    tmp_model = run / "model.tmp.zip"
+    model.save(tmp_model)
+    os.replace(tmp_model, run / "model.zip")
+    env.save(str(run / "vecnormalize.pkl.tmp"))
+    os.replace(run / "vecnormalize.pkl.tmp", run / "vecnormalize.pkl")
+
+    from safeswitch.evaluation.policies import load_policy
+
+    started = time.perf_counter()
+    evaluation = (
+        evaluate_trained(load_policy(run), config, config.eval_episodes, config.eval_seed)
+        if config.eval_episodes
+        else {}
+    )
+    t = monitor.totals
+    metrics: dict[str, Any] = {
+        "timesteps": int(model.num_timesteps),
+        "wall_time_s": round(wall, 2),
+        "steps_per_s": round(model.num_timesteps / max(wall, 1e-9), 1),
+        "n_envs": config.n_envs,
+        "torch_threads": config.torch_threads,
+        "switching": config.env.switching,
+        "adas_penalty": config.env.adas_penalty,
+        "seed": config.seed,
+        "training": {
+            "collisions": int(t["collisions"]),
+            "collision_episodes": int(t["collision_episodes"]),
+            "safety_activation_steps": int(t["safety_steps"]),
+            "safety_activation_episodes": int(t["safety_episodes"]),
+            "episodes": int(t["episodes"]),
+        },
+        "evaluation": {
+            "seed": config.eval_seed,
+            **evaluation,
+            "wall_time_s": round(time.perf_counter() - started, 2),
+        },
+    }
+    try:
+        from safeswitch.report.training import training_curves
+
+        training_curves(
+            run / "progress.csv",
+            run / "training_curves.png",
+            title=f"switching={config.env.switching}, "
+            f"R_ADAS {'on' if config.env.adas_penalty else 'off'}",
+        )
+    except Exception as exc:  # a figure must never cost a finished run
+        print(f"warning: training_curves.png not written: {exc}")
+    write_atomic(run / "metrics.json", json.dumps(metrics, indent=2))
+    return metrics

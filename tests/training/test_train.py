@@ -1,0 +1,142 @@
+import json
+
+import pytest
+import yaml
+
+from safeswitch.cli import main
+from safeswitch.training.callbacks import TrainingMonitor
+from safeswitch.training.config import TrainConfig, dump_config, load_config
+from safeswitch.training.run import train
+
+SMALL = {
+    "timesteps": 4096,
+    "n_envs": 8,
+    "seed": 3,
+    "checkpoint_every": 2048,
+    "eval_episodes": 50,
+    "torch_threads": 1,
+    "env": {"episode": {"learned_scope": "episode", "horizon_s": 2.0}},
+}
+
+
+def write_config(tmp_path, data):
+    path = tmp_path / "config.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_cli_trains_end_to_end_and_writes_a_complete_run_directory(tmp_path, capsys):
+    run = tmp_path / "run"
+    code = main(
+        [
+            "train",
+            "--config",
+            str(write_config(tmp_path, SMALL)),
+            "--out",
+            str(run),
+            "--switching",
+            "paper",
+            "--no-progress",
+        ]
+    )
+    assert code == 0
+    for name in (
+        "config.yaml",
+        "model.zip",
+        "vecnormalize.pkl",
+        "progress.csv",
+        "metrics.json",
+        "training_curves.png",
+    ):
+        assert (run / name).is_file(), name
+    assert any((run / "tb").iterdir())
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["timesteps"] >= 4096
+    assert metrics["training"]["collisions"] == 0  # the safety net held while exploring
+    assert metrics["training"]["episodes"] > 0
+    assert metrics["evaluation"]["episodes"] == 50
+    assert load_config(run / "config.yaml").env.switching == "paper"
+    assert "collisions during training: 0" in capsys.readouterr().out
+
+
+def test_an_interrupted_run_is_incomplete_and_resumes_to_the_end(tmp_path, monkeypatch):
+    run = tmp_path / "run"
+    config = load_config(write_config(tmp_path, SMALL | {"timesteps": 8192}))
+    original = TrainingMonitor._on_rollout_end
+
+    def interrupt_after_4096(self):
+        original(self)
+        if self.num_timesteps >= 4096:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", interrupt_after_4096)
+    with pytest.raises(KeyboardInterrupt):
+        train(config, run, progress_bar=False)
+    assert not (run / "metrics.json").exists()  # never looks complete
+    checkpoints = sorted((run / "checkpoints").glob("step_*"))
+    assert checkpoints and (checkpoints[-1] / "state.json").is_file()
+    episodes_before = json.loads((checkpoints[-1] / "state.json").read_text())["totals"]["episodes"]
+    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", original)
+    assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["timesteps"] >= 8192
+    assert metrics["training"]["episodes"] > episodes_before  # counters carried over
+    assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 2  # complete
+
+
+def test_an_invalid_config_names_the_bad_key(tmp_path, capsys):
+    path = write_config(tmp_path, {"ppo": {"learnin_rate": 0.1}})
+    assert main(["train", "--config", str(path), "--out", str(tmp_path / "r")]) == 2
+    assert "learnin_rate" in capsys.readouterr().err
+    path = write_config(tmp_path, {"ppo": {"gamma": 1.5}})
+    assert main(["train", "--config", str(path), "--out", str(tmp_path / "r")]) == 2
+    assert "gamma" in capsys.readouterr().err
+
+
+def test_a_used_run_directory_is_refused_without_resume(tmp_path, capsys):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "something").write_text("x")
+    assert main(["train", "--out", str(tmp_path / "run"), "--timesteps", "10"]) == 2
+    assert "not empty" in capsys.readouterr().err
+
+
+def test_config_round_trips_through_yaml(tmp_path):
+    config = load_config(write_config(tmp_path, SMALL))
+    (tmp_path / "again.yaml").write_text(dump_config(config))
+    assert load_config(tmp_path / "again.yaml") == config
+    assert TrainConfig().ppo.n_steps == 128 and TrainConfig().batch_size == 512
+
+
+def test_evaluate_json_has_the_documented_fields_and_is_deterministic(capsys):
+    outputs = []
+    for _ in range(2):
+        assert (
+            main(
+                [
+                    "evaluate",
+                    "--controller",
+                    "rule",
+                    "--scenarios",
+                    "random",
+                    "--episodes",
+                    "40",
+                    "--seed",
+                    "5",
+                    "--json",
+                ]
+            )
+            == 0
+        )
+        outputs.append(json.loads(capsys.readouterr().out))
+    assert outputs[0] == outputs[1]
+    for key in (
+        "episodes",
+        "collisions",
+        "safety_activation_episodes",
+        "safety_activation_steps",
+        "mean_time_to_clear_s",
+        "comfort_violation_steps",
+        "stops",
+    ):
+        assert key in outputs[0]
+    assert outputs[0]["episodes"] == 40
