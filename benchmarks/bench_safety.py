@@ -76,7 +76,7 @@ def sensible_drivers(count: int) -> list[dict[str, object]]:
                 resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
             )
             scenarios = task.draw_scenarios(99, np.arange(count), np.zeros(count, int))
-            policy = noisy_cruise(np.random.default_rng(0), sigma=0.0)
+            policy = noisy_cruise(task, np.random.default_rng(0), sigma=0.0)
             result = rollout(task, scenarios, policy)
             rows.append(
                 {

@@ -57,14 +57,15 @@ def test_no_adversary_makes_certified_collide(certified_task, adversary):
 
 
 def test_the_paper_logic_has_a_blind_spot_that_certified_closes():
-    """Slowing down after entering the zone defeats the paper's rule, not the filter."""
+    """Changing pace after the gap looked safe (here: random bang-bang throttle) defeats the
+    paper's rule, not the filter."""
     counts = {}
     for switching in ("paper", "certified"):
         task = LeftTurnTask(
             resolve_config({"episode": {"learned_scope": "episode"}}, switching=switching)
         )
         scenarios, _ = scenarios_for(task, 2000)
-        result = rollout(task, scenarios, catalogue(task, 2000, seed=1)["zero_throttle"]())
+        result = rollout(task, scenarios, catalogue(task, 2000, seed=1)["bang_bang"]())
         counts[switching] = int(result.collision.sum())
     assert counts["paper"] > 0 and counts["certified"] == 0
 

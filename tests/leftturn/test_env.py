@@ -9,6 +9,8 @@ from safeswitch.core.config import ConfigError
 from safeswitch.leftturn import LeftTurnEnv, make_vec_env
 from safeswitch.leftturn.rewards import REWARD_TERMS
 
+from .conftest import cruise_action
+
 IMPLEMENTED = ("paper", "none")
 
 
@@ -176,9 +178,9 @@ def test_a_collision_terminates_and_is_not_a_time_limit():
         seed=0,
         config={"episode": {"learned_scope": "episode"}},
     )
-    vec.reset()
-    for _ in range(600):
-        _, _, dones, infos = vec.step(np.array([[-0.6]]))
+    obs = vec.reset()
+    for _ in range(600):  # cruise at the limit, unshielded, into a north car that has priority
+        obs, _, dones, infos = vec.step(cruise_action(obs[:, 2])[:, None])
         if dones[0]:
             break
     assert dones[0] and infos[0]["collision"]

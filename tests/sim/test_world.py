@@ -7,6 +7,7 @@ from safeswitch.core.pid import PIDGains, PIDState, pid_step
 from safeswitch.sim.conflict import conflict_geometry
 from safeswitch.sim.road import Intersection
 from safeswitch.sim.traffic import AutopilotParams, autopilot_pedals
+from safeswitch.sim.vehicle import steady_state_throttle
 from safeswitch.sim.world import World, preview_offsets
 
 PID_TH = PIDGains(1.5, 0.05, 0.002, 0.0, 0.7)  # Table I
@@ -22,9 +23,12 @@ def world():
 
 
 def cruise(world, start, speed0, ticks, target=V_LIM):
-    """Ego under PID_th + PID_lka; the north car parked far away."""
+    """Ego under PID_th + PID_lka; the north car parked far away. PID_th's integral starts at
+    the throttle that cruises at the limit (the bumpless start the case study uses)."""
     state = world.place(np.array([[start, 0.0]]), np.array([[speed0, 0.0]]))
-    th, lka = PIDState.zeros((1,)), PIDState.zeros((1, 2))
+    cruise_throttle = float(steady_state_throttle(world.params, np.asarray(target)))
+    th = PIDState.zeros((1,), cruise_throttle / PID_TH.ki)
+    lka = PIDState.zeros((1, 2))
     log = []
     for _ in range(ticks):
         throttle, th = pid_step(PID_TH, th, target - state.vehicles.speed[:, 0], world.dt)

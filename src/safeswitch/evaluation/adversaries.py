@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from safeswitch.evaluation.rollout import Policy
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
+from safeswitch.sim.vehicle import steady_state_throttle
 
 FloatArray = NDArray[np.float64]
 
@@ -58,11 +59,18 @@ def enter_then_stop(task: LeftTurnTask, depth: FloatArray) -> Policy:
     return policy
 
 
-def creep(target_speed: float = 1.5) -> Policy:
-    """Creeps towards and into the conflict zone at walking pace (P control of the throttle)."""
+def cruise_throttle(task: LeftTurnTask, speed: float) -> float:
+    """The throttle that holds ``speed`` [m/s] on the task's vehicle."""
+    return float(steady_state_throttle(task.config.vehicle, np.asarray(speed)))
+
+
+def creep(task: LeftTurnTask, target_speed: float = 1.5) -> Policy:
+    """Creeps towards and into the conflict zone at walking pace (P control of the throttle
+    around the throttle that holds that pace)."""
+    base = cruise_throttle(task, target_speed)
 
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        throttle = np.clip(0.1 + 0.3 * (target_speed - obs[:, 2]), 0.0, 1.0)
+        throttle = np.clip(base + 0.3 * (target_speed - obs[:, 2]), 0.0, 1.0)
         return 2.0 * throttle - 1.0
 
     return policy
@@ -81,14 +89,15 @@ def broken(rng: np.random.Generator, p_invalid: float = 0.3) -> Policy:
     return policy
 
 
-def noisy_cruise(
-    rng: np.random.Generator, sigma: float = 0.5, target_speed: float = 25 / 3.6
-) -> Policy:
-    """A sensible driver (P control to the speed limit) with large Gaussian action noise."""
+def noisy_cruise(task: LeftTurnTask, rng: np.random.Generator, sigma: float = 0.5) -> Policy:
+    """A sensible driver (P control to the speed limit) with Gaussian action noise."""
+    target = task.config.controllers.speed_limit
+    base = cruise_throttle(task, target)
 
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        throttle = np.clip(0.2 + 0.5 * (target_speed - obs[:, 2]), 0.0, 1.0)
-        return np.clip(2.0 * throttle - 1.0 + rng.normal(0.0, sigma, obs.shape[0]), -1, 1)
+        throttle = np.clip(base + 0.5 * (target - obs[:, 2]), 0.0, 1.0)
+        noise = rng.normal(0.0, sigma, obs.shape[0]) if sigma > 0 else 0.0
+        return np.clip(2.0 * throttle - 1.0 + noise, -1.0, 1.0)
 
     return policy
 
@@ -102,7 +111,7 @@ def catalogue(task: LeftTurnTask, batch: int, seed: int) -> dict[str, Callable[[
         "full_throttle": lambda: constant(1.0),
         "zero_throttle": lambda: constant(-1.0),
         "enter_then_stop": lambda: enter_then_stop(task, depth),
-        "creep": lambda: creep(),
+        "creep": lambda: creep(task),
         "nan_inf": lambda: broken(np.random.default_rng(seed + 2)),
-        "noisy_cruise": lambda: noisy_cruise(np.random.default_rng(seed + 3)),
+        "noisy_cruise": lambda: noisy_cruise(task, np.random.default_rng(seed + 3)),
     }

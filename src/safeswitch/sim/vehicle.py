@@ -52,8 +52,13 @@ class VehicleParams:
         max_brake_force: Brake force at full brake command [N] (about the tyre limit).
         rolling_resistance: Rolling resistance coefficient.
         drag_area: Drag coefficient times frontal area, ``Cd·A`` [m²].
-        engine_brake_coefficient: Engine braking per unit speed at closed throttle [N·s/m].
-        max_engine_brake_force: Upper bound of the engine braking force [N].
+        engine_brake_base_force: Closed-throttle drag force [N], faded in over the first 1 m/s
+            so that a standing car pulls away with a small throttle. With the speed term it
+            gives about 1.5 m/s² at 25 km/h — lift-off regeneration of a hybrid (the MKZ is sold
+            as one) or a low gear — so the throttle alone can stop the car within about 20 m,
+            as the paper's policy does in CARLA (its Fig. 10: a full stop, brake never used).
+        engine_brake_coefficient: Further closed-throttle drag per unit speed [N·s/m].
+        max_engine_brake_force: Upper bound of the closed-throttle drag [N].
         throttle_time_constant: Lag of the throttle actuator [s].
         brake_time_constant: Lag of the brake actuator [s].
         steer_time_constant: Lag of the steering actuator [s].
@@ -72,8 +77,9 @@ class VehicleParams:
     max_brake_force: float = 15_000.0
     rolling_resistance: float = 0.015
     drag_area: float = 0.7
+    engine_brake_base_force: float = 1500.0
     engine_brake_coefficient: float = 150.0
-    max_engine_brake_force: float = 1500.0
+    max_engine_brake_force: float = 3000.0
     throttle_time_constant: float = 0.10
     brake_time_constant: float = 0.08
     steer_time_constant: float = 0.10
@@ -84,6 +90,7 @@ class VehicleParams:
             "drag_area",
             "engine_brake_coefficient",
             "max_engine_brake_force",
+            "engine_brake_base_force",
         }
         for f in fields(self):
             value = getattr(self, f.name)
@@ -205,45 +212,58 @@ def lag_factor(time_constant: float, dt: float) -> float:
     return 1.0 - math.exp(-dt / time_constant)
 
 
+def available_drive_force(params: VehicleParams, speed: FloatArray) -> FloatArray:
+    """Drive force at full throttle [N]: ``min(F_max, P/v, μ·m·g·f_driven)``."""
+    p = params
+    traction = p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction
+    return np.minimum(np.minimum(p.max_drive_force, p.max_power / np.maximum(speed, 0.1)), traction)
+
+
+def closed_throttle_drag(params: VehicleParams, speed: FloatArray) -> FloatArray:
+    """Engine braking at closed throttle [N]: ``min(F_0·min(v, 1) + c·v, F_max)``."""
+    p = params
+    return np.minimum(
+        p.engine_brake_base_force * np.minimum(speed, 1.0) + p.engine_brake_coefficient * speed,
+        p.max_engine_brake_force,
+    )
+
+
+def driving_resistance(params: VehicleParams, speed: FloatArray) -> FloatArray:
+    """Rolling resistance plus aerodynamic drag [N] (for speed > 0)."""
+    p = params
+    return p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * speed * speed
+
+
 def longitudinal_force(
     params: VehicleParams, speed: FloatArray, throttle: FloatArray, brake: FloatArray
 ) -> FloatArray:
     """Net longitudinal force on the car [N] for actual pedal positions, at speed > 0.
 
-    Drive force ``throttle · min(F_max, P/v, μ·m·g·f_driven)`` minus engine braking
-    ``(1 − throttle) · min(c_eb·v, F_eb,max)``, brake force, rolling resistance and drag. The
-    total is bounded by the tyres' grip ``μ·m·g``.
+    ``throttle · F_drive(v) − (1 − throttle) · F_drag(v) − brake · F_brake − F_res(v)``
+    (see :func:`available_drive_force`, :func:`closed_throttle_drag`,
+    :func:`driving_resistance`), bounded by the tyres' grip ``μ·m·g``.
     """
     p = params
-    traction = p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction
-    available = np.minimum(
-        np.minimum(p.max_drive_force, p.max_power / np.maximum(speed, 0.1)), traction
+    force = (
+        throttle * available_drive_force(p, speed)
+        - (1.0 - throttle) * closed_throttle_drag(p, speed)
+        - brake * p.max_brake_force
+        - driving_resistance(p, speed)
     )
-    engine_brake = (1.0 - throttle) * np.minimum(
-        p.engine_brake_coefficient * speed, p.max_engine_brake_force
-    )
-    resistance = (
-        p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * speed * speed
-    )
-    force = throttle * available - engine_brake - brake * p.max_brake_force - resistance
     grip = p.friction_coefficient * p.mass * GRAVITY
     return clamp(force, -grip, grip)
 
 
 def steady_state_throttle(params: VehicleParams, speed: FloatArray) -> FloatArray:
     """Throttle position that holds ``speed`` on a level road (feed-forward for speed control)."""
-    p = params
     speed = np.asarray(speed, dtype=np.float64)
-    traction = p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction
-    available = np.minimum(
-        np.minimum(p.max_drive_force, p.max_power / np.maximum(speed, 0.1)), traction
+    drag = closed_throttle_drag(params, speed)
+    # throttle·F_drive − (1 − throttle)·F_drag − F_res = 0
+    return clamp(
+        (drag + driving_resistance(params, speed)) / (available_drive_force(params, speed) + drag),
+        0.0,
+        1.0,
     )
-    engine_brake = np.minimum(p.engine_brake_coefficient * speed, p.max_engine_brake_force)
-    resistance = (
-        p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * speed**2
-    )
-    # throttle·available − (1 − throttle)·engine_brake − resistance = 0
-    return clamp((engine_brake + resistance) / (available + engine_brake), 0.0, 1.0)
 
 
 def vehicle_step(

@@ -38,6 +38,8 @@ class PPOConfig:
             alternative).
         normalize_observations: Running observation normalisation (``VecNormalize``).
         normalize_rewards: Running return-based reward scaling (``VecNormalize``).
+        log_std_init: Initial log standard deviation of the Gaussian policy (not in Table II;
+            SB3's default 0 makes the first actions mostly noise on a [-1, 1] throttle).
     """
 
     learning_rate: float = 2.5e-4
@@ -54,9 +56,13 @@ class PPOConfig:
     activation: Literal["tanh", "relu"] = "tanh"
     normalize_observations: bool = True
     normalize_rewards: bool = True
+    log_std_init: float = 0.0
 
     def __post_init__(self) -> None:
         o = "ppo"
+        check(
+            -5 <= self.log_std_init <= 2, o, "log_std_init", self.log_std_init, "must be in [-5, 2]"
+        )
         check(
             0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
         )

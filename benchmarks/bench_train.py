@@ -1,0 +1,82 @@
+"""Training speed and decision latency.
+
+Trains one policy from a configuration (default ``configs/paper.yaml``: 1.2 M steps, 16
+environments, 2 torch threads) into a temporary run directory and reports wall time and steps
+per second, then times the trained policy's decision for a single observation (normalisation +
+forward pass, median of 2,000 calls, 1 torch thread). Run on an otherwise idle machine:
+``python benchmarks/bench_train.py [--config FILE] [--timesteps N] [--json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import _common
+from safeswitch.evaluation.policies import load_policy
+from safeswitch.training.config import load_config
+from safeswitch.training.run import train
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def decision_latency_ms(run: Path, calls: int = 2000) -> float:
+    torch.set_num_threads(1)
+    policy = load_policy(run)
+    obs = np.array([[1.75, -30.0, 6.9, -1.75, 40.0, 8.0]], dtype=np.float32)
+    for _ in range(50):
+        policy.act(obs)
+    times = []
+    for _ in range(calls):
+        t0 = time.perf_counter()
+        policy.act(obs)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default=str(ROOT / "configs" / "paper.yaml"))
+    parser.add_argument("--timesteps", type=int, help="override the configuration's timesteps")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    config = load_config(args.config)
+    if args.timesteps:
+        config = replace(config, timesteps=args.timesteps)
+    config = replace(config, eval_episodes=0)
+    with tempfile.TemporaryDirectory() as tmp:
+        metrics = train(config, Path(tmp) / "run", progress_bar=False)
+        latency = decision_latency_ms(Path(tmp) / "run")
+    result = {
+        "benchmark": "train",
+        **_common.machine(),
+        "config": args.config,
+        "timesteps": metrics["timesteps"],
+        "n_envs": config.n_envs,
+        "torch_threads": config.torch_threads,
+        "wall_time_s": metrics["wall_time_s"],
+        "steps_per_s": metrics["steps_per_s"],
+        "decision_latency_ms": latency,
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(
+        f"PPO training, {result['timesteps']:,} steps, {config.n_envs} environments, "
+        f"{config.torch_threads} torch threads: {result['wall_time_s']:.0f} s "
+        f"({result['steps_per_s']:,.0f} steps/s)"
+    )
+    print(f"decision latency, one observation, 1 torch thread: {latency:.3f} ms")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
