@@ -10,44 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-import gymnasium as gym
-import numpy as np
-
 import _common
 import safeswitch  # noqa: F401  (registers the environment id)
-from safeswitch.leftturn import make_vec_env
+from safeswitch.bench import env_steps_per_s, vec_env_steps_per_s
 
 VEC_SIZES = (1, 64, 1024, 4096)
-
-
-def single_env_steps_per_s(switching: str, seconds: float) -> float:
-    env = gym.make("safeswitch/LeftTurn-v0", switching=switching).unwrapped
-    env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(-1, 1, (1000, 1)).astype(np.float32)
-    counter = {"k": 0}
-
-    def hundred_steps() -> None:
-        for _ in range(100):
-            _, _, terminated, truncated, _ = env.step(actions[counter["k"] % 1000])
-            counter["k"] += 1
-            if terminated or truncated:
-                env.reset()
-
-    return 100 / _common.time_per_call(hundred_steps, seconds)
-
-
-def vec_env_steps_per_s(num_envs: int, switching: str, seconds: float) -> float:
-    env = make_vec_env(num_envs, switching=switching, seed=0)
-    env.reset()
-    actions = np.random.default_rng(0).uniform(-1, 1, (16, num_envs, 1))
-    counter = {"k": 0}
-
-    def one_step() -> None:
-        env.step(actions[counter["k"] % 16])
-        counter["k"] += 1
-
-    return num_envs / _common.time_per_call(one_step, seconds)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=1.5, help="timing per row")
     parser.add_argument("--switching", default="paper", choices=("paper", "none"))
     args = parser.parse_args(argv)
-    single = single_env_steps_per_s(args.switching, args.seconds)
+    single = env_steps_per_s(args.switching, args.seconds)
     rows = [
         {"num_envs": n, "steps_per_s": vec_env_steps_per_s(n, args.switching, args.seconds)}
         for n in VEC_SIZES

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import _common
+from safeswitch.bench import time_per_call
 from safeswitch.evaluation.adversaries import catalogue, noisy_cruise
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
@@ -149,7 +150,7 @@ def cost(seconds: float) -> dict[str, float]:
             env.step(actions[counter["k"] % 16])
             counter["k"] += 1
 
-        out[f"{switching}_step_ms"] = 1e3 * _common.time_per_call(step, seconds)
+        out[f"{switching}_step_ms"] = 1e3 * time_per_call(step, seconds)
     out["certified_over_none"] = out["certified_step_ms"] / out["none_step_ms"] - 1.0
     out["certified_over_paper"] = out["certified_step_ms"] / out["paper_step_ms"] - 1.0
     return out

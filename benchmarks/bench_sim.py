@@ -15,40 +15,10 @@ import argparse
 import sys
 import time
 
-import numpy as np
-
 import _common
-from safeswitch.core.pid import PIDGains, PIDState, pid_step
-from safeswitch.sim import AutopilotParams, Intersection, World, autopilot_pedals, preview_offsets
+from safeswitch.bench import sim_stepper, time_per_call
 
 BATCHES = (1, 64, 1024, 8192)
-
-
-def make_stepper(batch: int):
-    intersection = Intersection()
-    world = World([intersection.route("south", "west"), intersection.route("north", "south")])
-    rng = np.random.default_rng(0)
-    progress = np.stack([rng.uniform(60, 110, batch), rng.uniform(60, 110, batch)], 1)
-    state = world.place(progress, rng.uniform(4, 9, (batch, 2)))
-    lka = PIDGains(0.2, 0.01, 0.02, -1.0, 1.0)
-    autopilot = AutopilotParams()
-    target = np.full(batch, 8.0)
-    ego_throttle = np.full(batch, 0.3)
-    memory = {"state": state, "lka": PIDState.zeros((batch, 2)), "speed": PIDState.zeros((batch,))}
-
-    def step() -> None:
-        s = memory["state"]
-        steer, memory["lka"] = pid_step(
-            lka, memory["lka"], preview_offsets(world, s, 5.0), world.dt
-        )
-        throttle_n, brake_n, memory["speed"] = autopilot_pedals(
-            autopilot, world.params, s.vehicles.speed[:, 1], target, memory["speed"], world.dt
-        )
-        throttle = np.stack([ego_throttle, throttle_n], 1)
-        brake = np.stack([np.zeros(batch), brake_n], 1)
-        memory["state"], _, _ = world.step(s, throttle, brake, steer)
-
-    return step
 
 
 def bench_highway_env(seconds: float = 3.0) -> dict[str, float] | None:
@@ -87,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
 
     rows = []
     for batch in BATCHES:
-        per_call = _common.time_per_call(make_stepper(batch), args.seconds)
+        per_call = time_per_call(sim_stepper(batch), args.seconds)
         rows.append(
             {
                 "batch": batch,

@@ -78,6 +78,19 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench(args: argparse.Namespace) -> int:
+    from safeswitch.bench import quick_bench
+
+    figures = quick_bench(args.seconds)
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        for key, value in figures.items():
+            print(f"{key:>38}: {value:,.0f}")
+        print("(one core; benchmarks/ has the full scripts behind the README's figures)")
+    return 0
+
+
 def _demo(args: argparse.Namespace) -> int:
     from safeswitch.demo import run_demo
 
@@ -131,6 +144,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", help="folder for episodes.csv and summary.json")
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     ev.set_defaults(func=_evaluate)
+
+    bench = sub.add_parser("bench", help="throughput figures of the simulator and environments")
+    bench.add_argument("--json", action="store_true", help="print one JSON object")
+    bench.add_argument("--seconds", type=float, default=0.5, help="timing per figure")
+    bench.set_defaults(func=_bench)
 
     demo = sub.add_parser("demo", help="run the main job on the embedded simulator and report")
     demo.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")

@@ -46,7 +46,8 @@ def test_lane_keeping_reward_is_symmetric_with_zero_at_the_tolerance(x, expected
 
 
 @pytest.mark.parametrize(
-    ("a", "lon", "lat"), [(0, 1, 1), (3, 0.4, 0), (5, 0, -2 / 3), (6, -0.2, -1), (10, -1, -1)]
+    ("a", "lon", "lat"),
+    [(0, 1, 1), (3, 0.4, 0), (3.75, 0.25, -1), (5, 0, -2), (5.75, -1, -2), (10, -2, -2)],
 )
 def test_acceleration_rewards_are_zero_at_their_comfort_limits(a, lon, lat):
     for sign in (1, -1):

@@ -140,3 +140,17 @@ def test_evaluate_json_has_the_documented_fields_and_is_deterministic(capsys):
     ):
         assert key in outputs[0]
     assert outputs[0]["episodes"] == 40
+
+
+def test_bench_json_reports_positive_throughput(capsys):
+    assert main(["bench", "--json", "--seconds", "0.05"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    for key in (
+        "sim_vehicle_steps_per_s_batch_8192",
+        "vec_env_steps_per_s_4096",
+        "vec_env_certified_steps_per_s_4096",
+        "env_steps_per_s",
+    ):
+        assert figures[key] > 0
+    # Batching pays: a 4,096-env step is far cheaper per environment than the single Env's.
+    assert figures["vec_env_steps_per_s_4096"] > 50 * figures["env_steps_per_s"]

@@ -256,7 +256,10 @@ class RewardConfig:
         speed_values: ``R_v`` at those breakpoints.
         lateral_points_m: Breakpoints of ``R_lka`` on ``|lateral deviation|`` [m] (0 at 1.5 m).
         lateral_values: ``R_lka`` at those breakpoints.
-        accel_lon_points: Breakpoints of ``R_a_lon`` on ``|a_lon|`` [m/s²] (0 at 5 m/s²).
+        accel_lon_points: Breakpoints of ``R_a_lon`` on ``|a_lon|`` [m/s²] (0 at 5 m/s²). Beyond
+            the limit the penalty is steep (ours: -2 at 1.5 m/s² over it): with a gentle slope,
+            the 0.2 of ``R_v`` lost by slowing from 25 to 21 km/h outweighs the comfort gained
+            in the 11.75 m turn, and PPO learns to take it at 4.2 m/s² lateral.
         accel_lon_values: ``R_a_lon`` at those breakpoints.
         accel_lat_points: Breakpoints of ``R_a_lat`` on ``|a_lat|`` [m/s²] (0 at 3 m/s²).
         accel_lat_values: ``R_a_lat`` at those breakpoints.
@@ -272,10 +275,10 @@ class RewardConfig:
     speed_values: tuple[float, ...] = (-1.0, 0.0, 1.0, 1.0, 0.0, -1.0)
     lateral_points_m: tuple[float, ...] = (0.0, 1.5, 3.0)
     lateral_values: tuple[float, ...] = (1.0, 0.0, -1.0)
-    accel_lon_points: tuple[float, ...] = (0.0, 5.0, 10.0)
-    accel_lon_values: tuple[float, ...] = (1.0, 0.0, -1.0)
-    accel_lat_points: tuple[float, ...] = (0.0, 3.0, 6.0)
-    accel_lat_values: tuple[float, ...] = (1.0, 0.0, -1.0)
+    accel_lon_points: tuple[float, ...] = (0.0, 5.0, 6.5)
+    accel_lon_values: tuple[float, ...] = (1.0, 0.0, -2.0)
+    accel_lat_points: tuple[float, ...] = (0.0, 3.0, 4.5)
+    accel_lat_values: tuple[float, ...] = (1.0, 0.0, -2.0)
     collision_penalty: float = 0.0
     comfort_accel_lon: float = 5.0
     comfort_accel_lat: float = 3.0

@@ -73,6 +73,7 @@ def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | 
         policy_kwargs={
             "net_arch": {"pi": arch, "vf": arch},
             "activation_fn": _activation(ppo.activation),
+            "log_std_init": ppo.log_std_init,
         },
         tensorboard_log=str(tensorboard_log) if tensorboard_log else None,
         verbose=0,
