@@ -45,26 +45,21 @@ def sim_stepper(batch: int) -> Callable[[], None]:
     world = World([intersection.route("south", "west"), intersection.route("north", "south")])
     rng = np.random.default_rng(0)
     progress = np.stack([rng.uniform(60, 110, batch), rng.uniform(60, 110, batch)], 1)
-    memory = {
-        "state": world.place(progress, rng.uniform(4, 9, (batch, 2))),
-        "lka": PIDState.zeros((batch, 2)),
-        "speed": PIDState.zeros((batch,)),
-    }
+    state = world.place(progress, rng.uniform(4, 9, (batch, 2)))
+    lka_state, speed_state = PIDState.zeros((batch, 2)), PIDState.zeros((batch,))
     lka = PIDGains(0.2, 0.01, 0.02, -1.0, 1.0)
     autopilot = AutopilotParams()
     target, ego_throttle = np.full(batch, 8.0), np.full(batch, 0.35)
 
     def step() -> None:
-        s = memory["state"]
-        steer, memory["lka"] = pid_step(
-            lka, memory["lka"], preview_offsets(world, s, 5.0), world.dt
-        )
-        throttle_n, brake_n, memory["speed"] = autopilot_pedals(
-            autopilot, world.params, s.vehicles.speed[:, 1], target, memory["speed"], world.dt
+        nonlocal state, lka_state, speed_state
+        steer, lka_state = pid_step(lka, lka_state, preview_offsets(world, state, 5.0), world.dt)
+        throttle_n, brake_n, speed_state = autopilot_pedals(
+            autopilot, world.params, state.vehicles.speed[:, 1], target, speed_state, world.dt
         )
         throttle = np.stack([ego_throttle, throttle_n], 1)
         brake = np.stack([np.zeros(batch), brake_n], 1)
-        memory["state"], _, _ = world.step(s, throttle, brake, steer)
+        state, _, _ = world.step(state, throttle, brake, steer)
 
     return step
 
