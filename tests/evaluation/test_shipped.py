@@ -1,0 +1,66 @@
+"""The policies that ship with the package: safe training, and the paper policy's quality on
+scenarios it never saw (issue targets; see the README for the one it misses)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from safeswitch.evaluation.evaluate import evaluate
+from safeswitch.evaluation.policies import SHIPPED_DIR, load_policy, resolve_model_dir
+from safeswitch.training.config import load_config
+
+EVAL = {"scenarios": "random", "episodes": 1000, "seed": 424242, "out": None}
+
+
+def metrics(name):
+    return json.loads((SHIPPED_DIR / name / "metrics.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return evaluate("learned", "shipped", switching=None, **EVAL)
+
+
+@pytest.fixture(scope="module")
+def rule():
+    return evaluate("rule", None, switching=None, **EVAL)
+
+
+def test_every_shipped_policy_loads_with_its_config_and_acts_in_bounds():
+    obs = np.array([[1.75, -30.0, 6.9, -1.75, 40.0, 8.0]], dtype=np.float32)
+    for name in ("paper", "no_adas", "certified", "none"):
+        policy = load_policy(SHIPPED_DIR / name)
+        config = load_config(SHIPPED_DIR / name / "config.yaml")
+        assert config.timesteps == 1_200_000
+        action = policy.act(obs)
+        assert action.shape == (1,) and -1.0 <= action[0] <= 1.0
+    assert resolve_model_dir("shipped") == SHIPPED_DIR / "paper"
+    with pytest.raises(FileNotFoundError, match="no trained policy"):
+        resolve_model_dir("nonexistent-run")
+
+
+def test_training_with_a_safety_net_was_collision_free_and_without_one_was_not():
+    assert metrics("paper")["training"]["collisions"] == 0
+    assert metrics("certified")["training"]["collisions"] == 0
+    assert metrics("none")["training"]["collisions"] > 0
+    for name in ("paper", "no_adas", "certified", "none"):
+        assert metrics(name)["timesteps"] >= 1_200_000
+
+
+def test_paper_policy_is_safe_and_comfortable_on_unseen_scenarios(paper):
+    assert paper["episodes"] == 1000
+    assert paper["collisions"] == 0
+    assert paper["safety_activation_episodes"] <= 0.02 * 1000
+    assert paper["comfort_violation_fraction"] <= 0.005
+    assert paper["stops"] <= 0.10 * 1000
+
+
+def test_the_ablation_needs_the_safety_controller_more_than_the_paper_policy(paper):
+    ablation = evaluate("learned", "no-adas", switching=None, **EVAL)
+    assert ablation["safety_activation_episodes"] > paper["safety_activation_episodes"]
+
+
+def test_the_rule_baseline_is_safe_but_leans_on_the_safety_controller(rule, paper):
+    assert rule["collisions"] == 0
+    assert rule["safety_activation_episodes"] > 10 * max(paper["safety_activation_episodes"], 1)
