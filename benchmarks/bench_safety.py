@@ -25,6 +25,7 @@ import numpy as np
 import _common
 from safeswitch.bench import time_per_call
 from safeswitch.evaluation.adversaries import catalogue, noisy_cruise
+from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
 from safeswitch.leftturn.config import resolve_config
@@ -69,15 +70,24 @@ def adversarial_table(random_count: int) -> list[dict[str, object]]:
 
 
 def sensible_drivers(count: int) -> list[dict[str, object]]:
-    """Interventions when the driver is reasonable: PID_th alone, and a noisy cruise."""
+    """Interventions when the driver is reasonable: PID_th alone, a cruise P-controller, and
+    the shipped paper policy (each under both logics)."""
     rows = []
-    for driver, scope in (("rule (PID_th cruise)", "never"), ("cruise P-controller", "episode")):
+    drivers = (
+        ("rule (PID_th cruise)", "never"),
+        ("cruise P-controller", "episode"),
+        ("shipped paper policy", "episode"),
+    )
+    for driver, scope in drivers:
         for switching in ("certified", "paper"):
             task = LeftTurnTask(
                 resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
             )
             scenarios = task.draw_scenarios(99, np.arange(count), np.zeros(count, int))
-            policy = noisy_cruise(task, np.random.default_rng(0), sigma=0.0)
+            if driver.startswith("shipped"):
+                policy = load_policy("shipped").as_policy()
+            else:
+                policy = noisy_cruise(task, np.random.default_rng(0), sigma=0.0)
             result = rollout(task, scenarios, policy)
             rows.append(
                 {

@@ -23,6 +23,7 @@ ADVERSARIES = (
     "creep",
     "nan_inf",
     "noisy_cruise",
+    "noisy_trained",
 )
 
 

@@ -11,7 +11,7 @@ from safeswitch.leftturn.rewards import REWARD_TERMS
 
 from .conftest import cruise_action
 
-IMPLEMENTED = ("paper", "none")
+IMPLEMENTED = ("paper", "certified", "none")
 
 
 @pytest.mark.parametrize("switching", IMPLEMENTED)

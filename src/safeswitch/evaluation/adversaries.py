@@ -102,6 +102,19 @@ def noisy_cruise(task: LeftTurnTask, rng: np.random.Generator, sigma: float = 0.
     return policy
 
 
+def noisy_trained(rng: np.random.Generator, model: str = "shipped", sigma: float = 0.5) -> Policy:
+    """The shipped paper policy with large Gaussian noise on every action."""
+    from safeswitch.evaluation.policies import load_policy
+
+    trained = load_policy(model)
+
+    def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
+        noise = rng.normal(0.0, sigma, obs.shape[0])
+        return np.clip(trained.act(obs) + noise, -1.0, 1.0)
+
+    return policy
+
+
 def catalogue(task: LeftTurnTask, batch: int, seed: int) -> dict[str, Callable[[], Policy]]:
     """Every adversary, by name, as a zero-argument factory (fresh state and generator)."""
     depth = np.linspace(-3.0, 10.0, batch)  # the sweep of "stop inside" timings
@@ -114,4 +127,5 @@ def catalogue(task: LeftTurnTask, batch: int, seed: int) -> dict[str, Callable[[
         "creep": lambda: creep(task),
         "nan_inf": lambda: broken(np.random.default_rng(seed + 2)),
         "noisy_cruise": lambda: noisy_cruise(task, np.random.default_rng(seed + 3)),
+        "noisy_trained": lambda: noisy_trained(np.random.default_rng(seed + 4)),
     }
