@@ -8,10 +8,10 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig, resolve_config
+from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import step_info
 from safeswitch.leftturn.spaces import action_space, observation_space
-from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
+from safeswitch.leftturn.task import StepRecord, TaskState, build_task
 
 
 class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -47,12 +47,10 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         render_mode: str | None = None,
         env_index: int = 0,
     ) -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        self.config = resolve_config(
-            config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
+        self.task = build_task(
+            render_mode, config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
         )
-        self.task = LeftTurnTask(self.config)
+        self.config = self.task.config
         self.render_mode = render_mode
         self.observation_space = observation_space()  # type: ignore[assignment]
         self.action_space = action_space()  # type: ignore[assignment]

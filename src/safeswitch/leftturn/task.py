@@ -18,6 +18,7 @@ One tick (paper Fig. 3 and Algorithm 1):
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,7 +27,7 @@ from safeswitch.core.arrays import columns
 from safeswitch.core.pid import PIDState, pid_step
 from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.certified import CertifiedSwitching
-from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.config import LeftTurnConfig, resolve_config
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
@@ -415,3 +416,13 @@ class LeftTurnTask:
             ego_cleared=ego_cleared,
         )
         return new_state, record
+
+
+def build_task(
+    render_mode: str | None, config: LeftTurnConfig | dict[str, Any] | None, **overrides: Any
+) -> LeftTurnTask:
+    """The task behind an environment: ``render_mode`` checked, ``config`` resolved with the
+    constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`)."""
+    if render_mode not in (None, "rgb_array"):
+        raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+    return LeftTurnTask(resolve_config(config, **overrides))

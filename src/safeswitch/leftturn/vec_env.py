@@ -23,11 +23,11 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig, resolve_config
+from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import BatchInfos
 from safeswitch.leftturn.rewards import REWARD_TERMS
 from safeswitch.leftturn.spaces import action_space, observation_space
-from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
+from safeswitch.leftturn.task import StepRecord, TaskState, build_task
 
 #: Keys of the ``episode`` summary beyond SB3's ``r``, ``l`` and ``t``.
 EPISODE_KEYS: tuple[str, ...] = (
@@ -135,12 +135,10 @@ class LeftTurnVecEnv(VecEnv):
     ) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        self.config = resolve_config(
-            config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
+        self.task = build_task(
+            render_mode, config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
         )
-        self.task = LeftTurnTask(self.config)
+        self.config = self.task.config
         self.render_mode = render_mode
         super().__init__(int(num_envs), observation_space(), action_space())
         self._seed = _fresh_seed() if seed is None else int(seed)
