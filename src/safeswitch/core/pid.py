@@ -76,12 +76,6 @@ class PIDState:
     def copy(self) -> PIDState:
         return PIDState(self.integral.copy(), self.prev_error.copy(), self.derivative.copy())
 
-    def assign_where(self, mask: NDArray[np.bool_], other: PIDState) -> None:
-        """Overwrite the elements selected by ``mask`` with ``other``'s, in place."""
-        self.integral[mask] = other.integral[mask]
-        self.prev_error[mask] = other.prev_error[mask]
-        self.derivative[mask] = other.derivative[mask]
-
     def reset_where(self, mask: NDArray[np.bool_], integral: float | FloatArray = 0.0) -> None:
         """Reset the elements selected by ``mask`` in place."""
         self.integral[mask] = np.broadcast_to(integral, self.integral.shape)[mask]

@@ -76,7 +76,7 @@ def rollout(
         actions = policy(observation, state, tick)
         state, record = task.step(state, actions)
         # Ended episodes keep stepping (no reset) but no longer count.
-        _freeze(stats, record, live, config)
+        stats.update(record, config, live)
         invalid += live & (record.reason == invalid_code)
         min_separation = np.where(
             live, np.minimum(min_separation, record.separation), min_separation
@@ -100,29 +100,3 @@ def rollout(
         episode_return=stats.ret,
         min_separation=min_separation,
     )
-
-
-def _freeze(
-    stats: EpisodeStatistics, record: StepRecord, live: NDArray[np.bool_], config: LeftTurnConfig
-) -> None:
-    """Update the statistics of the live episodes only."""
-    before = {
-        name: getattr(stats, name).copy()
-        for name in (
-            "ret",
-            "length",
-            "collision",
-            "safety_steps",
-            "min_speed",
-            "comfort_violation_steps",
-            "time_to_clear",
-            "max_lateral",
-        )
-    }
-    terms_before = {k: v.copy() for k, v in stats.terms.items()}
-    stats.update(record, config)
-    dead = ~live
-    for name, value in before.items():
-        getattr(stats, name)[dead] = value[dead]
-    for name, value in terms_before.items():
-        stats.terms[name][dead] = value[dead]

@@ -56,21 +56,29 @@ class EpisodeStatistics:
         self.max_lateral = np.zeros(batch)
         self.terms = {name: np.zeros(batch) for name in REWARD_TERMS}
 
-    def update(self, record: StepRecord, config: LeftTurnConfig) -> None:
+    def update(
+        self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_] | None = None
+    ) -> None:
+        """Add one tick; with ``live``, only the episodes it selects (the others have ended and
+        keep their figures)."""
         r = record
-        self.ret += r.reward
-        self.length += 1
-        self.collision |= r.collision
-        self.safety_steps += r.safety_active
-        self.min_speed = np.minimum(self.min_speed, r.ego_speed)
-        self.comfort_violation_steps += (np.abs(r.accel_lon) > config.rewards.comfort_accel_lon) | (
-            np.abs(r.accel_lat) > config.rewards.comfort_accel_lat
+        on = np.ones(r.reward.shape[0], dtype=bool) if live is None else live
+        self.ret += np.where(on, r.reward, 0.0)
+        self.length += on
+        self.collision |= r.collision & on
+        self.safety_steps += r.safety_active & on
+        self.min_speed = np.where(on, np.minimum(self.min_speed, r.ego_speed), self.min_speed)
+        self.comfort_violation_steps += on & (
+            (np.abs(r.accel_lon) > config.rewards.comfort_accel_lon)
+            | (np.abs(r.accel_lat) > config.rewards.comfort_accel_lat)
         )
-        just_cleared = r.ego_cleared & np.isnan(self.time_to_clear)
+        just_cleared = on & r.ego_cleared & np.isnan(self.time_to_clear)
         self.time_to_clear[just_cleared] = self.length[just_cleared] * config.episode.dt
-        self.max_lateral = np.maximum(self.max_lateral, np.abs(r.lateral))
+        self.max_lateral = np.where(
+            on, np.maximum(self.max_lateral, np.abs(r.lateral)), self.max_lateral
+        )
         for name in REWARD_TERMS:
-            self.terms[name] += r.terms[name]
+            self.terms[name] += np.where(on, r.terms[name], 0.0)
 
     def summary(
         self, index: NDArray[np.intp], record: StepRecord, elapsed: float

@@ -186,11 +186,6 @@ class VehicleState:
     def copy(self) -> VehicleState:
         return VehicleState(*(getattr(self, f.name).copy() for f in fields(self)))
 
-    def assign_where(self, mask: NDArray[np.bool_], other: VehicleState) -> None:
-        """Overwrite the elements selected by ``mask`` with ``other``'s, in place."""
-        for f in fields(self):
-            getattr(self, f.name)[mask] = getattr(other, f.name)[mask]
-
 
 @dataclass
 class VehicleOutputs:

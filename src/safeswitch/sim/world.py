@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
 
 from safeswitch.sim.collision import separation_from_axes
 from safeswitch.sim.geometry import FloatArray, Route, RouteSet, wrap_angle
@@ -39,12 +38,6 @@ class WorldState:
     progress: FloatArray
     lateral: FloatArray
     time: FloatArray
-
-    def assign_where(self, mask: NDArray[np.bool_], other: WorldState) -> None:
-        """Overwrite the scenes selected by ``mask`` (shape ``[B]``) with ``other``'s."""
-        self.vehicles.assign_where(mask, other.vehicles)
-        for name in ("progress", "lateral", "time"):
-            getattr(self, name)[mask] = getattr(other, name)[mask]
 
 
 @dataclass
