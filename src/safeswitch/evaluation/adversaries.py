@@ -64,13 +64,18 @@ def cruise_throttle(task: LeftTurnTask, speed: float) -> float:
     return float(steady_state_throttle(task.config.vehicle, np.asarray(speed)))
 
 
-def creep(task: LeftTurnTask, target_speed: float = 1.5) -> Policy:
-    """Creeps towards and into the conflict zone at walking pace (P control of the throttle
-    around the throttle that holds that pace)."""
-    base = cruise_throttle(task, target_speed)
+def creep(task: LeftTurnTask, target_speed: float = 1.5, from_m: float = 15.0) -> Policy:
+    """Cruises at the speed limit until ``from_m`` metres before the conflict zone, then creeps
+    into and through it at walking pace (P control around the throttle that holds each speed)."""
+    limit = task.config.controllers.speed_limit
+    slow, fast = cruise_throttle(task, target_speed), cruise_throttle(task, limit)
+    entry = task.conflict.zone_a[0]
 
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        throttle = np.clip(base + 0.3 * (target_speed - obs[:, 2]), 0.0, 1.0)
+        near = state.world.progress[:, 0] > entry - from_m
+        target = np.where(near, target_speed, limit)
+        base = np.where(near, slow, fast)
+        throttle = np.clip(base + 0.5 * (target - obs[:, 2]), 0.0, 1.0)
         return 2.0 * throttle - 1.0
 
     return policy

@@ -100,6 +100,14 @@ class CertifiedSwitching:
             p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * cap * cap
         )
         self._north_max_speed = config.north_max_speed_kmh / 3.6
+        # Closed forms of the stop bound (see stop_distance): the deceleration on tick k is
+        # A − B·ρ_b^k − C·ρ_t^k, so its partial sums and their sums are constants times B, C.
+        kk = config.lag_ticks
+        self._decel_full = self._brake_max / p.mass  # A
+        gb, gt = np.cumsum(self._brake_decay), np.cumsum(self._throttle_decay)
+        self._sum_k = kk * (kk + 1) / 2.0  # sum_k k
+        self._gb_last, self._gt_last = float(gb[-1]), float(gt[-1])
+        self._gb_sum, self._gt_sum = float(gb.sum()), float(gt.sum())
         # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
         # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
         # whole lag phase, then brake at the lag phase's last (weakest) deceleration.
@@ -122,11 +130,37 @@ class CertifiedSwitching:
     ) -> FloatArray:
         """Upper bound on the distance driven under full brake until standstill [m].
 
+        On tick ``k`` of the lag phase the deceleration is at least ``A − B·ρ_b^k − C·ρ_t^k``
+        (brake force building up, drive force of the decaying throttle at its maximum,
+        resistances ignored). Where the car is still moving at the end of the lag phase the
+        sums have closed forms; where it stops within it, :meth:`_stop_distance_by_tick` follows
+        the ticks.
+
         Args:
             speed: Current speed [m/s] ``[N]``.
             throttle: Actual throttle position ``[N]`` (it decays with the actuator lag).
             brake: Actual brake position ``[N]`` (it builds up with the lag).
         """
+        dt, kk = self.dt, self.config.lag_ticks
+        b = self._decel_full * (1.0 - brake)  # B
+        c = (self._drive_max / self.vehicle.mass) * throttle  # C
+        v_end = speed - dt * (kk * self._decel_full - b * self._gb_last - c * self._gt_last)
+        v_sum = kk * speed - dt * (
+            self._sum_k * self._decel_full - b * self._gb_sum - c * self._gt_sum
+        )
+        decel_end = self._decel_full - b * self._brake_decay[-1] - c * self._throttle_decay[-1]
+        distance = dt * (v_sum + 0.5 * (speed - v_end)) + v_end * v_end / (2.0 * decel_end)
+        stops_early = np.flatnonzero(v_end <= 0.0)
+        if stops_early.size:
+            distance[stops_early] = self._stop_distance_by_tick(
+                speed[stops_early], throttle[stops_early], brake[stops_early]
+            )
+        return distance
+
+    def _stop_distance_by_tick(
+        self, speed: FloatArray, throttle: FloatArray, brake: FloatArray
+    ) -> FloatArray:
+        """:meth:`stop_distance` tick by tick (also right when the car stops in the lag)."""
         p, dt = self.vehicle, self.dt
         # Deceleration lower bound on tick k: brake force minus the largest drive force.
         decel = (
@@ -148,7 +182,57 @@ class CertifiedSwitching:
     def clear_time(
         self, distance: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
     ) -> FloatArray:
-        """Upper bound on the time to drive ``distance`` [m] under full throttle [s]."""
+        """Upper bound on the time to drive ``distance`` [m] under full throttle [s].
+
+        On tick ``k`` of the lag phase the acceleration is at least ``A − P·ρ_t^k − Q·ρ_b^k``
+        (throttle building up, brake releasing; drive force at the clearing speed cap, full
+        engine braking of the closed part, resistances at the cap). Where no clamp of the speed
+        bound (at 0 or at the cap) can act and the distance is not covered within the lag phase,
+        the sums have closed forms; elsewhere :meth:`_clear_time_by_tick` follows the ticks.
+        """
+        p, dt, kk, cap = self.vehicle, self.dt, self.config.lag_ticks, self.config.clear_speed_cap
+        a_full = (self._drive_at_cap - self._resist_at_cap) / p.mass  # A
+        q_throttle = (1.0 - throttle) * (self._drive_at_cap + p.max_engine_brake_force) / p.mass
+        q_brake = brake * self._brake_max / p.mass
+        first = a_full - q_throttle * self._throttle_decay[0] - q_brake * self._brake_decay[0]
+        v_end = speed + dt * (kk * a_full - q_throttle * self._gt_last - q_brake * self._gb_last)
+        v_sum = kk * speed + dt * (
+            self._sum_k * a_full - q_throttle * self._gt_sum - q_brake * self._gb_sum
+        )
+        covered = dt * (v_sum + 0.5 * (speed - v_end))
+        a_end = a_full - q_throttle * self._throttle_decay[-1] - q_brake * self._brake_decay[-1]
+        # The bound's acceleration only grows with k: if it starts >= 0 the speed never dips.
+        simple = (first >= 0.0) & (np.maximum(speed, v_end) <= cap) & (covered < distance)
+        time = np.empty_like(distance)
+        time[simple] = self._lag_time + self._tail_time(
+            distance[simple] - covered[simple], v_end[simple], a_end[simple]
+        )
+        rest = np.flatnonzero(~simple)
+        if rest.size:
+            time[rest] = self._clear_time_by_tick(
+                distance[rest], speed[rest], throttle[rest], brake[rest]
+            )
+        return time
+
+    def _tail_time(self, rest: FloatArray, v: FloatArray, a: FloatArray) -> FloatArray:
+        """Time to drive ``rest`` [m] from speed ``v`` at constant acceleration ``a`` up to
+        the clearing speed cap, then at the cap [s]."""
+        cap = self.config.clear_speed_cap
+        with np.errstate(divide="ignore", invalid="ignore"):
+            to_cap = np.where(a > 0, (cap * cap - v * v) / (2.0 * a), np.inf)
+            accelerating = np.where(
+                a > 0,
+                (np.sqrt(v * v + 2.0 * a * rest) - v) / a,
+                np.where(v > 0, rest / v, np.inf),
+            )
+            capped = np.where(a > 0, (cap - v) / a + (rest - to_cap) / cap, np.inf)
+        return np.where(rest <= to_cap, accelerating, capped)
+
+    def _clear_time_by_tick(
+        self, distance: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
+    ) -> FloatArray:
+        """:meth:`clear_time` tick by tick (also right when a clamp acts or the distance is
+        covered within the lag phase)."""
         p, dt, cap = self.vehicle, self.dt, self.config.clear_speed_cap
         throttle_k = 1.0 - (1.0 - throttle)[:, None] * self._throttle_decay
         brake_k = brake[:, None] * self._brake_decay
@@ -165,18 +249,8 @@ class CertifiedSwitching:
         covered = dt * (np.cumsum(v, axis=1) + 0.5 * (speed[:, None] - v))
         reached = covered >= distance[:, None]
         time = np.where(reached.any(axis=1), (np.argmax(reached, axis=1) + 1) * dt, np.inf)
-        # Beyond the lag phase: constant acceleration a_K up to the cap, then the cap.
-        a, v_k = accel[:, -1], v[:, -1]
         rest = np.maximum(distance - covered[:, -1], 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            to_cap = np.where(a > 0, (cap * cap - v_k * v_k) / (2.0 * a), np.inf)
-            accelerating = np.where(
-                a > 0,
-                (np.sqrt(v_k * v_k + 2.0 * a * rest) - v_k) / a,
-                np.where(v_k > 0, rest / v_k, np.inf),
-            )
-            capped = np.where(a > 0, (cap - v_k) / a + (rest - to_cap) / cap, np.inf)
-        tail = np.where(rest <= to_cap, accelerating, capped)
+        tail = self._tail_time(rest, v[:, -1], accel[:, -1])
         return np.where(np.isfinite(time), time, self._lag_time + tail)
 
     def north_arrival(self, progress: FloatArray, speed: FloatArray) -> FloatArray:
