@@ -201,8 +201,11 @@ class CertifiedSwitching:
         )
         covered = dt * (v_sum + 0.5 * (speed - v_end))
         a_end = a_full - q_throttle * self._throttle_decay[-1] - q_brake * self._brake_decay[-1]
-        # The bound's acceleration only grows with k: if it starts >= 0 the speed never dips.
-        simple = (first >= 0.0) & (np.maximum(speed, v_end) <= cap) & (covered < distance)
+        # The bound's acceleration only grows with k, so the speed bound is valley-shaped: it
+        # cannot reach 0 if even K ticks at the first (lowest) acceleration would not, and its
+        # largest value is at an end of the lag phase.
+        stays_positive = speed + kk * dt * np.minimum(first, 0.0) >= 0.0
+        simple = stays_positive & (np.maximum(speed, v_end) <= cap) & (covered < distance)
         time = np.empty_like(distance)
         time[simple] = self._lag_time + self._tail_time(
             distance[simple] - covered[simple], v_end[simple], a_end[simple]
