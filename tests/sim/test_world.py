@@ -109,3 +109,14 @@ def test_a_batch_of_n_equals_n_batches_of_one(world):
         np.testing.assert_array_equal(one.vehicles.x[0], batch.vehicles.x[i])
         np.testing.assert_array_equal(one.progress[0], batch.progress[i])
         assert sep_1[0] == sep_b[i]
+
+
+def test_heading_errors_measure_the_angle_to_the_route(world):
+    from safeswitch.sim.world import heading_errors
+
+    state = world.place(np.array([[100.0, 50.0]]), np.ones((1, 2)))
+    np.testing.assert_allclose(heading_errors(world, state), 0.0, atol=1e-9)
+    v = state.vehicles
+    yaw = v.yaw + np.array([[0.1, -0.2]])
+    v.cos_yaw[:], v.sin_yaw[:] = np.cos(yaw), np.sin(yaw)
+    np.testing.assert_allclose(heading_errors(world, state), [[0.1, -0.2]], atol=1e-9)

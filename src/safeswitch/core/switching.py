@@ -24,8 +24,6 @@ IntArray = NDArray[np.int8]
 
 StateT_contra = TypeVar("StateT_contra", contravariant=True)
 
-#: Reason code of "the learned action was executed". Every logic's reason table starts with it.
-LEARNED = 0
 #: Name added by :func:`supervise` for a learned action that was NaN or infinite.
 INVALID_LEARNED_ACTION = "invalid_learned_action"
 

@@ -10,7 +10,7 @@ of SB3's ``Monitor`` — ``r``, ``l``, ``t`` — plus the safety and comfort sta
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -257,13 +257,6 @@ class LeftTurnVecEnv(VecEnv):
         return [
             render_scene(self.task, self.state, i, self.last_record) for i in range(self.num_envs)
         ]
-
-    def _get_indices(self, indices: VecEnvIndices) -> Iterable[int]:
-        if indices is None:
-            return range(self.num_envs)
-        if isinstance(indices, int):
-            return [indices]
-        return indices
 
 
 def _fresh_seed() -> int:

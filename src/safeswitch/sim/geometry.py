@@ -220,6 +220,20 @@ class RouteSet:
         self, base: IntArray, x: FloatArray, y: FloatArray, s_guess: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """:meth:`project` with ``base`` from :meth:`base_index` and coordinates split."""
+        i, s, along, lateral = self._locate(base, x, y, s_guess)
+        return s, lateral, self._heading_at(i, along)
+
+    def track_flat(
+        self, base: IntArray, x: FloatArray, y: FloatArray, s_guess: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Arc length and lateral deviation only (the simulator's per-tick route tracking)."""
+        _, s, _, lateral = self._locate(base, x, y, s_guess)
+        return s, lateral
+
+    def _locate(
+        self, base: IntArray, x: FloatArray, y: FloatArray, s_guess: FloatArray
+    ) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
+        """Flat segment index, arc length, distance along the segment and lateral deviation."""
         k_max = self.size - 2
         k = clamp(np.floor(s_guess / self.spacing).astype(np.intp), 0, k_max)
         for _ in range(self.WALK_STEPS):
@@ -232,7 +246,7 @@ class RouteSet:
         rx, ry = x - self._px.take(i), y - self._py.take(i)
         dx, dy = self._dx.take(i), self._dy.take(i)
         along = clamp(rx * dx + ry * dy, 0.0, self.spacing)
-        return k * self.spacing + along, dx * ry - dy * rx, self._heading_at(i, along)
+        return i, k * self.spacing + along, along, dx * ry - dy * rx
 
     def project_global(
         self, route_index: IntArray, xy: FloatArray

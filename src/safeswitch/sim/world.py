@@ -101,7 +101,7 @@ class World:
         vehicles, outputs = vehicle_step(
             self.params, state.vehicles, throttle, brake, steer, self.dt
         )
-        progress, lateral, _ = self.route_set.project_flat(
+        progress, lateral = self.route_set.track_flat(
             self._base, vehicles.x, vehicles.y, state.progress
         )
         new = WorldState(vehicles, progress, lateral, state.time + self.dt)

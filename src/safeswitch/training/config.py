@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import yaml
 
@@ -153,7 +153,3 @@ def load_config(path: str | Path) -> TrainConfig:
 def dump_config(config: TrainConfig) -> str:
     """The configuration as YAML (every value, defaults included)."""
     return yaml.safe_dump(to_dict(config), sort_keys=False)
-
-
-def config_from_data(data: dict[str, Any]) -> TrainConfig:
-    return from_dict(TrainConfig, data)
