@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml Makefile
 	touch $(STAMP)
 
 demo: venv
-	$(VENV)/bin/safeswitch demo --out out/demo
+	$(VENV)/bin/safeswitch reproduce --quick --out out/demo
 
 test: venv
 	$(PY) -m pytest -q

@@ -91,10 +91,23 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from safeswitch.demo import run_demo
+def _reproduce(args: argparse.Namespace) -> int:
+    from safeswitch.report.reproduce import reproduce
 
-    return run_demo(args.out)
+    if args.episodes < 1:
+        print(
+            f"safeswitch reproduce: error: --episodes must be >= 1, got {args.episodes}",
+            file=sys.stderr,
+        )
+        return 2
+    if args.timesteps is not None and args.timesteps < 1:
+        print(
+            f"safeswitch reproduce: error: --timesteps must be >= 1, got {args.timesteps}",
+            file=sys.stderr,
+        )
+        return 2
+    reproduce(args.out, quick=args.quick, episodes=args.episodes, timesteps=args.timesteps)
+    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -132,7 +145,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="run directory, or a shipped policy: shipped (the paper "
         "policy), paper, no-adas, certified, none",
     )
-    ev.add_argument("--controller", choices=("learned", "rule"), default="learned")
+    ev.add_argument(
+        "--controller",
+        choices=("learned", "rule", "oracle"),
+        default="learned",
+        help="learned: a trained policy (--model); rule: PID_th under the paper switching logic; "
+        "oracle: the minimum-time crossing planned with knowledge of the north car",
+    )
     ev.add_argument("--scenarios", choices=("paper", "random"), default="random")
     ev.add_argument("--episodes", type=int, default=1000, help="random scenarios")
     ev.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
@@ -150,9 +169,25 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--seconds", type=float, default=0.5, help="timing per figure")
     bench.set_defaults(func=_bench)
 
-    demo = sub.add_parser("demo", help="run the main job on the embedded simulator and report")
-    demo.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
-    demo.set_defaults(func=_demo)
+    rep = sub.add_parser(
+        "reproduce",
+        help="the paper's experiments end to end: figures, comparison table, report.html",
+    )
+    rep.add_argument(
+        "--quick",
+        action="store_true",
+        help="use the shipped policies (under 2 minutes) instead of training all four first",
+    )
+    rep.add_argument("--out", default="out/report", help="report folder (default: out/report)")
+    rep.add_argument("--episodes", type=int, default=1000, help="random evaluation scenarios")
+    rep.add_argument(
+        "--timesteps", type=int, help="training steps per policy without --quick (default 1.2 M)"
+    )
+    rep.set_defaults(func=_reproduce)
+
+    demo = sub.add_parser("demo", help="the same as reproduce --quick (the README's make demo)")
+    demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
+    demo.set_defaults(func=_reproduce, quick=True, episodes=1000, timesteps=None)
     return parser
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
@@ -12,11 +13,13 @@ from typing import Any
 import numpy as np
 
 from safeswitch.evaluation.metrics import summarize
+from safeswitch.evaluation.oracle import Oracle, OraclePlan, efficiency
 from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.leftturn.config import SCENARIO_NAMES, LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
-from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
+from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask, StepRecord, TaskState
+from safeswitch.sim.geometry import FloatArray
 from safeswitch.training.config import load_config
 from safeswitch.training.run import write_atomic
 
@@ -43,6 +46,46 @@ def scenario_set(
     return scenarios, [f"random-{i}" for i in range(episodes)]
 
 
+def controller_setup(
+    controller: str, model: str | None, switching: str | None
+) -> tuple[LeftTurnConfig, Policy | None]:
+    """The task configuration and policy of a controller (``None`` for the oracle, which
+    plans instead of acting)."""
+    policy: Policy | None
+    if controller == "learned":
+        if model is None:
+            raise ValueError("--controller learned needs --model (a run directory or 'shipped')")
+        trained = load_policy(model)
+        env_config = load_config(trained.path / "config.yaml").env
+        policy = trained.as_policy()
+    elif controller in ("rule", "oracle"):
+        env_config = replace(LeftTurnConfig(), switching="paper")
+        env_config = replace(env_config, episode=replace(env_config.episode, learned_scope="never"))
+        policy = _rule_policy if controller == "rule" else None
+    else:
+        raise ValueError(f"--controller must be 'learned', 'rule' or 'oracle', got {controller!r}")
+    if switching is not None:
+        env_config = replace(env_config, switching=switching)  # type: ignore[arg-type]
+    return replace(env_config, scenario=None), policy
+
+
+def run_controller(
+    task: LeftTurnTask,
+    policy: Policy | None,
+    batch: Scenarios,
+    on_tick: Callable[[TaskState, StepRecord, int], None] | None = None,
+    plan: OraclePlan | None = None,
+) -> tuple[RolloutResult, OraclePlan]:
+    """One episode per scenario (the oracle's plan when ``policy`` is None), and the oracle's
+    plan of the same scenarios (``plan``, if already made for this road and these scenarios)."""
+    oracle = Oracle(task)
+    if plan is None:
+        plan = oracle.plan(batch)
+    if policy is None:
+        return oracle.as_rollout(plan), plan
+    return rollout(task, batch, policy, on_tick), plan
+
+
 def evaluate(
     controller: str,
     model: str | None,
@@ -53,44 +96,36 @@ def evaluate(
     out: str | Path | None,
 ) -> dict[str, Any]:
     """Run the evaluation, write ``episodes.csv`` and ``summary.json`` into ``out``, and return
-    the summary (see :mod:`safeswitch.evaluation.metrics` for its fields)."""
-    policy: Policy
-    if controller == "learned":
-        if model is None:
-            raise ValueError("--controller learned needs --model (a run directory or 'shipped')")
-        trained = load_policy(model)
-        env_config = load_config(trained.path / "config.yaml").env
-        policy = trained.as_policy()
-    elif controller == "rule":
-        env_config = replace(LeftTurnConfig(), switching="paper")
-        env_config = replace(env_config, episode=replace(env_config.episode, learned_scope="never"))
-        policy = _rule_policy
-    else:
-        raise ValueError(f"--controller must be 'learned' or 'rule', got {controller!r}")
-    if switching is not None:
-        env_config = replace(env_config, switching=switching)  # type: ignore[arg-type]
-    env_config = replace(env_config, scenario=None)
+    the summary (see :mod:`safeswitch.evaluation.metrics` for its fields; ``mean_efficiency``
+    is the mean over scenarios of the oracle's time to clear divided by the controller's)."""
+    env_config, policy = controller_setup(controller, model, switching)
     task = LeftTurnTask(env_config)
     batch, names = scenario_set(task, scenarios, episodes, seed)
-    result = rollout(task, batch, policy)
+    result, plan = run_controller(task, policy, batch)
+    oracle_time = plan.time_to_clear
+    ratio = efficiency(oracle_time, result.time_to_clear, env_config.episode.horizon_s)
     summary = {
         "controller": controller,
         "model": str(model) if model else None,
-        "switching": env_config.switching,
+        "switching": env_config.switching if policy is not None else None,
         "scenarios": scenarios,
         "seed": seed,
         **summarize(result),
+        "mean_oracle_time_to_clear_s": float(np.nanmean(oracle_time)),
+        "mean_efficiency": float(np.nanmean(ratio)),
     }
     if out is not None:
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
-        write_atomic(folder / "episodes.csv", episodes_csv(names, batch, result))
+        write_atomic(folder / "episodes.csv", episodes_csv(names, batch, result, oracle_time))
         write_atomic(folder / "summary.json", json.dumps(summary, indent=2))
     return summary
 
 
-def episodes_csv(names: list[str], scenarios: Scenarios, result: RolloutResult) -> str:
-    """One row per episode: the scenario and what happened."""
+def episodes_csv(
+    names: list[str], scenarios: Scenarios, result: RolloutResult, oracle_time: FloatArray
+) -> str:
+    """One row per episode: the scenario, what happened, and the oracle's time to clear."""
     buffer = io.StringIO()
     writer = csv.writer(buffer)
     writer.writerow(
@@ -106,7 +141,11 @@ def episodes_csv(names: list[str], scenarios: Scenarios, result: RolloutResult) 
             "time_to_clear_s",
             "outcome",
             "comfort_violation_steps",
+            "max_accel_lon",
+            "max_accel_lat",
+            "max_lateral_m",
             "return",
+            "oracle_time_to_clear_s",
         ]
     )
     for i, name in enumerate(names):
@@ -123,7 +162,11 @@ def episodes_csv(names: list[str], scenarios: Scenarios, result: RolloutResult) 
                 f"{result.time_to_clear[i]:.3f}",
                 OUTCOMES[int(result.outcome[i])],
                 int(result.comfort_violation_steps[i]),
+                f"{result.max_accel_lon[i]:.3f}",
+                f"{result.max_accel_lat[i]:.3f}",
+                f"{result.max_lateral[i]:.3f}",
                 f"{result.episode_return[i]:.3f}",
+                f"{oracle_time[i]:.3f}",
             ]
         )
     return buffer.getvalue()

@@ -12,6 +12,10 @@ Fields:
     stops: Episodes in which the ego came to a full stop (speed below 0.1 m/s).
     cut_episodes / yield_episodes: Episodes in which the ego crossed before / after the north car.
     mean_return: Mean episode return.
+    mean_terms: Each reward term of Eq. 5, summed per episode, mean over episodes.
+    mean_min_speed_kmh: Mean over episodes of the lowest ego speed [km/h].
+    max_accel_lon / max_accel_lat: Largest |a_lon| and |a_lat| of any episode [m/s²].
+    max_lateral_deviation_m: Largest distance from the route's centre line [m].
     ticks: Ticks simulated (all episodes).
 """
 
@@ -43,5 +47,10 @@ def summarize(result: RolloutResult) -> dict[str, Any]:
         "cut_episodes": int((result.outcome == 1).sum()),
         "yield_episodes": int((result.outcome == 2).sum()),
         "mean_return": float(result.episode_return.mean()),
+        "mean_terms": {name: float(v.mean()) for name, v in result.terms.items()},
+        "mean_min_speed_kmh": float(result.min_speed.mean() * 3.6),
+        "max_accel_lon": float(result.max_accel_lon.max()),
+        "max_accel_lat": float(result.max_accel_lat.max()),
+        "max_lateral_deviation_m": float(result.max_lateral.max()),
         "ticks": ticks,
     }

@@ -33,6 +33,10 @@ class RolloutResult:
         ticks: Episode length in ticks.
         episode_return: Sum of rewards.
         min_separation: Smallest gap between the two footprints [m].
+        max_accel_lon: Largest ``|a_lon|`` [m/s²].
+        max_accel_lat: Largest ``|a_lat|`` [m/s²].
+        max_lateral: Largest ``|lateral deviation|`` from the route [m].
+        terms: Each reward term of Eq. 5 summed over the episode, keyed by ``REWARD_TERMS``.
     """
 
     collision: NDArray[np.bool_]
@@ -45,6 +49,10 @@ class RolloutResult:
     ticks: NDArray[np.int64]
     episode_return: NDArray[np.float64]
     min_separation: NDArray[np.float64]
+    max_accel_lon: NDArray[np.float64]
+    max_accel_lat: NDArray[np.float64]
+    max_lateral: NDArray[np.float64]
+    terms: dict[str, NDArray[np.float64]]
 
 
 def rollout(
@@ -69,6 +77,7 @@ def rollout(
     live = np.ones(batch, dtype=bool)
     invalid = np.zeros(batch, dtype=np.int64)
     min_separation = np.full(batch, np.inf)
+    max_lon, max_lat = np.zeros(batch), np.zeros(batch)
     ended_outcome = np.zeros(batch, dtype=np.int8)
     observation = task.observe(state)
     invalid_code = task.reasons.index("invalid_learned_action")
@@ -82,6 +91,8 @@ def rollout(
             live, np.minimum(min_separation, record.separation), min_separation
         )
         ended_outcome = np.where(live, record.outcome, ended_outcome)
+        max_lon = np.where(live, np.maximum(max_lon, np.abs(record.accel_lon)), max_lon)
+        max_lat = np.where(live, np.maximum(max_lat, np.abs(record.accel_lat)), max_lat)
         if on_tick is not None:
             on_tick(state, record, tick)
         live &= ~(record.terminated | record.truncated)
@@ -99,4 +110,8 @@ def rollout(
         ticks=stats.length,
         episode_return=stats.ret,
         min_separation=min_separation,
+        max_accel_lon=max_lon,
+        max_accel_lat=max_lat,
+        max_lateral=stats.max_lateral,
+        terms=stats.terms,
     )

@@ -1,0 +1,324 @@
+"""The oracle: the minimum-time crossing, planned with full knowledge of the north car's future.
+
+The efficiency limit against which every controller is measured. The north car does not react
+to the ego, so its whole trajectory is known in advance (it is simulated first, on the plant).
+The ego is a point mass on its route, ``s'' = a``, with
+
+- speed ``0 <= v <= v_max``: the speed limit plus the tolerated speeding (the highest speed at
+  which ``R_v`` is still at its best, 30 km/h by default);
+- ``-d <= a <= a_max(v)``: the comfort limit ``|a_lon| <= 5 m/s²``, and no more drive than the
+  plant's engine gives at full throttle (power and traction limits) nor more braking than its
+  brakes give;
+- ``v² |κ(s)| <= 3 m/s²``: the lateral comfort limit on the route's curvature;
+- the ego is never in its conflict zone on a tick on which the north car is in its own.
+
+It has no actuator lags, so no controller driving the plant within the same limits can clear the
+conflict zone sooner (the tests check this against every controller we have).
+
+The plan is exact for this model: the time-optimal way through the curve from any state is the
+classic forward–backward speed profile (accelerate as hard as the limits allow while a
+full-comfort braking can still respect every curvature limit ahead). Passing first is possible
+iff that profile leaves the zone before the north car enters it. Otherwise the ego must enter
+after the north car has left, and the fastest way to do so is bang-bang: brake at ``d`` for a
+time ``θ`` (waiting at rest if it stops), then accelerate as above. The smallest ``θ`` that keeps
+the ego out of the zone until the north car is gone is found by bisection (the entry tick grows
+monotonically with ``θ``). All of it runs batched over scenarios, on the simulator's own ticks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.evaluation.rollout import RolloutResult
+from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
+from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.sim.collision import rectangle_separation
+from safeswitch.sim.geometry import FloatArray
+from safeswitch.sim.vehicle import available_drive_force, driving_resistance
+
+#: Bisection steps on the braking time θ (resolution horizon / 2**steps, well below a tick).
+_BISECTION_STEPS = 16
+
+
+@dataclass(frozen=True)
+class OracleLimits:
+    """The limits the oracle plans within.
+
+    Attributes:
+        max_speed: ``v_max`` [m/s] (speed limit plus tolerated speeding).
+        accel_lon: Longitudinal comfort limit [m/s²].
+        accel_lat: Lateral comfort limit [m/s²].
+        max_decel: Braking used, ``min(accel_lon, brakes)`` [m/s²].
+    """
+
+    max_speed: float
+    accel_lon: float
+    accel_lat: float
+    max_decel: float
+
+    @classmethod
+    def from_config(cls, config: LeftTurnConfig) -> OracleLimits:
+        """The limits of a task configuration: comfort limits of the reward, ``v_max`` the
+        highest speed at which ``R_v`` is at its best."""
+        r = config.rewards
+        best = max(r.speed_values)
+        top_kmh = max(
+            p for p, v in zip(r.speed_points_kmh, r.speed_values, strict=True) if v == best
+        )
+        return cls(
+            max_speed=top_kmh / 3.6,
+            accel_lon=r.comfort_accel_lon,
+            accel_lat=r.comfort_accel_lat,
+            max_decel=min(r.comfort_accel_lon, config.vehicle.max_brake_deceleration),
+        )
+
+
+@dataclass
+class OraclePlan:
+    """The oracle's crossing of ``B`` scenarios, sampled on the simulator's ticks.
+
+    Attributes:
+        progress: Ego arc length along its route [m], ``[B, H + 1]`` (tick 0 is the start).
+        speed: Ego speed [m/s], ``[B, H + 1]``.
+        accel_lon: Ego acceleration over each tick [m/s²], ``[B, H]``.
+        accel_lat: Ego lateral acceleration ``v² κ`` after each tick [m/s²], ``[B, H]``.
+        north_progress: North car's arc length [m], ``[B, H + 1]``.
+        separation: Gap between the two footprints after each tick [m], ``[B, H]``.
+        time_to_clear: Time until the ego left its conflict zone [s] (NaN: not within the
+            horizon), ``[B]``.
+        outcome: 1 the ego crosses first, 2 after the north car, 0 neither within the horizon.
+        brake_time: The bang-bang braking time θ [s] (0 when passing first), ``[B]``.
+    """
+
+    progress: FloatArray
+    speed: FloatArray
+    accel_lon: FloatArray
+    accel_lat: FloatArray
+    north_progress: FloatArray
+    separation: FloatArray
+    time_to_clear: FloatArray
+    outcome: NDArray[np.int8]
+    brake_time: FloatArray
+
+
+class Oracle:
+    """Minimum-time crossings of the left-turn task (see the module docstring).
+
+    Args:
+        task: The task; its route, conflict zones, plant, tick and horizon are used.
+        limits: The limits to plan within (default: :meth:`OracleLimits.from_config`).
+    """
+
+    def __init__(self, task: LeftTurnTask, limits: OracleLimits | None = None) -> None:
+        self.task = task
+        self.limits = limits or OracleLimits.from_config(task.config)
+        route = task.world.routes[0]
+        self._grid = route.arc_length
+        self._curvature = np.abs(route.curvature)
+        lim = self.limits
+        # V(s)² on the route's grid: the speed cap and the lateral limit, each node taking the
+        # sharpest curvature of its two segments, so that v² ≤ V(s)² (interpolated) implies
+        # v² κ(s) ≤ a_lat for the linearly interpolated curvature everywhere.
+        k = self._curvature
+        sharpest = np.maximum(k, np.maximum(np.r_[k[1:], k[-1]], np.r_[k[0], k[:-1]]))
+        with np.errstate(divide="ignore"):
+            v_curve_sq = np.where(sharpest > 0, lim.accel_lat / sharpest, np.inf)
+        self._v_sq = np.minimum(lim.max_speed**2, v_curve_sq)
+        # Backward pass: the highest speed² from which braking at d respects V everywhere ahead.
+        w_sq = self._v_sq.copy()
+        step = 2.0 * lim.max_decel * np.diff(self._grid)
+        for i in range(len(w_sq) - 2, -1, -1):
+            w_sq[i] = min(w_sq[i], w_sq[i + 1] + step[i])
+        self._w_sq = w_sq
+
+    def speed_cap_sq(self, s: FloatArray) -> FloatArray:
+        """``V(s)²``: the squared speed limit at arc lengths ``s`` (linear between waypoints)."""
+        return np.interp(s, self._grid, self._v_sq)
+
+    def _max_accel(self, speed: FloatArray) -> FloatArray:
+        p = self.task.config.vehicle
+        engine = (available_drive_force(p, speed) - driving_resistance(p, speed)) / p.mass
+        return np.minimum(engine, self.limits.accel_lon)
+
+    def north_progress(self, scenarios: Scenarios) -> tuple[FloatArray, FloatArray]:
+        """The north car's arc length on every tick ``[B, H + 1]`` (simulated on the plant; the
+        ego's actions cannot change it), and the ego's start ``(s0, v0)`` as ``[B, 2]``."""
+        task = self.task
+        state = task.initial(scenarios)
+        start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], axis=1)
+        out = [state.world.progress[:, 1].copy()]
+        hold = np.zeros(state.batch_size)
+        for _ in range(task.config.episode.horizon_ticks):
+            state, _ = task.step(state, hold)
+            out.append(state.world.progress[:, 1].copy())
+        return np.stack(out, axis=1), start
+
+    def _fastest(self, s: FloatArray, v: FloatArray) -> FloatArray:
+        """The fastest allowed acceleration: as hard as the engine and comfort allow, lowered
+        until the next speed is within W at the next position (a fixed point, reached in a step
+        or two), never below ``-d``."""
+        dt = self.task.config.episode.dt
+        a = self._max_accel(v)
+        for _ in range(3):
+            s_next = s + v * dt + 0.5 * a * dt * dt
+            w = np.sqrt(np.maximum(np.interp(s_next, self._grid, self._w_sq), 0.0))
+            a = np.minimum(a, (w - v) / dt)
+        return np.maximum(a, -self.limits.max_decel)
+
+    def integrate(
+        self,
+        start: FloatArray,
+        control: Callable[[int, FloatArray, FloatArray], FloatArray],
+        ticks: int | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Point-mass motion ``[B, T + 1]`` (progress, speed) from ``start`` ``[B, 2]`` under
+        ``control(tick, s, v) -> a``, integrated exactly over each tick; ``a`` is clipped to
+        ``[-d, a_max(v)]`` and the car stops rather than reverses. ``T``: ``ticks``, by default
+        the horizon."""
+        dt = self.task.config.episode.dt
+        d = self.limits.max_decel
+        s, v = start[:, 0].copy(), start[:, 1].copy()
+        s_out, v_out = [s.copy()], [v.copy()]
+        for k in range(self.task.config.episode.horizon_ticks if ticks is None else ticks):
+            a = np.clip(control(k, s, v), -d, self._max_accel(v))
+            stops = v + a * dt < 0.0  # braking to rest within the tick
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.where(stops, s + v * v / (2.0 * d), s + v * dt + 0.5 * a * dt * dt)
+            v = np.where(stops, 0.0, v + a * dt)
+            s_out.append(s.copy())
+            v_out.append(v.copy())
+        return np.stack(s_out, axis=1), np.stack(v_out, axis=1)
+
+    def _drive(
+        self, start: FloatArray, brake_time: FloatArray, ticks: int | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Brake at ``d`` for ``brake_time``, then as fast as the limits allow."""
+        dt = self.task.config.episode.dt
+        d = self.limits.max_decel
+
+        def law(k: int, s: FloatArray, v: FloatArray) -> FloatArray:
+            return np.where(k * dt < brake_time - 1e-9, -d, self._fastest(s, v))
+
+        return self.integrate(start, law, ticks)
+
+    def plan(self, scenarios: Scenarios) -> OraclePlan:
+        """The minimum-time crossing of each scenario."""
+        task = self.task
+        geo = task.conflict
+        dt = task.config.episode.dt
+        horizon = task.config.episode.horizon_ticks
+        north, start = self.north_progress(scenarios)
+        batch = north.shape[0]
+        ticks = np.arange(horizon + 1)
+        north_in = (north >= geo.zone_b[0]) & (north <= geo.zone_b[1])
+        # Last tick the north car is in its zone (-1: never; horizon + 1: still in at the end).
+        north_last = np.where(
+            north_in.any(axis=1), np.max(np.where(north_in, ticks, -1), axis=1), -1
+        )
+        north_last = np.where(north_in[:, -1], horizon + 1, north_last)
+
+        def shares(progress: FloatArray) -> NDArray[np.bool_]:
+            ego_in = (progress >= geo.zone_a[0]) & (progress <= geo.zone_a[1])
+            return np.any(ego_in & north_in, axis=1)
+
+        def entry_tick(progress: FloatArray) -> NDArray[np.int64]:
+            entered = progress >= geo.zone_a[0]
+            return np.where(entered.any(axis=1), np.argmax(entered, axis=1), horizon + 1)
+
+        free_s, _ = self._drive(start, np.zeros(batch))
+        cut_ok = ~shares(free_s)
+        # Yield: bisection on θ for the first entry after the north car's last tick in its zone.
+        low, high = np.zeros(batch), np.full(batch, horizon * dt)
+        needed = int(np.clip(north_last.max() + 1, 1, horizon))  # ticks that decide the entry
+        for _ in range(_BISECTION_STEPS):
+            mid = 0.5 * (low + high)
+            s_mid, _ = self._drive(start, mid, needed)
+            late_enough = entry_tick(s_mid) > north_last
+            high = np.where(late_enough, mid, high)
+            low = np.where(late_enough, low, mid)
+        brake_time = np.where(cut_ok, 0.0, high)
+        progress, speed = self._drive(start, brake_time)
+
+        cleared = progress > geo.zone_a[1]
+        time_to_clear = np.where(cleared.any(axis=1), np.argmax(cleared, axis=1) * dt, np.nan)
+        north_cleared = north > geo.zone_b[1]
+        first_north = np.where(north_cleared.any(axis=1), np.argmax(north_cleared, axis=1), np.inf)
+        first_ego = np.where(cleared.any(axis=1), np.argmax(cleared, axis=1), np.inf)
+        outcome = np.where(
+            first_ego < first_north, 1, np.where(np.isfinite(first_north), 2, 0)
+        ).astype(np.int8)
+        outcome = np.where(np.isfinite(first_ego), outcome, 0).astype(np.int8)
+
+        accel_lon = np.diff(speed, axis=1) / dt
+        curvature = np.interp(progress[:, 1:], self._grid, self._curvature)
+        accel_lat = speed[:, 1:] ** 2 * curvature
+        return OraclePlan(
+            progress=progress,
+            speed=speed,
+            accel_lon=accel_lon,
+            accel_lat=accel_lat,
+            north_progress=north,
+            separation=self._separation(progress[:, 1:], north[:, 1:]),
+            time_to_clear=time_to_clear,
+            outcome=outcome,
+            brake_time=brake_time,
+        )
+
+    def _separation(self, ego: FloatArray, north: FloatArray) -> FloatArray:
+        """Footprint gap of the two cars placed on their centre lines [m]."""
+        routes, vehicle = self.task.world.routes, self.task.config.vehicle
+        xy_e, yaw_e = routes[0].pose_at(ego)
+        xy_n, yaw_n = routes[1].pose_at(north)
+        size = (vehicle.length, vehicle.width)
+        return rectangle_separation(xy_e, yaw_e, *size, xy_n, yaw_n, *size)
+
+    def as_rollout(self, plan: OraclePlan) -> RolloutResult:
+        """The plan in the form of a rollout's per-episode results (for the same metrics and
+        CSV as every controller). Its episodes run the whole horizon; the return is Eq. 5
+        along the plan, on the centre line, without safety actions."""
+        config = self.task.config
+        comfort = (np.abs(plan.accel_lon) > config.rewards.comfort_accel_lon + 1e-9) | (
+            np.abs(plan.accel_lat) > config.rewards.comfort_accel_lat + 1e-9
+        )
+        terms = reward_terms(
+            config.rewards,
+            speed=plan.speed[:, 1:],
+            lateral=np.zeros_like(plan.accel_lon),
+            accel_lon=plan.accel_lon,
+            accel_lat=plan.accel_lat,
+            safety_active=np.zeros(plan.accel_lon.shape, dtype=bool),
+            adas_enabled=config.adas_penalty,
+        )
+        totals = {name: terms[name].sum(axis=1) for name in REWARD_TERMS}
+        batch, horizon = plan.accel_lon.shape
+        return RolloutResult(
+            collision=np.any(plan.separation <= 0.0, axis=1),
+            safety_steps=np.zeros(batch, dtype=np.int64),
+            invalid_steps=np.zeros(batch, dtype=np.int64),
+            min_speed=plan.speed.min(axis=1),
+            time_to_clear=plan.time_to_clear,
+            outcome=plan.outcome,
+            comfort_violation_steps=comfort.sum(axis=1).astype(np.int64),
+            ticks=np.full(batch, horizon, dtype=np.int64),
+            episode_return=np.sum(list(totals.values()), axis=0),
+            min_separation=plan.separation.min(axis=1),
+            max_accel_lon=np.abs(plan.accel_lon).max(axis=1),
+            max_accel_lat=np.abs(plan.accel_lat).max(axis=1),
+            max_lateral=np.zeros(batch),
+            terms=totals,
+        )
+
+
+def efficiency(oracle_time: FloatArray, time: FloatArray, horizon_s: float) -> FloatArray:
+    """Per-scenario ``oracle time / controller time`` (1: as fast as the limit). A controller
+    that never cleared the zone counts with the whole horizon (an upper bound on its
+    efficiency); scenarios the oracle cannot clear within the horizon give NaN."""
+    t = np.where(np.isfinite(time), time, horizon_s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(oracle_time, dtype=np.float64) / np.maximum(t, 1e-9)
