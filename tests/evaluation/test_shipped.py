@@ -6,8 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from safeswitch.evaluation.evaluate import evaluate
+from safeswitch.evaluation.evaluate import controller_setup, evaluate, run_controller, scenario_set
+from safeswitch.evaluation.metrics import STOP_SPEED
 from safeswitch.evaluation.policies import SHIPPED_DIR, load_policy, resolve_model_dir
+from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
 from safeswitch.training.config import load_config
 
 EVAL = {"scenarios": "random", "episodes": 1000, "seed": 424242, "out": None}
@@ -64,3 +66,69 @@ def test_the_ablation_needs_the_safety_controller_more_than_the_paper_policy(pap
 def test_the_rule_baseline_is_safe_but_leans_on_the_safety_controller(rule, paper):
     assert rule["collisions"] == 0
     assert rule["safety_activation_episodes"] > 10 * max(paper["safety_activation_episodes"], 1)
+
+
+# -- the paper's Section VI results, on the shipped policies ---------------------------------
+
+
+def paper_scenarios(model):
+    config, policy = controller_setup("learned", model, None)
+    task = LeftTurnTask(config)
+    batch, names = scenario_set(task, "paper", 3, 0)
+    result, _ = run_controller(task, policy, batch)
+    return {
+        name: {
+            "outcome": OUTCOMES[int(result.outcome[i])],
+            "safety_steps": int(result.safety_steps[i]),
+            "min_speed": float(result.min_speed[i]),
+            "collision": bool(result.collision[i]),
+        }
+        for i, name in enumerate(names)
+    }
+
+
+@pytest.fixture(scope="module")
+def paper_runs():
+    return paper_scenarios("shipped")
+
+
+@pytest.mark.xfail(
+    strict=True, reason="the shipped paper policy yields in `cut` too (README, Training)"
+)
+def test_in_cut_the_paper_policy_passes_first_without_the_safety_controller(paper_runs):
+    assert paper_runs["cut"]["outcome"] == "cut"
+    assert paper_runs["cut"]["safety_steps"] == 0
+
+
+def test_in_yield1_the_paper_policy_passes_second_without_stopping_or_safety(paper_runs):
+    run = paper_runs["yield1"]
+    assert run["outcome"] == "yield" and not run["collision"]
+    assert run["safety_steps"] == 0
+    assert run["min_speed"] > STOP_SPEED
+
+
+def test_in_yield2_the_paper_policy_slows_further(paper_runs):
+    assert paper_runs["yield2"]["outcome"] == "yield"
+    assert paper_runs["yield2"]["min_speed"] < paper_runs["yield1"]["min_speed"]
+    assert paper_runs["yield2"]["safety_steps"] == 0
+
+
+def test_the_ablation_policy_triggers_the_safety_controller_in_a_yield_scenario():
+    runs = paper_scenarios("no-adas")
+    assert max(runs["yield1"]["safety_steps"], runs["yield2"]["safety_steps"]) > 0
+    assert not any(run["collision"] for run in runs.values())
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the shipped paper policy reaches 0.60 of the oracle's speed, target 0.85 (README)",
+)
+def test_the_paper_policy_is_within_85_percent_of_the_oracle(paper):
+    assert paper["mean_efficiency"] >= 0.85
+
+
+@pytest.mark.xfail(
+    strict=True, reason="the shipped paper policy always yields: 9.9 s against 7.8 s (README)"
+)
+def test_the_paper_policy_clears_the_zone_no_later_than_the_rule_on_average(paper, rule):
+    assert paper["mean_time_to_clear_s"] <= rule["mean_time_to_clear_s"]

@@ -131,7 +131,7 @@ def _reckless(episodes: int) -> list[dict[str, Any]]:
     """A reckless learned controller (full throttle) under each switching logic."""
     rows = []
     for switching in ("none", "paper", "certified"):
-        task = LeftTurnTask(LeftTurnConfig(switching=switching))  # type: ignore[arg-type]
+        task = LeftTurnTask(LeftTurnConfig(switching=switching))
         batch, _ = scenario_set(task, "random", episodes, EVAL_SEED)
         summary = summarize(rollout(task, batch, constant(1.0)))
         rows.append({"switching": switching, **summary})
@@ -251,12 +251,19 @@ def reproduce(
 # -- rendering ------------------------------------------------------------------------------
 
 
+def _format(result: dict[str, Any], key: str, fmt: str) -> str:
+    value = result[key]
+    if isinstance(value, float) and not np.isfinite(value):
+        return "never" if key == "mean_time_to_clear_s" else "–"
+    return fmt.format(value)
+
+
 def _cells(summary: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
     header = ["controller", *(h for _, h, _ in TABLE)]
     rows = []
     for name, result in summary["controllers"].items():
         r = result["random"]
-        rows.append([name, *(fmt.format(r[key]) for key, _, fmt in TABLE)])
+        rows.append([name, *(_format(r, key, fmt) for key, _, fmt in TABLE)])
     return header, rows
 
 
