@@ -10,9 +10,9 @@ import argparse
 import shutil
 from pathlib import Path
 
-import _common  # noqa: F401  (pins the numeric libraries to one thread)
 import torch
 
+import _common  # noqa: F401  (pins the numeric libraries to one thread)
 from safeswitch.report.reproduce import reproduce
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"

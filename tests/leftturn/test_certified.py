@@ -264,6 +264,29 @@ def test_invariant_on_200k_random_states_including_the_intervention_boundary(log
     assert not (safe & ~is_safe(logic, after)).any()
 
 
+def test_the_cheap_screen_only_passes_states_the_full_certificate_accepts(logic):
+    """``settled`` skips the certificate; every state it passes must be one the certificate
+    accepts after a tick of any pedals, including full throttle with no brake."""
+    rng = np.random.default_rng(3)
+    n = 200_000
+    state = make_state(
+        logic,
+        logic.ego_zone[0] + rng.uniform(-40, 15, n),
+        rng.uniform(0, 15, n),
+        rng.uniform(0, 1, n),
+        rng.uniform(0, 1, n),
+        logic.north_zone[0] + rng.uniform(-80, 15, n),
+        rng.uniform(0, 13.8, n),
+    )
+    settled = logic.settled(state)
+    assert 0.2 < settled.mean() < 0.9  # the screen decides a real share, not all or nothing
+    arrival = logic.north_arrival(state.north_progress, state.north_speed) - logic.dt
+    for pedals in ([1.0, 0.0], [0.0, 0.0], [0.5, 0.5]):
+        low, high, v, th, br = logic.predict(state, np.tile(pedals, (n, 1)))
+        accepted = logic._certify(low, high, v, th, br, arrival)
+        assert accepted[settled].all()
+
+
 def test_the_quick_stop_bound_never_undercuts_the_exact_one_nor_the_plant(logic):
     rng = np.random.default_rng(4)
     n = 20_000

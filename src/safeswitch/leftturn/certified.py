@@ -352,26 +352,47 @@ class CertifiedSwitching:
             brake,
         )
 
+    def settled(self, state: ConflictState) -> BoolArray:
+        """Elements the learned action cannot make unsafe, whatever it is: the conflict is over
+        (the north car has left its zone, or the ego its own), or even after a tick of the
+        hardest acceleration the plant can give, a full brake (loose bound) still stops before
+        the ego's zone. A cheap screen; :meth:`decide` certifies only the rest."""
+        f, dt = self.config.progress_factor, self.dt
+        top = state.ego_speed + self._accel_max * dt  # no pedal accelerates the car harder
+        room = (self.ego_zone[0] - (state.ego_progress + top * dt * f)) / f
+        return (
+            (self.quick_stop_distance(top) <= room)
+            | (state.north_progress > self.north_zone[1])
+            | (state.ego_progress > self.ego_zone[1])
+        )
+
     def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
         batch = learned.shape[0]
-        arrival = self.north_arrival(state.north_progress, state.north_speed)
-        low, high, speed, throttle, brake = self.predict(state, learned)
-        # The north car may arrive one tick sooner after the learned tick.
-        use = ~self._certify(low, high, speed, throttle, brake, arrival - self.dt)
+        use = np.zeros(batch, dtype=bool)
+        rest = np.flatnonzero(~self.settled(state))
+        if rest.size:
+            sub = state if rest.size == batch else state.take(rest)
+            pedals = learned if rest.size == batch else learned[rest]
+            arrival = self.north_arrival(sub.north_progress, sub.north_speed)
+            low, high, speed, throttle, brake = self.predict(sub, pedals)
+            # The north car may arrive one tick sooner after the learned tick.
+            use[rest] = ~self._certify(low, high, speed, throttle, brake, arrival - self.dt)
         reason = np.zeros(batch, dtype=np.int8)
         action = np.zeros((batch, 2))
         idx = np.flatnonzero(use)
         if idx.size:
+            arrival = self.north_arrival(state.north_progress[idx], state.north_speed[idx])
             reason[idx], action[idx] = self._backup(state, arrival, idx)
         return Decision(use, reason, action)
 
     def _backup(
         self, s: ConflictState, arrival: FloatArray, idx: NDArray[np.intp]
     ) -> tuple[NDArray[np.int8], FloatArray]:
-        """Reason codes and pedals of the backup for the elements ``idx``."""
+        """Reason codes and pedals of the backup for the elements ``idx`` (``arrival``: the
+        north car's earliest arrival for those elements)."""
         args = (s.ego_progress[idx], s.ego_speed[idx], s.ego_throttle[idx], s.ego_brake[idx])
         stop = self.stop_feasible(*args)
-        clear = ~stop & self.clear_feasible(*args, arrival[idx])
+        clear = ~stop & self.clear_feasible(*args, arrival)
         before_zone = s.ego_progress[idx] < self.ego_zone[0]
         reason = np.where(stop, 1, np.where(clear, 2, np.where(before_zone, 3, 4)))
         go = (reason == 2) | (reason == 4)
