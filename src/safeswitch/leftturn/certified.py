@@ -29,14 +29,24 @@ random, adversarial, NaN — leads to a collision while the assumptions hold.
 If no backup is feasible (only when the assumptions were broken), the filter brakes fully while
 the ego is still before its zone and accelerates fully once it is inside (best effort), and the
 reason says so.
+
+**Implementation.** The bounds follow the lag phase tick by tick, per element, in scalar code
+compiled with numba: a few dozen floating-point operations per element instead of a few hundred
+numpy calls per batch, so the filter costs little at any batch size. The numpy-facing methods
+(:meth:`CertifiedSwitching.stop_distance`, :meth:`~CertifiedSwitching.clear_time`, …) run the
+same compiled functions.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import clamp
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import CertifiedConfig
 from safeswitch.leftturn.switching import ConflictState
@@ -49,6 +59,330 @@ from safeswitch.sim.vehicle import (
 )
 
 STOP, CLEAR = 1, 2
+
+# Slots of the constants vector the compiled functions read (see CertifiedSwitching.__init__).
+(
+    _DT,
+    _MASS,
+    _BRAKE_MAX,
+    _DRIVE_MAX,
+    _DRIVE_AT_CAP,
+    _RESIST_AT_CAP,
+    _ENGINE_BRAKE_MAX,
+    _CAP,
+    _LAG_TIME,
+    _ACCEL_MAX,
+    _DECEL_TAIL_WORST,
+    _EGO_ENTER,
+    _EGO_EXIT,
+    _NORTH_ENTER,
+    _NORTH_EXIT,
+    _NORTH_ACCEL,
+    _NORTH_TOP,
+    _PROGRESS_FACTOR,
+    _TIME_MARGIN,
+) = range(19)
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _jit(fn: _F) -> _F:
+    """Compile ``fn`` with numba (machine code cached on disk); typed as ``fn`` for mypy."""
+    return cast(_F, numba.njit(cache=True, nogil=True)(fn))
+
+
+@_jit
+def _stop_distance(
+    speed: float, throttle: float, brake: float, c: FloatArray, rho_t: FloatArray, rho_b: FloatArray
+) -> float:
+    """Upper bound on the full-brake stopping distance [m]: on lag tick ``k`` the deceleration
+    is at least the brake force built up minus the largest drive force of the decaying throttle
+    (resistances ignored); after the lag phase, its last value."""
+    dt, v, total = c[_DT], speed, 0.0
+    decel = 0.0
+    for k in range(rho_t.shape[0]):
+        decel = (
+            c[_BRAKE_MAX] * (1.0 - (1.0 - brake) * rho_b[k]) - c[_DRIVE_MAX] * throttle * rho_t[k]
+        ) / c[_MASS]
+        v_next = max(v - dt * decel, 0.0)  # decel grows with k: once at rest, stays at rest
+        total += 0.5 * dt * (v + v_next)
+        v = v_next
+    return total + v * v / (2.0 * decel)
+
+
+@_jit
+def _quick_stop_distance(speed: float, c: FloatArray) -> float:
+    """A looser stopping bound for any pedal positions: the largest drive force for the whole
+    lag phase, then the lag phase's weakest deceleration [m]."""
+    t, a = c[_LAG_TIME], c[_ACCEL_MAX]
+    top = speed + a * t
+    return (speed + 0.5 * a * t) * t + top * top / (2.0 * c[_DECEL_TAIL_WORST])
+
+
+@_jit
+def _tail_time(rest: float, v: float, a: float, cap: float) -> float:
+    """Time to drive ``rest`` [m] from speed ``v`` at constant ``a`` up to ``cap``, then at
+    the cap [s]."""
+    if a > 0.0:
+        to_cap = (cap * cap - v * v) / (2.0 * a)
+        if rest <= to_cap:
+            return (math.sqrt(v * v + 2.0 * a * rest) - v) / a
+        return (cap - v) / a + (rest - to_cap) / cap
+    if v > 0.0:
+        return rest / v
+    return math.inf
+
+
+@_jit
+def _clear_time(
+    distance: float,
+    speed: float,
+    throttle: float,
+    brake: float,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+) -> float:
+    """Upper bound on the time to drive ``distance`` [m] under full throttle [s]: on lag tick
+    ``k`` the acceleration is at least the throttle's drive force at the clearing speed cap
+    minus full engine braking of its closed part, the releasing brake and the resistances at
+    the cap; the speed bound is clamped to ``[0, cap]`` (which only lowers it)."""
+    dt, cap, mass = c[_DT], c[_CAP], c[_MASS]
+    raw, v, accel, speeds = speed, speed, 0.0, 0.0
+    covered = 0.0
+    for k in range(rho_t.shape[0]):
+        throttle_k = 1.0 - (1.0 - throttle) * rho_t[k]
+        accel = (
+            throttle_k * c[_DRIVE_AT_CAP]
+            - c[_ENGINE_BRAKE_MAX] * (1.0 - throttle_k)
+            - brake * rho_b[k] * c[_BRAKE_MAX]
+            - c[_RESIST_AT_CAP]
+        ) / mass
+        raw += dt * accel
+        v = min(max(raw, 0.0), cap)
+        speeds += v
+        covered = dt * (speeds + 0.5 * (speed - v))
+        if covered >= distance:
+            return (k + 1) * dt
+    return c[_LAG_TIME] + _tail_time(max(distance - covered, 0.0), v, accel, cap)
+
+
+@_jit
+def _north_arrival(progress: float, speed: float, c: FloatArray) -> float:
+    """Earliest time the north car can enter its zone within the assumptions [s] (0 inside,
+    ``inf`` once it has left)."""
+    if progress > c[_NORTH_EXIT]:
+        return math.inf
+    a = c[_NORTH_ACCEL]
+    top = max(c[_NORTH_TOP], speed)  # best effort if already faster
+    distance = max(c[_NORTH_ENTER] - progress, 0.0)
+    to_top = (top * top - speed * speed) / (2.0 * a)
+    if distance <= to_top:
+        return (math.sqrt(speed * speed + 2.0 * a * distance) - speed) / a
+    return (top - speed) / a + (distance - to_top) / top
+
+
+@_jit
+def _stop_ok(
+    progress: float,
+    speed: float,
+    throttle: float,
+    brake: float,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+) -> bool:
+    """Full braking ends before the ego's zone entry (the quick bound first)."""
+    room = (c[_EGO_ENTER] - progress) / c[_PROGRESS_FACTOR]
+    if _quick_stop_distance(speed, c) <= room:
+        return True
+    if room < 0.0:
+        return False
+    return _stop_distance(speed, throttle, brake, c, rho_t, rho_b) <= room
+
+
+@_jit
+def _clear_ok(
+    progress: float,
+    speed: float,
+    throttle: float,
+    brake: float,
+    arrival: float,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+) -> bool:
+    """Full throttle leaves the ego's zone ``time_margin_s`` before the north car can enter."""
+    distance = c[_PROGRESS_FACTOR] * max(c[_EGO_EXIT] - progress, 0.0)
+    deadline = arrival - c[_TIME_MARGIN]
+    return _clear_time(distance, speed, throttle, brake, c, rho_t, rho_b) <= deadline
+
+
+@_jit
+def _certified(
+    low: float,
+    high: float,
+    speed: float,
+    throttle: float,
+    brake: float,
+    arrival: float,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+) -> bool:
+    """The certificate with the ego's progress known within ``[low, high]``: the stop backup
+    judged at the highest progress, the clear backup at the lowest."""
+    if math.isinf(arrival) or low > c[_EGO_EXIT]:
+        return True
+    if _stop_ok(high, speed, throttle, brake, c, rho_t, rho_b):
+        return True
+    return _clear_ok(low, speed, throttle, brake, arrival, c, rho_t, rho_b)
+
+
+@_jit
+def _settled(progress: float, speed: float, north_progress: float, c: FloatArray) -> bool:
+    """No learned action can matter: the conflict is over, or even after a tick of the hardest
+    acceleration the plant can give, a full brake (quick bound) still stops before the zone."""
+    if north_progress > c[_NORTH_EXIT] or progress > c[_EGO_EXIT]:
+        return True
+    dt, f = c[_DT], c[_PROGRESS_FACTOR]
+    top = speed + c[_ACCEL_MAX] * dt
+    room = (c[_EGO_ENTER] - (progress + top * dt * f)) / f
+    return _quick_stop_distance(top, c) <= room
+
+
+@_jit
+def _decide(
+    progress: FloatArray,
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    north_progress: FloatArray,
+    north_speed: FloatArray,
+    low: FloatArray,
+    high: FloatArray,
+    next_speed: FloatArray,
+    next_throttle: FloatArray,
+    next_brake: FloatArray,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+    use: BoolArray,
+    reason: NDArray[np.int8],
+    pedals: FloatArray,
+) -> None:
+    """The filter, element by element (for elements the screen did not settle): certificate of
+    the state after the learned tick, and the backup where it fails (written into ``use``,
+    ``reason``, ``pedals``)."""
+    for i in range(progress.shape[0]):
+        arrival = _north_arrival(north_progress[i], north_speed[i], c)
+        # The north car may arrive one tick sooner after the learned tick.
+        if _certified(
+            low[i],
+            high[i],
+            next_speed[i],
+            next_throttle[i],
+            next_brake[i],
+            arrival - c[_DT],
+            c,
+            rho_t,
+            rho_b,
+        ):
+            continue
+        use[i] = True
+        if _stop_ok(progress[i], speed[i], throttle[i], brake[i], c, rho_t, rho_b):
+            code = STOP
+        elif _clear_ok(progress[i], speed[i], throttle[i], brake[i], arrival, c, rho_t, rho_b):
+            code = CLEAR
+        elif progress[i] < c[_EGO_ENTER]:
+            code = 3  # no_certified_backup_brake
+        else:
+            code = 4  # no_certified_backup_clear
+        reason[i] = code
+        go = code == CLEAR or code == 4
+        pedals[i, 0] = 1.0 if go else 0.0
+        pedals[i, 1] = 0.0 if go else 1.0
+
+
+@_jit
+def _map_stop_distance(
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+    out: NDArray[Any],
+) -> None:
+    for i in range(speed.shape[0]):
+        out[i] = _stop_distance(speed[i], throttle[i], brake[i], c, rho_t, rho_b)
+
+
+@_jit
+def _map_clear_time(
+    distance: FloatArray,
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+    out: NDArray[Any],
+) -> None:
+    for i in range(speed.shape[0]):
+        out[i] = _clear_time(distance[i], speed[i], throttle[i], brake[i], c, rho_t, rho_b)
+
+
+@_jit
+def _map_quick_stop_distance(speed: FloatArray, c: FloatArray, out: NDArray[Any]) -> None:
+    for i in range(speed.shape[0]):
+        out[i] = _quick_stop_distance(speed[i], c)
+
+
+@_jit
+def _map_north_arrival(
+    progress: FloatArray, speed: FloatArray, c: FloatArray, out: NDArray[Any]
+) -> None:
+    for i in range(progress.shape[0]):
+        out[i] = _north_arrival(progress[i], speed[i], c)
+
+
+@_jit
+def _map_certified(
+    low: FloatArray,
+    high: FloatArray,
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    arrival: FloatArray,
+    c: FloatArray,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
+    out: NDArray[Any],
+) -> None:
+    for i in range(low.shape[0]):
+        out[i] = _certified(
+            low[i], high[i], speed[i], throttle[i], brake[i], arrival[i], c, rho_t, rho_b
+        )
+
+
+@_jit
+def _map_settled(
+    progress: FloatArray,
+    speed: FloatArray,
+    north_progress: FloatArray,
+    c: FloatArray,
+    out: NDArray[Any],
+) -> None:
+    for i in range(progress.shape[0]):
+        out[i] = _settled(progress[i], speed[i], north_progress[i], c)
+
+
+def _columns(*values: FloatArray | float) -> list[FloatArray]:
+    """The values as contiguous float64 vectors of one common length (what the compiled
+    functions take)."""
+    arrays = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in values))
+    return [np.ascontiguousarray(a) for a in arrays]
 
 
 class CertifiedSwitching:
@@ -100,14 +434,6 @@ class CertifiedSwitching:
             p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * cap * cap
         )
         self._north_max_speed = config.north_max_speed_kmh / 3.6
-        # Closed forms of the stop bound (see stop_distance): the deceleration on tick k is
-        # A − B·ρ_b^k − C·ρ_t^k, so its partial sums and their sums are constants times B, C.
-        kk = config.lag_ticks
-        self._decel_full = self._brake_max / p.mass  # A
-        gb, gt = np.cumsum(self._brake_decay), np.cumsum(self._throttle_decay)
-        self._sum_k = kk * (kk + 1) / 2.0  # sum_k k
-        self._gb_last, self._gt_last = float(gb[-1]), float(gt[-1])
-        self._gb_sum, self._gt_sum = float(gb.sum()), float(gt.sum())
         # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
         # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
         # whole lag phase, then brake at the lag phase's last (weakest) deceleration.
@@ -122,179 +448,65 @@ class CertifiedSwitching:
                 f"certified.lag_ticks={config.lag_ticks} is too short: after it the brake "
                 "cannot yet overcome a fully open throttle; increase it"
             )
+        # The constants the compiled functions read, by slot.
+        p_const = np.zeros(19)
+        p_const[_DT] = dt
+        p_const[_MASS] = p.mass
+        p_const[_BRAKE_MAX] = self._brake_max
+        p_const[_DRIVE_MAX] = self._drive_max
+        p_const[_DRIVE_AT_CAP] = self._drive_at_cap
+        p_const[_RESIST_AT_CAP] = self._resist_at_cap
+        p_const[_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
+        p_const[_CAP] = cap
+        p_const[_LAG_TIME] = self._lag_time
+        p_const[_ACCEL_MAX] = self._accel_max
+        p_const[_DECEL_TAIL_WORST] = self._decel_tail_worst
+        p_const[_EGO_ENTER], p_const[_EGO_EXIT] = ego_zone
+        p_const[_NORTH_ENTER], p_const[_NORTH_EXIT] = north_zone
+        p_const[_NORTH_ACCEL] = config.north_max_accel
+        p_const[_NORTH_TOP] = self._north_max_speed
+        p_const[_PROGRESS_FACTOR] = config.progress_factor
+        p_const[_TIME_MARGIN] = config.time_margin_s
+        self._c = p_const
 
-    # -- bounds ------------------------------------------------------------------------------
+    # -- bounds (each element through the compiled scalar functions) ------------------------
 
     def stop_distance(
         self, speed: FloatArray, throttle: FloatArray, brake: FloatArray
     ) -> FloatArray:
-        """Upper bound on the distance driven under full brake until standstill [m].
-
-        On tick ``k`` of the lag phase the deceleration is at least ``A − B·ρ_b^k − C·ρ_t^k``
-        (brake force building up, drive force of the decaying throttle at its maximum,
-        resistances ignored). Where the car is still moving at the end of the lag phase the
-        sums have closed forms; where it stops within it, :meth:`_stop_distance_by_tick` follows
-        the ticks.
-
-        Args:
-            speed: Current speed [m/s] ``[N]``.
-            throttle: Actual throttle position ``[N]`` (it decays with the actuator lag).
-            brake: Actual brake position ``[N]`` (it builds up with the lag).
-        """
-        dt, kk = self.dt, self.config.lag_ticks
-        b = self._decel_full * (1.0 - brake)  # B
-        c = (self._drive_max / self.vehicle.mass) * throttle  # C
-        v_end = speed - dt * (kk * self._decel_full - b * self._gb_last - c * self._gt_last)
-        v_sum = kk * speed - dt * (
-            self._sum_k * self._decel_full - b * self._gb_sum - c * self._gt_sum
-        )
-        decel_end = self._decel_full - b * self._brake_decay[-1] - c * self._throttle_decay[-1]
-        distance = dt * (v_sum + 0.5 * (speed - v_end)) + v_end * v_end / (2.0 * decel_end)
-        stops_early = np.flatnonzero(v_end <= 0.0)
-        if stops_early.size:
-            distance[stops_early] = self._stop_distance_by_tick(
-                speed[stops_early], throttle[stops_early], brake[stops_early]
-            )
-        return distance
-
-    def _stop_distance_by_tick(
-        self, speed: FloatArray, throttle: FloatArray, brake: FloatArray
-    ) -> FloatArray:
-        """:meth:`stop_distance` tick by tick (also right when the car stops in the lag)."""
-        p, dt = self.vehicle, self.dt
-        # Deceleration lower bound on tick k: brake force minus the largest drive force.
-        decel = (
-            self._brake_max * (1.0 - (1.0 - brake)[:, None] * self._brake_decay)
-            - self._drive_max * throttle[:, None] * self._throttle_decay
-        ) / p.mass
-        # It grows with k, so once the speed reaches 0 it stays there: clamping is exact.
-        v = np.maximum(speed[:, None] - dt * np.cumsum(decel, axis=1), 0.0)
-        # Trapezoids: sum_k (v_{k-1} + v_k) / 2 = sum_k v_k + (v_0 - v_K) / 2.
-        lag_distance = dt * (v.sum(axis=1) + 0.5 * (speed - v[:, -1]))
-        return lag_distance + v[:, -1] ** 2 / (2.0 * decel[:, -1])
+        """Upper bound on the distance driven under full brake until standstill [m], from the
+        current speed and actual pedal positions (the throttle decays and the brake builds up
+        with their lags)."""
+        v, th, br = _columns(speed, throttle, brake)
+        out = np.empty(v.shape[0])
+        _map_stop_distance(v, th, br, self._c, self._throttle_decay, self._brake_decay, out)
+        return out
 
     def quick_stop_distance(self, speed: FloatArray) -> FloatArray:
         """A looser upper bound on :meth:`stop_distance`, valid for any pedal positions [m]."""
-        t, a = self._lag_time, self._accel_max
-        top = speed + a * t
-        return (speed + 0.5 * a * t) * t + top * top / (2.0 * self._decel_tail_worst)
+        (v,) = _columns(speed)
+        out = np.empty(v.shape[0])
+        _map_quick_stop_distance(v, self._c, out)
+        return out
 
     def clear_time(
         self, distance: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
     ) -> FloatArray:
-        """Upper bound on the time to drive ``distance`` [m] under full throttle [s].
-
-        On tick ``k`` of the lag phase the acceleration is at least ``A − P·ρ_t^k − Q·ρ_b^k``
-        (throttle building up, brake releasing; drive force at the clearing speed cap, full
-        engine braking of the closed part, resistances at the cap). Where no clamp of the speed
-        bound (at 0 or at the cap) can act and the distance is not covered within the lag phase,
-        the sums have closed forms; elsewhere :meth:`_clear_time_by_tick` follows the ticks.
-        """
-        p, dt, kk, cap = self.vehicle, self.dt, self.config.lag_ticks, self.config.clear_speed_cap
-        a_full = (self._drive_at_cap - self._resist_at_cap) / p.mass  # A
-        q_throttle = (1.0 - throttle) * (self._drive_at_cap + p.max_engine_brake_force) / p.mass
-        q_brake = brake * self._brake_max / p.mass
-        first = a_full - q_throttle * self._throttle_decay[0] - q_brake * self._brake_decay[0]
-        v_end = speed + dt * (kk * a_full - q_throttle * self._gt_last - q_brake * self._gb_last)
-        v_sum = kk * speed + dt * (
-            self._sum_k * a_full - q_throttle * self._gt_sum - q_brake * self._gb_sum
-        )
-        covered = dt * (v_sum + 0.5 * (speed - v_end))
-        a_end = a_full - q_throttle * self._throttle_decay[-1] - q_brake * self._brake_decay[-1]
-        # The bound's acceleration only grows with k, so the speed bound is valley-shaped: it
-        # cannot reach 0 if even K ticks at the first (lowest) acceleration would not, and its
-        # largest value is at an end of the lag phase.
-        stays_positive = speed + kk * dt * np.minimum(first, 0.0) >= 0.0
-        simple = stays_positive & (np.maximum(speed, v_end) <= cap) & (covered < distance)
-        time = np.empty_like(distance)
-        time[simple] = self._lag_time + self._tail_time(
-            distance[simple] - covered[simple], v_end[simple], a_end[simple]
-        )
-        rest = np.flatnonzero(~simple)
-        if rest.size:
-            time[rest] = self._clear_time_by_tick(
-                distance[rest], speed[rest], throttle[rest], brake[rest]
-            )
-        return time
-
-    def _tail_time(self, rest: FloatArray, v: FloatArray, a: FloatArray) -> FloatArray:
-        """Time to drive ``rest`` [m] from speed ``v`` at constant acceleration ``a`` up to
-        the clearing speed cap, then at the cap [s]."""
-        cap = self.config.clear_speed_cap
-        with np.errstate(divide="ignore", invalid="ignore"):
-            to_cap = np.where(a > 0, (cap * cap - v * v) / (2.0 * a), np.inf)
-            accelerating = np.where(
-                a > 0,
-                (np.sqrt(v * v + 2.0 * a * rest) - v) / a,
-                np.where(v > 0, rest / v, np.inf),
-            )
-            capped = np.where(a > 0, (cap - v) / a + (rest - to_cap) / cap, np.inf)
-        return np.where(rest <= to_cap, accelerating, capped)
-
-    def _clear_time_by_tick(
-        self, distance: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
-    ) -> FloatArray:
-        """:meth:`clear_time` tick by tick (also right when a clamp acts or the distance is
-        covered within the lag phase)."""
-        p, dt, cap = self.vehicle, self.dt, self.config.clear_speed_cap
-        throttle_k = 1.0 - (1.0 - throttle)[:, None] * self._throttle_decay
-        brake_k = brake[:, None] * self._brake_decay
-        engine_brake = p.max_engine_brake_force * (1.0 - throttle_k)
-        accel = (
-            throttle_k * self._drive_at_cap
-            - engine_brake
-            - brake_k * self._brake_max
-            - self._resist_at_cap
-        ) / p.mass
-        # Lower bound on the speed (clamping at 0 and at the cap only lowers it further).
-        v = clamp(speed[:, None] + dt * np.cumsum(accel, axis=1), 0.0, cap)
-        # Trapezoids up to tick k: sum_{j<=k} v_j + (v_0 - v_k) / 2.
-        covered = dt * (np.cumsum(v, axis=1) + 0.5 * (speed[:, None] - v))
-        reached = covered >= distance[:, None]
-        time = np.where(reached.any(axis=1), (np.argmax(reached, axis=1) + 1) * dt, np.inf)
-        rest = np.maximum(distance - covered[:, -1], 0.0)
-        tail = self._tail_time(rest, v[:, -1], accel[:, -1])
-        return np.where(np.isfinite(time), time, self._lag_time + tail)
+        """Upper bound on the time to drive ``distance`` [m] under full throttle [s]."""
+        d, v, th, br = _columns(distance, speed, throttle, brake)
+        out = np.empty(d.shape[0])
+        _map_clear_time(d, v, th, br, self._c, self._throttle_decay, self._brake_decay, out)
+        return out
 
     def north_arrival(self, progress: FloatArray, speed: FloatArray) -> FloatArray:
         """Earliest time the north car can enter its conflict zone, within the assumptions [s]
         (0 if it is inside, ``inf`` if it has left)."""
-        a = self.config.north_max_accel
-        top = np.maximum(self._north_max_speed, speed)  # best effort if already faster
-        distance = np.maximum(self.north_zone[0] - progress, 0.0)
-        to_top = (top * top - speed * speed) / (2.0 * a)
-        time = np.where(
-            distance <= to_top,
-            (np.sqrt(speed * speed + 2.0 * a * distance) - speed) / a,
-            (top - speed) / a + (distance - to_top) / top,
-        )
-        return np.where(progress > self.north_zone[1], np.inf, time)
+        s, v = _columns(progress, speed)
+        out = np.empty(s.shape[0])
+        _map_north_arrival(s, v, self._c, out)
+        return out
 
     # -- the certificate --------------------------------------------------------------------
-
-    def stop_feasible(
-        self, progress: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray
-    ) -> BoolArray:
-        """Full braking ends before the ego's conflict-zone entry."""
-        room = (self.ego_zone[0] - progress) / self.config.progress_factor
-        ok = self.quick_stop_distance(speed) <= room
-        near = np.flatnonzero(~ok & (room >= 0))
-        if near.size:
-            ok[near] = self.stop_distance(speed[near], throttle[near], brake[near]) <= room[near]
-        return ok
-
-    def clear_feasible(
-        self,
-        progress: FloatArray,
-        speed: FloatArray,
-        throttle: FloatArray,
-        brake: FloatArray,
-        north_arrival: FloatArray,
-    ) -> BoolArray:
-        """Full throttle leaves the ego's zone ``time_margin_s`` before the north car can enter."""
-        distance = self.config.progress_factor * np.maximum(self.ego_zone[1] - progress, 0.0)
-        deadline = north_arrival - self.config.time_margin_s
-        return self.clear_time(distance, speed, throttle, brake) <= deadline
 
     def safe(
         self,
@@ -317,20 +529,24 @@ class CertifiedSwitching:
         north_arrival: FloatArray,
     ) -> BoolArray:
         """:meth:`safe` with the ego's progress known only within ``[low, high]``: the stop
-        backup is judged at the highest progress, the clear backup at the lowest. Cheap tests
-        first; the exact bounds run only on what they leave undecided."""
-        ok = np.isinf(north_arrival) | (progress_low > self.ego_zone[1])
-        rest = np.flatnonzero(~ok)
-        if rest.size:
-            ok[rest] = self.stop_feasible(
-                progress_high[rest], speed[rest], throttle[rest], brake[rest]
-            )
-            rest = rest[~ok[rest]]
-        if rest.size:
-            ok[rest] = self.clear_feasible(
-                progress_low[rest], speed[rest], throttle[rest], brake[rest], north_arrival[rest]
-            )
-        return ok
+        backup is judged at the highest progress, the clear backup at the lowest."""
+        low, high, v, th, br, arrival = _columns(
+            progress_low, progress_high, speed, throttle, brake, north_arrival
+        )
+        out = np.empty(low.shape[0], dtype=np.bool_)
+        tables = (self._c, self._throttle_decay, self._brake_decay)
+        _map_certified(low, high, v, th, br, arrival, *tables, out)
+        return out
+
+    def settled(self, state: ConflictState) -> BoolArray:
+        """Elements the learned action cannot make unsafe, whatever it is: the conflict is over
+        (the north car has left its zone, or the ego its own), or even after a tick of the
+        hardest acceleration the plant can give, a full brake (loose bound) still stops before
+        the ego's zone. :meth:`decide` certifies only the rest."""
+        s, v, north = _columns(state.ego_progress, state.ego_speed, state.north_progress)
+        out = np.empty(s.shape[0], dtype=np.bool_)
+        _map_settled(s, v, north, self._c, out)
+        return out
 
     def predict(
         self, state: ConflictState, pedals: FloatArray
@@ -352,49 +568,30 @@ class CertifiedSwitching:
             brake,
         )
 
-    def settled(self, state: ConflictState) -> BoolArray:
-        """Elements the learned action cannot make unsafe, whatever it is: the conflict is over
-        (the north car has left its zone, or the ego its own), or even after a tick of the
-        hardest acceleration the plant can give, a full brake (loose bound) still stops before
-        the ego's zone. A cheap screen; :meth:`decide` certifies only the rest."""
-        f, dt = self.config.progress_factor, self.dt
-        top = state.ego_speed + self._accel_max * dt  # no pedal accelerates the car harder
-        room = (self.ego_zone[0] - (state.ego_progress + top * dt * f)) / f
-        return (
-            (self.quick_stop_distance(top) <= room)
-            | (state.north_progress > self.north_zone[1])
-            | (state.ego_progress > self.ego_zone[1])
-        )
-
     def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
         batch = learned.shape[0]
-        use = np.zeros(batch, dtype=bool)
-        rest = np.flatnonzero(~self.settled(state))
-        if rest.size:
-            sub = state if rest.size == batch else state.take(rest)
-            pedals = learned if rest.size == batch else learned[rest]
-            arrival = self.north_arrival(sub.north_progress, sub.north_speed)
-            low, high, speed, throttle, brake = self.predict(sub, pedals)
-            # The north car may arrive one tick sooner after the learned tick.
-            use[rest] = ~self._certify(low, high, speed, throttle, brake, arrival - self.dt)
+        use = np.zeros(batch, dtype=np.bool_)
         reason = np.zeros(batch, dtype=np.int8)
         action = np.zeros((batch, 2))
-        idx = np.flatnonzero(use)
-        if idx.size:
-            arrival = self.north_arrival(state.north_progress[idx], state.north_speed[idx])
-            reason[idx], action[idx] = self._backup(state, arrival, idx)
+        rest = np.flatnonzero(~self.settled(state))
+        if rest.size == 0:
+            return Decision(use, reason, action)
+        whole = rest.size == batch
+        s = state if whole else state.take(rest)
+        low, high, speed, throttle, brake = self.predict(s, learned if whole else learned[rest])
+        n = rest.size
+        sub_use, sub_reason, sub_action = (
+            np.zeros(n, np.bool_),
+            np.zeros(n, np.int8),
+            np.zeros((n, 2)),
+        )
+        x = _columns(
+            s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake, s.north_progress,
+            s.north_speed, low, high, speed, throttle, brake,
+        )  # fmt: skip
+        _decide(
+            x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10],
+            self._c, self._throttle_decay, self._brake_decay, sub_use, sub_reason, sub_action,
+        )  # fmt: skip
+        use[rest], reason[rest], action[rest] = sub_use, sub_reason, sub_action
         return Decision(use, reason, action)
-
-    def _backup(
-        self, s: ConflictState, arrival: FloatArray, idx: NDArray[np.intp]
-    ) -> tuple[NDArray[np.int8], FloatArray]:
-        """Reason codes and pedals of the backup for the elements ``idx`` (``arrival``: the
-        north car's earliest arrival for those elements)."""
-        args = (s.ego_progress[idx], s.ego_speed[idx], s.ego_throttle[idx], s.ego_brake[idx])
-        stop = self.stop_feasible(*args)
-        clear = ~stop & self.clear_feasible(*args, arrival)
-        before_zone = s.ego_progress[idx] < self.ego_zone[0]
-        reason = np.where(stop, 1, np.where(clear, 2, np.where(before_zone, 3, 4)))
-        go = (reason == 2) | (reason == 4)
-        pedals = np.stack([go.astype(np.float64), (~go).astype(np.float64)], axis=1)
-        return reason.astype(np.int8), pedals
