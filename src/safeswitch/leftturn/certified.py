@@ -81,7 +81,13 @@ STOP, CLEAR = 1, 2
     _NORTH_TOP,
     _PROGRESS_FACTOR,
     _TIME_MARGIN,
-) = range(19)
+    _LAG_TICKS,
+    _SUM_K,
+    _GT_LAST,
+    _GB_LAST,
+    _GT_SUM,
+    _GB_SUM,
+) = range(25)
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -96,14 +102,22 @@ def _stop_distance(
     speed: float, throttle: float, brake: float, c: FloatArray, rho_t: FloatArray, rho_b: FloatArray
 ) -> float:
     """Upper bound on the full-brake stopping distance [m]: on lag tick ``k`` the deceleration
-    is at least the brake force built up minus the largest drive force of the decaying throttle
-    (resistances ignored); after the lag phase, its last value."""
-    dt, v, total = c[_DT], speed, 0.0
-    decel = 0.0
-    for k in range(rho_t.shape[0]):
-        decel = (
-            c[_BRAKE_MAX] * (1.0 - (1.0 - brake) * rho_b[k]) - c[_DRIVE_MAX] * throttle * rho_t[k]
-        ) / c[_MASS]
+    is at least ``A − B·ρ_b^k − C·ρ_t^k`` (the brake force built up, minus the largest drive
+    force of the decaying throttle; resistances ignored); after the lag phase, its last value.
+    Closed form while the car still moves at the end of the lag phase, else tick by tick."""
+    dt, kk = c[_DT], c[_LAG_TICKS]
+    a = c[_BRAKE_MAX] / c[_MASS]
+    b = a * (1.0 - brake)
+    cc = c[_DRIVE_MAX] / c[_MASS] * throttle
+    v_end = speed - dt * (kk * a - b * c[_GB_LAST] - cc * c[_GT_LAST])
+    last = rho_t.shape[0] - 1
+    if v_end > 0.0:
+        v_sum = kk * speed - dt * (c[_SUM_K] * a - b * c[_GB_SUM] - cc * c[_GT_SUM])
+        decel_end = a - b * rho_b[last] - cc * rho_t[last]
+        return dt * (v_sum + 0.5 * (speed - v_end)) + v_end * v_end / (2.0 * decel_end)
+    v, total, decel = speed, 0.0, 0.0
+    for k in range(last + 1):
+        decel = a - b * rho_b[k] - cc * rho_t[k]
         v_next = max(v - dt * decel, 0.0)  # decel grows with k: once at rest, stays at rest
         total += 0.5 * dt * (v + v_next)
         v = v_next
@@ -144,22 +158,30 @@ def _clear_time(
     rho_b: FloatArray,
 ) -> float:
     """Upper bound on the time to drive ``distance`` [m] under full throttle [s]: on lag tick
-    ``k`` the acceleration is at least the throttle's drive force at the clearing speed cap
-    minus full engine braking of its closed part, the releasing brake and the resistances at
-    the cap; the speed bound is clamped to ``[0, cap]`` (which only lowers it)."""
-    dt, cap, mass = c[_DT], c[_CAP], c[_MASS]
+    ``k`` the acceleration is at least ``A − P·ρ_t^k − Q·ρ_b^k`` (the throttle's drive force at
+    the clearing speed cap minus full engine braking of its closed part, the releasing brake and
+    the resistances at the cap). Closed form when no clamp of the speed bound (at 0 or at the
+    cap) can act and the distance is not covered within the lag phase, else tick by tick."""
+    dt, cap, mass, kk = c[_DT], c[_CAP], c[_MASS], c[_LAG_TICKS]
+    a = (c[_DRIVE_AT_CAP] - c[_RESIST_AT_CAP]) / mass
+    q_t = (1.0 - throttle) * (c[_DRIVE_AT_CAP] + c[_ENGINE_BRAKE_MAX]) / mass
+    q_b = brake * c[_BRAKE_MAX] / mass
+    last = rho_t.shape[0] - 1
+    first = a - q_t * rho_t[0] - q_b * rho_b[0]
+    v_end = speed + dt * (kk * a - q_t * c[_GT_LAST] - q_b * c[_GB_LAST])
+    v_sum = kk * speed + dt * (c[_SUM_K] * a - q_t * c[_GT_SUM] - q_b * c[_GB_SUM])
+    covered = dt * (v_sum + 0.5 * (speed - v_end))
+    # The bound's acceleration only grows with k, so the speed bound is valley-shaped: it cannot
+    # reach 0 if even K ticks at the first (lowest) acceleration would not, and its largest
+    # value is at an end of the lag phase.
+    if speed + kk * dt * min(first, 0.0) >= 0.0 and max(speed, v_end) <= cap and covered < distance:
+        a_end = a - q_t * rho_t[last] - q_b * rho_b[last]
+        return c[_LAG_TIME] + _tail_time(distance - covered, v_end, a_end, cap)
     raw, v, accel, speeds = speed, speed, 0.0, 0.0
-    covered = 0.0
-    for k in range(rho_t.shape[0]):
-        throttle_k = 1.0 - (1.0 - throttle) * rho_t[k]
-        accel = (
-            throttle_k * c[_DRIVE_AT_CAP]
-            - c[_ENGINE_BRAKE_MAX] * (1.0 - throttle_k)
-            - brake * rho_b[k] * c[_BRAKE_MAX]
-            - c[_RESIST_AT_CAP]
-        ) / mass
+    for k in range(last + 1):
+        accel = a - q_t * rho_t[k] - q_b * rho_b[k]
         raw += dt * accel
-        v = min(max(raw, 0.0), cap)
+        v = min(max(raw, 0.0), cap)  # clamping only lowers the bound
         speeds += v
         covered = dt * (speeds + 0.5 * (speed - v))
         if covered >= distance:
@@ -449,7 +471,7 @@ class CertifiedSwitching:
                 "cannot yet overcome a fully open throttle; increase it"
             )
         # The constants the compiled functions read, by slot.
-        p_const = np.zeros(19)
+        p_const = np.zeros(25)
         p_const[_DT] = dt
         p_const[_MASS] = p.mass
         p_const[_BRAKE_MAX] = self._brake_max
@@ -467,6 +489,12 @@ class CertifiedSwitching:
         p_const[_NORTH_TOP] = self._north_max_speed
         p_const[_PROGRESS_FACTOR] = config.progress_factor
         p_const[_TIME_MARGIN] = config.time_margin_s
+        # Sums for the closed forms: Σk, and the last value and sum of the partial sums of ρ^k.
+        kk = config.lag_ticks
+        gt, gb = np.cumsum(self._throttle_decay), np.cumsum(self._brake_decay)
+        p_const[_LAG_TICKS], p_const[_SUM_K] = kk, kk * (kk + 1) / 2.0
+        p_const[_GT_LAST], p_const[_GB_LAST] = gt[-1], gb[-1]
+        p_const[_GT_SUM], p_const[_GB_SUM] = gt.sum(), gb.sum()
         self._c = p_const
 
     # -- bounds (each element through the compiled scalar functions) ------------------------
