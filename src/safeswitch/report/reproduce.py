@@ -87,8 +87,9 @@ TABLE = (
 
 
 def train_policies(out: Path, timesteps: int | None) -> dict[str, Path]:
-    """Train the four policies from scratch with their shipped configurations."""
-    from safeswitch.training.run import train
+    """Train the four policies from scratch with their shipped configurations, into
+    ``out/runs/``; a finished run is reused and an interrupted one resumed."""
+    from safeswitch.training.run import complete_checkpoints, train
 
     runs = {}
     for entry in ENTRIES:
@@ -98,9 +99,12 @@ def train_policies(out: Path, timesteps: int | None) -> dict[str, Path]:
         if timesteps is not None:
             config = replace(config, timesteps=timesteps)
         run = out / "runs" / entry.policy
-        print(f"training {entry.name} ({config.timesteps:,} steps) into {run}", flush=True)
-        train(config, run, resume=(run / "checkpoints").exists(), progress_bar=False)
         runs[entry.policy] = run
+        if (run / "metrics.json").is_file():  # finished by an earlier, interrupted reproduce
+            print(f"reusing the finished run {run}", flush=True)
+            continue
+        print(f"training {entry.name} ({config.timesteps:,} steps) into {run}", flush=True)
+        train(config, run, resume=bool(complete_checkpoints(run)), progress_bar=False)
     return runs
 
 
@@ -307,7 +311,7 @@ def comparison_text(summary: dict[str, Any]) -> str:
         "  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)),
     ]
     lines += ["  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
-    lines.append("Paper findings (shipped paper policy, paper scenarios):")
+    lines.append("Paper findings (the paper policy in the paper scenarios):")
     lines += [
         f"  [{'x' if f['reproduced'] else ' '}] {f['finding']}" for f in summary["paper_findings"]
     ]

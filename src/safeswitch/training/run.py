@@ -80,7 +80,8 @@ def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | 
     )
 
 
-def _checkpoints(run: Path) -> list[Path]:
+def complete_checkpoints(run: Path) -> list[Path]:
+    """The run's checkpoints that were written whole, oldest first."""
     folder = run / "checkpoints"
     if not folder.is_dir():
         return []
@@ -109,7 +110,7 @@ def _save_checkpoint(
     (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
     shutil.rmtree(final, ignore_errors=True)
     os.replace(tmp, final)
-    for old in _checkpoints(run)[:-2]:  # keep the last two
+    for old in complete_checkpoints(run)[:-2]:  # keep the last two
         shutil.rmtree(old, ignore_errors=True)
     return final
 
@@ -143,7 +144,7 @@ def train(
         if (run / "metrics.json").is_file():
             raise RunDirectoryError(f"--resume: the run in {run} is already complete")
         config = load_config(run / "config.yaml")
-        checkpoints = _checkpoints(run)
+        checkpoints = complete_checkpoints(run)
         if not checkpoints:
             raise RunDirectoryError(f"--resume: {run} has no complete checkpoint yet")
         latest = checkpoints[-1]
