@@ -40,12 +40,6 @@ class PPOConfig:
         normalize_rewards: Running return-based reward scaling (``VecNormalize``).
         log_std_init: Initial log standard deviation of the Gaussian policy (not in Table II;
             SB3's default 0 makes the first actions mostly noise on a [-1, 1] throttle).
-        use_sde: Generalised state-dependent exploration (Raffin et al. 2022; not in Table II):
-            the exploration noise is a function of the state, redrawn every ``sde_sample_freq``
-            ticks, so it stays coherent over many 20 ms ticks instead of averaging out
-            through the actuator lags.
-        sde_sample_freq: Ticks between redraws of the exploration matrix (-1: once per
-            rollout).
     """
 
     learning_rate: float = 2.5e-4
@@ -63,8 +57,6 @@ class PPOConfig:
     normalize_observations: bool = True
     normalize_rewards: bool = True
     log_std_init: float = 0.0
-    use_sde: bool = False
-    sde_sample_freq: int = -1
 
     def __post_init__(self) -> None:
         o = "ppo"
@@ -75,13 +67,6 @@ class PPOConfig:
             0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
         )
         check(self.n_steps >= 2, o, "n_steps", self.n_steps, "must be >= 2")
-        check(
-            self.sde_sample_freq == -1 or self.sde_sample_freq >= 1,
-            o,
-            "sde_sample_freq",
-            self.sde_sample_freq,
-            "must be -1 or >= 1",
-        )
         check(self.n_minibatches >= 1, o, "n_minibatches", self.n_minibatches, "must be >= 1")
         check(self.n_epochs >= 1, o, "n_epochs", self.n_epochs, "must be >= 1")
         for name in ("gamma", "gae_lambda"):

@@ -68,8 +68,6 @@ def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | 
         ent_coef=ppo.ent_coef,
         vf_coef=ppo.vf_coef,
         max_grad_norm=ppo.max_grad_norm,
-        use_sde=ppo.use_sde,
-        sde_sample_freq=ppo.sde_sample_freq,
         seed=config.seed,
         device="cpu",
         policy_kwargs={
