@@ -107,26 +107,13 @@ def test_config_round_trips_through_yaml(tmp_path):
     assert TrainConfig().ppo.n_steps == 128 and TrainConfig().batch_size == 512
 
 
-def test_evaluate_json_has_the_documented_fields_and_is_deterministic(capsys):
+@pytest.mark.parametrize("controller", ["rule", "learned", "oracle"])
+def test_evaluate_json_has_the_documented_fields_and_is_deterministic(capsys, controller):
+    args = ["evaluate", "--controller", controller, "--model", "shipped", "--scenarios", "random"]
+    args += ["--episodes", "40", "--seed", "5", "--json"]
     outputs = []
     for _ in range(2):
-        assert (
-            main(
-                [
-                    "evaluate",
-                    "--controller",
-                    "rule",
-                    "--scenarios",
-                    "random",
-                    "--episodes",
-                    "40",
-                    "--seed",
-                    "5",
-                    "--json",
-                ]
-            )
-            == 0
-        )
+        assert main(args) == 0
         outputs.append(json.loads(capsys.readouterr().out))
     assert outputs[0] == outputs[1]
     for key in (
@@ -137,9 +124,18 @@ def test_evaluate_json_has_the_documented_fields_and_is_deterministic(capsys):
         "mean_time_to_clear_s",
         "comfort_violation_steps",
         "stops",
+        "mean_efficiency",
+        "mean_oracle_time_to_clear_s",
+        "mean_terms",
+        "max_accel_lat",
     ):
         assert key in outputs[0]
     assert outputs[0]["episodes"] == 40
+    efficiency = outputs[0]["mean_efficiency"]
+    if controller == "oracle":
+        assert efficiency == pytest.approx(1.0) and outputs[0]["collisions"] == 0
+    else:
+        assert 0.0 < efficiency < 1.0
 
 
 def test_bench_json_reports_positive_throughput(capsys):
