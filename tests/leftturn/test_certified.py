@@ -240,12 +240,10 @@ def test_a_north_car_faster_than_assumed_is_flagged_whenever_it_causes_a_collisi
     assert flagged[result.collision].all()
 
 
-def test_invariant_on_200k_random_states_including_the_intervention_boundary(logic):
-    """Hypothesis explores shapes; this sweeps volume, so the rare states where the filter
-    must intervene (about 0.15 % of safe ones) are hit hundreds of times."""
-    rng = np.random.default_rng(0)
-    n = 200_000
-    state = make_state(
+def random_states(logic, rng, n):
+    """States around both conflict zones: the ego 40 m before to 15 m into its zone at up to
+    54 km/h with any pedals, the north car 80 m before to 15 m into its zone."""
+    return make_state(
         logic,
         logic.ego_zone[0] + rng.uniform(-40, 15, n),
         rng.uniform(0, 15, n),
@@ -254,6 +252,14 @@ def test_invariant_on_200k_random_states_including_the_intervention_boundary(log
         logic.north_zone[0] + rng.uniform(-80, 15, n),
         rng.uniform(0, 13.8, n),
     )
+
+
+def test_invariant_on_200k_random_states_including_the_intervention_boundary(logic):
+    """Hypothesis explores shapes; this sweeps volume, so the rare states where the filter
+    must intervene (about 0.15 % of safe ones) are hit hundreds of times."""
+    rng = np.random.default_rng(0)
+    n = 200_000
+    state = random_states(logic, rng, n)
     safe = is_safe(logic, state)
     learned = np.stack([rng.uniform(0, 1, n), rng.choice([0.0, 0.0, 1.0], n)], axis=1)
     sup = supervise(logic, state, learned, np.tile([0.0, 1.0], (n, 1)), 0.0, 1.0)
@@ -269,15 +275,7 @@ def test_the_cheap_screen_only_passes_states_the_full_certificate_accepts(logic)
     accepts after a tick of any pedals, including full throttle with no brake."""
     rng = np.random.default_rng(3)
     n = 200_000
-    state = make_state(
-        logic,
-        logic.ego_zone[0] + rng.uniform(-40, 15, n),
-        rng.uniform(0, 15, n),
-        rng.uniform(0, 1, n),
-        rng.uniform(0, 1, n),
-        logic.north_zone[0] + rng.uniform(-80, 15, n),
-        rng.uniform(0, 13.8, n),
-    )
+    state = random_states(logic, rng, n)
     settled = logic.settled(state)
     assert 0.2 < settled.mean() < 0.9  # the screen decides a real share, not all or nothing
     arrival = logic.north_arrival(state.north_progress, state.north_speed) - logic.dt

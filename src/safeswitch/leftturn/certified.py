@@ -58,7 +58,8 @@ from safeswitch.sim.vehicle import (
     longitudinal_force,
 )
 
-STOP, CLEAR = 1, 2
+#: Reason codes of the backups (indices into ``CertifiedSwitching.reasons``).
+STOP, CLEAR, NO_BACKUP_BRAKE, NO_BACKUP_CLEAR = 1, 2, 3, 4
 
 # Slots of the constants vector the compiled functions read (see CertifiedSwitching.__init__).
 (
@@ -312,16 +313,15 @@ def _decide(
         ):
             continue
         use[i] = True
+        # Stop where it can; else clear; else best effort: brake before the zone, go inside it.
         if _stop_ok(progress[i], speed[i], throttle[i], brake[i], c, rho_t, rho_b):
-            code = STOP
+            reason[i], go = STOP, False
         elif _clear_ok(progress[i], speed[i], throttle[i], brake[i], arrival, c, rho_t, rho_b):
-            code = CLEAR
+            reason[i], go = CLEAR, True
         elif progress[i] < c[_EGO_ENTER]:
-            code = 3  # no_certified_backup_brake
+            reason[i], go = NO_BACKUP_BRAKE, False
         else:
-            code = 4  # no_certified_backup_clear
-        reason[i] = code
-        go = code == CLEAR or code == 4
+            reason[i], go = NO_BACKUP_CLEAR, True
         pedals[i, 0] = 1.0 if go else 0.0
         pedals[i, 1] = 0.0 if go else 1.0
 
@@ -426,6 +426,7 @@ class CertifiedSwitching:
         "no_certified_backup_brake",
         "no_certified_backup_clear",
     )
+    assert reasons.index("no_certified_backup_clear") == NO_BACKUP_CLEAR
 
     def __init__(
         self,
@@ -445,57 +446,48 @@ class CertifiedSwitching:
         self._alpha_throttle = lag_factor(p.throttle_time_constant, dt)
         self._alpha_brake = lag_factor(p.brake_time_constant, dt)
         k = np.arange(1, config.lag_ticks + 1, dtype=np.float64)
-        self._throttle_decay = (1.0 - self._alpha_throttle) ** k  # ρ_t^k, [K]
-        self._brake_decay = (1.0 - self._alpha_brake) ** k  # ρ_b^k, [K]
+        throttle_decay = (1.0 - self._alpha_throttle) ** k  # ρ_t^k, [K]
+        brake_decay = (1.0 - self._alpha_brake) ** k  # ρ_b^k, [K]
+        # The constants the compiled functions read, by slot.
+        c = np.zeros(25)
+        c[_DT], c[_MASS] = dt, p.mass
         # Forces that bound the backups [N].
-        self._drive_max = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
-        self._brake_max = min(p.max_brake_force, grip)
-        cap = config.clear_speed_cap
-        self._drive_at_cap = min(self._drive_max, p.max_power / cap)
-        self._resist_at_cap = (
+        c[_DRIVE_MAX] = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
+        c[_BRAKE_MAX] = min(p.max_brake_force, grip)
+        c[_CAP] = cap = config.clear_speed_cap
+        c[_DRIVE_AT_CAP] = min(c[_DRIVE_MAX], p.max_power / cap)
+        c[_RESIST_AT_CAP] = (
             p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * cap * cap
         )
-        self._north_max_speed = config.north_max_speed_kmh / 3.6
+        c[_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
         # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
         # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
         # whole lag phase, then brake at the lag phase's last (weakest) deceleration.
-        self._lag_time = config.lag_ticks * dt
-        self._accel_max = self._drive_max / p.mass
-        self._decel_tail_worst = (
-            self._brake_max * (1.0 - self._brake_decay[-1])
-            - self._drive_max * self._throttle_decay[-1]
+        c[_LAG_TIME] = config.lag_ticks * dt
+        c[_ACCEL_MAX] = c[_DRIVE_MAX] / p.mass
+        c[_DECEL_TAIL_WORST] = (
+            c[_BRAKE_MAX] * (1.0 - brake_decay[-1]) - c[_DRIVE_MAX] * throttle_decay[-1]
         ) / p.mass
-        if self._decel_tail_worst <= 0:
+        if c[_DECEL_TAIL_WORST] <= 0:
             raise ValueError(
                 f"certified.lag_ticks={config.lag_ticks} is too short: after it the brake "
                 "cannot yet overcome a fully open throttle; increase it"
             )
-        # The constants the compiled functions read, by slot.
-        p_const = np.zeros(25)
-        p_const[_DT] = dt
-        p_const[_MASS] = p.mass
-        p_const[_BRAKE_MAX] = self._brake_max
-        p_const[_DRIVE_MAX] = self._drive_max
-        p_const[_DRIVE_AT_CAP] = self._drive_at_cap
-        p_const[_RESIST_AT_CAP] = self._resist_at_cap
-        p_const[_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
-        p_const[_CAP] = cap
-        p_const[_LAG_TIME] = self._lag_time
-        p_const[_ACCEL_MAX] = self._accel_max
-        p_const[_DECEL_TAIL_WORST] = self._decel_tail_worst
-        p_const[_EGO_ENTER], p_const[_EGO_EXIT] = ego_zone
-        p_const[_NORTH_ENTER], p_const[_NORTH_EXIT] = north_zone
-        p_const[_NORTH_ACCEL] = config.north_max_accel
-        p_const[_NORTH_TOP] = self._north_max_speed
-        p_const[_PROGRESS_FACTOR] = config.progress_factor
-        p_const[_TIME_MARGIN] = config.time_margin_s
+        c[_EGO_ENTER], c[_EGO_EXIT] = ego_zone
+        c[_NORTH_ENTER], c[_NORTH_EXIT] = north_zone
+        c[_NORTH_ACCEL] = config.north_max_accel
+        c[_NORTH_TOP] = config.north_max_speed_kmh / 3.6
+        c[_PROGRESS_FACTOR] = config.progress_factor
+        c[_TIME_MARGIN] = config.time_margin_s
         # Sums for the closed forms: Σk, and the last value and sum of the partial sums of ρ^k.
         kk = config.lag_ticks
-        gt, gb = np.cumsum(self._throttle_decay), np.cumsum(self._brake_decay)
-        p_const[_LAG_TICKS], p_const[_SUM_K] = kk, kk * (kk + 1) / 2.0
-        p_const[_GT_LAST], p_const[_GB_LAST] = gt[-1], gb[-1]
-        p_const[_GT_SUM], p_const[_GB_SUM] = gt.sum(), gb.sum()
-        self._c = p_const
+        gt, gb = np.cumsum(throttle_decay), np.cumsum(brake_decay)
+        c[_LAG_TICKS], c[_SUM_K] = kk, kk * (kk + 1) / 2.0
+        c[_GT_LAST], c[_GB_LAST] = gt[-1], gb[-1]
+        c[_GT_SUM], c[_GB_SUM] = gt.sum(), gb.sum()
+        self._c = c
+        #: Everything the compiled bounds read: constants, ρ_t^k and ρ_b^k.
+        self._tables = (c, throttle_decay, brake_decay)
 
     # -- bounds (each element through the compiled scalar functions) ------------------------
 
@@ -507,7 +499,7 @@ class CertifiedSwitching:
         with their lags)."""
         v, th, br = _columns(speed, throttle, brake)
         out = np.empty(v.shape[0])
-        _map_stop_distance(v, th, br, self._c, self._throttle_decay, self._brake_decay, out)
+        _map_stop_distance(v, th, br, *self._tables, out)
         return out
 
     def quick_stop_distance(self, speed: FloatArray) -> FloatArray:
@@ -523,7 +515,7 @@ class CertifiedSwitching:
         """Upper bound on the time to drive ``distance`` [m] under full throttle [s]."""
         d, v, th, br = _columns(distance, speed, throttle, brake)
         out = np.empty(d.shape[0])
-        _map_clear_time(d, v, th, br, self._c, self._throttle_decay, self._brake_decay, out)
+        _map_clear_time(d, v, th, br, *self._tables, out)
         return out
 
     def north_arrival(self, progress: FloatArray, speed: FloatArray) -> FloatArray:
@@ -562,8 +554,7 @@ class CertifiedSwitching:
             progress_low, progress_high, speed, throttle, brake, north_arrival
         )
         out = np.empty(low.shape[0], dtype=np.bool_)
-        tables = (self._c, self._throttle_decay, self._brake_decay)
-        _map_certified(low, high, v, th, br, arrival, *tables, out)
+        _map_certified(low, high, v, th, br, arrival, *self._tables, out)
         return out
 
     def settled(self, state: ConflictState) -> BoolArray:
@@ -619,7 +610,7 @@ class CertifiedSwitching:
         )  # fmt: skip
         _decide(
             x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10],
-            self._c, self._throttle_decay, self._brake_decay, sub_use, sub_reason, sub_action,
+            *self._tables, sub_use, sub_reason, sub_action,
         )  # fmt: skip
         use[rest], reason[rest], action[rest] = sub_use, sub_reason, sub_action
         return Decision(use, reason, action)
