@@ -78,12 +78,26 @@ def run_controller(
 ) -> tuple[RolloutResult, OraclePlan]:
     """One episode per scenario (the oracle's plan when ``policy`` is None), and the oracle's
     plan of the same scenarios (``plan``, if already made for this road and these scenarios)."""
-    oracle = Oracle(task)
-    if plan is None:
-        plan = oracle.plan(batch)
-    if policy is None:
-        return oracle.as_rollout(plan), plan
+    if plan is None or policy is None:
+        oracle = Oracle(task)
+        plan = plan or oracle.plan(batch)
+        if policy is None:
+            return oracle.as_rollout(plan), plan
     return rollout(task, batch, policy, on_tick), plan
+
+
+def summary_against_oracle(
+    result: RolloutResult, plan: OraclePlan, horizon_s: float
+) -> dict[str, Any]:
+    """:func:`~safeswitch.evaluation.metrics.summarize` plus the oracle's mean time to clear
+    and ``mean_efficiency``: the mean over scenarios of the oracle's time to clear divided by
+    the controller's (see :func:`~safeswitch.evaluation.oracle.efficiency`)."""
+    ratio = efficiency(plan.time_to_clear, result.time_to_clear, horizon_s)
+    return {
+        **summarize(result),
+        "mean_oracle_time_to_clear_s": float(np.nanmean(plan.time_to_clear)),
+        "mean_efficiency": float(np.nanmean(ratio)),
+    }
 
 
 def evaluate(
@@ -102,22 +116,20 @@ def evaluate(
     task = LeftTurnTask(env_config)
     batch, names = scenario_set(task, scenarios, episodes, seed)
     result, plan = run_controller(task, policy, batch)
-    oracle_time = plan.time_to_clear
-    ratio = efficiency(oracle_time, result.time_to_clear, env_config.episode.horizon_s)
     summary = {
         "controller": controller,
         "model": str(model) if model else None,
         "switching": env_config.switching if policy is not None else None,
         "scenarios": scenarios,
         "seed": seed,
-        **summarize(result),
-        "mean_oracle_time_to_clear_s": float(np.nanmean(oracle_time)),
-        "mean_efficiency": float(np.nanmean(ratio)),
+        **summary_against_oracle(result, plan, env_config.episode.horizon_s),
     }
     if out is not None:
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
-        write_atomic(folder / "episodes.csv", episodes_csv(names, batch, result, oracle_time))
+        write_atomic(
+            folder / "episodes.csv", episodes_csv(names, batch, result, plan.time_to_clear)
+        )
         write_atomic(folder / "summary.json", json.dumps(summary, indent=2))
     return summary
 

@@ -215,21 +215,14 @@ class Oracle:
         horizon = task.config.episode.horizon_ticks
         north, start = self.north_progress(scenarios)
         batch = north.shape[0]
-        ticks = np.arange(horizon + 1)
         north_in = (north >= geo.zone_b[0]) & (north <= geo.zone_b[1])
         # Last tick the north car is in its zone (-1: never; horizon + 1: still in at the end).
-        north_last = np.where(
-            north_in.any(axis=1), np.max(np.where(north_in, ticks, -1), axis=1), -1
-        )
+        north_last = np.max(np.where(north_in, np.arange(horizon + 1), -1), axis=1)
         north_last = np.where(north_in[:, -1], horizon + 1, north_last)
 
         def shares(progress: FloatArray) -> NDArray[np.bool_]:
             ego_in = (progress >= geo.zone_a[0]) & (progress <= geo.zone_a[1])
             return np.any(ego_in & north_in, axis=1)
-
-        def entry_tick(progress: FloatArray) -> NDArray[np.int64]:
-            entered = progress >= geo.zone_a[0]
-            return np.where(entered.any(axis=1), np.argmax(entered, axis=1), horizon + 1)
 
         free_s, _ = self._drive(start, np.zeros(batch))
         cut_ok = ~shares(free_s)
@@ -239,21 +232,19 @@ class Oracle:
         for _ in range(_BISECTION_STEPS):
             mid = 0.5 * (low + high)
             s_mid, _ = self._drive(start, mid, needed)
-            late_enough = entry_tick(s_mid) > north_last
+            late_enough = _first_tick(s_mid >= geo.zone_a[0], horizon + 1) > north_last
             high = np.where(late_enough, mid, high)
             low = np.where(late_enough, low, mid)
         brake_time = np.where(cut_ok, 0.0, high)
         progress, speed = self._drive(start, brake_time)
 
-        cleared = progress > geo.zone_a[1]
-        time_to_clear = np.where(cleared.any(axis=1), np.argmax(cleared, axis=1) * dt, np.nan)
-        north_cleared = north > geo.zone_b[1]
-        first_north = np.where(north_cleared.any(axis=1), np.argmax(north_cleared, axis=1), np.inf)
-        first_ego = np.where(cleared.any(axis=1), np.argmax(cleared, axis=1), np.inf)
+        # Who cleared first, coded as the task's outcome (0: the ego not within the horizon).
+        ego_clears = _first_tick(progress > geo.zone_a[1], np.inf)
+        north_clears = _first_tick(north > geo.zone_b[1], np.inf)
         outcome = np.where(
-            first_ego < first_north, 1, np.where(np.isfinite(first_north), 2, 0)
+            np.isinf(ego_clears), 0, np.where(ego_clears < north_clears, 1, 2)
         ).astype(np.int8)
-        outcome = np.where(np.isfinite(first_ego), outcome, 0).astype(np.int8)
+        time_to_clear = np.where(np.isinf(ego_clears), np.nan, ego_clears * dt)
 
         accel_lon = np.diff(speed, axis=1) / dt
         curvature = np.interp(progress[:, 1:], self._grid, self._curvature)
@@ -313,6 +304,11 @@ class Oracle:
             max_lateral=np.zeros(batch),
             terms=totals,
         )
+
+
+def _first_tick(mask: NDArray[np.bool_], never: float) -> FloatArray:
+    """Index of each row's first true tick of ``mask`` ``[B, T]``, ``never`` if none."""
+    return np.where(mask.any(axis=1), np.argmax(mask, axis=1), never)
 
 
 def efficiency(oracle_time: FloatArray, time: FloatArray, horizon_s: float) -> FloatArray:

@@ -30,6 +30,7 @@ from safeswitch.evaluation.evaluate import (
     episodes_csv,
     run_controller,
     scenario_set,
+    summary_against_oracle,
 )
 from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import OraclePlan, efficiency
@@ -164,15 +165,21 @@ def reproduce(
     random_rows = []
     offsets = None
     oracle_random = None
-    plans: dict[tuple[str, str], OraclePlan] = {}  # one plan per road, car, limits and batch
+    # The oracle's plans depend on neither the switching logic, R_ADAS nor who drives: one
+    # plan per remaining configuration and scenario set serves every controller.
+    plans: dict[tuple[LeftTurnConfig, str], OraclePlan] = {}
     for entry in ENTRIES:
         model = models.get(entry.policy) if entry.policy else None
         config, policy = controller_setup(entry.kind, model, None)
         task = LeftTurnTask(config)
         paper_batch, names = scenario_set(task, "paper", 3, 0)
         trace = Trace(task, animate=(0, 1, 2) if entry.name == "ppo-paper" else ())
-        world = repr((config.geometry, config.vehicle, config.rewards, config.episode.dt))
-        world += repr((config.episode.horizon_s, config.controllers.lane_pid, config.scenarios))
+        world = replace(
+            config,
+            switching="none",
+            adas_penalty=False,
+            episode=replace(config.episode, learned_scope="never"),
+        )
         paper_result, paper_plan = run_controller(
             task, policy, paper_batch, trace.on_tick, plans.get((world, "paper"))
         )
@@ -184,11 +191,7 @@ def reproduce(
         horizon_s = config.episode.horizon_s
         ratio = efficiency(random_plan.time_to_clear, random_result.time_to_clear, horizon_s)
         offsets, oracle_random = random_batch.arrival_offset, random_plan.time_to_clear
-        summary = {
-            **summarize(random_result),
-            "mean_efficiency": float(np.nanmean(ratio)),
-            "mean_oracle_time_to_clear_s": float(np.nanmean(random_plan.time_to_clear)),
-        }
+        summary = summary_against_oracle(random_result, random_plan, horizon_s)
         per_scenario = {}
         for i, name in enumerate(names):
             per_scenario[name] = {
