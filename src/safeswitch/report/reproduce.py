@@ -321,8 +321,8 @@ def comparison_text(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-#: Figures in report order: (file stem, caption).
 def _figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """The report's PNG figures in order, as (file stem, caption)."""
     out = [("comparison", "Time to clear against the north car's arrival; mean efficiency")]
     for name, result in summary["controllers"].items():
         if name == "oracle":
