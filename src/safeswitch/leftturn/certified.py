@@ -562,9 +562,8 @@ class CertifiedSwitching:
         (the north car has left its zone, or the ego its own), or even after a tick of the
         hardest acceleration the plant can give, a full brake (loose bound) still stops before
         the ego's zone. :meth:`decide` certifies only the rest."""
-        s, v, north = _columns(state.ego_progress, state.ego_speed, state.north_progress)
-        out = np.empty(s.shape[0], dtype=np.bool_)
-        _map_settled(s, v, north, self._c, out)
+        out = np.empty(state.ego_speed.shape[0], dtype=np.bool_)
+        _map_settled(state.ego_progress, state.ego_speed, state.north_progress, self._c, out)
         return out
 
     def predict(
@@ -598,19 +597,11 @@ class CertifiedSwitching:
         whole = rest.size == batch
         s = state if whole else state.take(rest)
         low, high, speed, throttle, brake = self.predict(s, learned if whole else learned[rest])
-        n = rest.size
-        sub_use, sub_reason, sub_action = (
-            np.zeros(n, np.bool_),
-            np.zeros(n, np.int8),
-            np.zeros((n, 2)),
-        )
-        x = _columns(
-            s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake, s.north_progress,
-            s.north_speed, low, high, speed, throttle, brake,
-        )  # fmt: skip
+        out = (use, reason, action) if whole else (use[rest], reason[rest], action[rest])
         _decide(
-            x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10],
-            *self._tables, sub_use, sub_reason, sub_action,
+            s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake, s.north_progress,
+            s.north_speed, low, high, speed, throttle, brake, *self._tables, *out,
         )  # fmt: skip
-        use[rest], reason[rest], action[rest] = sub_use, sub_reason, sub_action
+        if not whole:
+            use[rest], reason[rest], action[rest] = out
         return Decision(use, reason, action)
