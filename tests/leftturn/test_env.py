@@ -7,6 +7,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import safeswitch
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn import LeftTurnEnv, make_vec_env
+from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.rewards import REWARD_TERMS
 
 from .conftest import cruise_action
@@ -168,6 +169,16 @@ def test_keyword_arguments_override_the_config_only_when_given():
         False,
     )
     assert LeftTurnEnv().config.switching == "paper"
+    # A nested section given as plain data replaces that section, validated like a config file.
+    resolved = resolve_config(config, episode={"learned_scope": "episode"})
+    assert (resolved.episode.learned_scope, resolved.scenario) == ("episode", "cut")
+    assert resolved.episode.horizon_s == LeftTurnEnv().config.episode.horizon_s
+    for bad, named in [
+        ({"learned_scope": "always"}, "always"),
+        ({"horizon_sec": 3}, "horizon_sec"),
+    ]:
+        with pytest.raises(ConfigError, match=named):
+            resolve_config(config, episode=bad)
 
 
 def test_a_collision_terminates_and_is_not_a_time_limit():

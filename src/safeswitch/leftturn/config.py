@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import Any, Literal
 
-from safeswitch.core.config import ConfigError, check, from_dict
+from safeswitch.core.config import ConfigError, check, from_dict, to_dict
 from safeswitch.core.pid import PIDGains
 from safeswitch.sim.road import IntersectionGeometry
 from safeswitch.sim.vehicle import VehicleParams
@@ -493,7 +493,8 @@ def resolve_config(
     config: LeftTurnConfig | dict[str, Any] | None = None, **overrides: Any
 ) -> LeftTurnConfig:
     """A config from a config, a dict or nothing, with top-level fields overridden (overrides
-    equal to :data:`FROM_CONFIG` are ignored)."""
+    equal to :data:`FROM_CONFIG` are ignored). An override replaces the whole field; it may be
+    given as plain data (``episode={"horizon_s": 8}``) and is validated like a config file."""
     overrides = {k: v for k, v in overrides.items() if v is not FROM_CONFIG}
     if config is None:
         config = LeftTurnConfig()
@@ -505,4 +506,7 @@ def resolve_config(
     for key in overrides:
         if key not in valid:
             raise ConfigError(f"unknown environment argument {key!r} (valid: {sorted(valid)})")
-    return replace(config, **overrides)
+    if not overrides:
+        return config
+    merged = to_dict(config) | {key: to_dict(value) for key, value in overrides.items()}
+    return LeftTurnConfig.from_dict(merged)
