@@ -12,7 +12,7 @@ from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.scenarios import scenario_grid
 from safeswitch.leftturn.switching import ConflictState
 from safeswitch.leftturn.task import LeftTurnTask
-from safeswitch.sim.vehicle import longitudinal_force
+from safeswitch.sim.vehicle import VehicleState, vehicle_step
 
 ADVERSARIES = (
     "uniform",
@@ -112,10 +112,11 @@ def is_safe(logic, s):
 def advance(logic, s, pedals, north_accel, progress_ratio):
     """One tick of the plant's longitudinal model for the ego, the north car anywhere within
     the assumptions, and the ego's progress per metre driven anywhere in the allowed band."""
-    p, dt = logic.vehicle, logic.dt
-    th = s.ego_throttle + logic._alpha_throttle * (pedals[:, 0] - s.ego_throttle)
-    br = s.ego_brake + logic._alpha_brake * (pedals[:, 1] - s.ego_brake)
-    speed = np.maximum(s.ego_speed + longitudinal_force(p, s.ego_speed, th, br) / p.mass * dt, 0)
+    dt = logic.dt
+    ego = VehicleState.at(0.0, 0.0, 0.0, s.ego_speed, s.ego_throttle)
+    ego.brake = np.asarray(s.ego_brake, dtype=np.float64).copy()
+    ego, _ = vehicle_step(logic.vehicle, ego, pedals[:, 0], pedals[:, 1], 0.0, dt)
+    th, br, speed = ego.throttle, ego.brake, ego.speed
     progress = s.ego_progress + 0.5 * (s.ego_speed + speed) * dt * progress_ratio
     top = logic.config.north_max_speed_kmh / 3.6
     n_speed = np.clip(s.north_speed + north_accel * dt, 0.0, top)
@@ -292,8 +293,6 @@ def test_the_quick_stop_bound_never_undercuts_the_exact_one_nor_the_plant(logic)
     exact = logic.stop_distance(speed, throttle, brake)
     assert (logic.quick_stop_distance(speed) >= exact - 1e-9).all()
     # And the exact bound holds on the plant itself: brake fully and measure.
-    from safeswitch.sim.vehicle import VehicleState, vehicle_step
-
     state = VehicleState.at(np.zeros(n), 0.0, 0.0, speed, throttle)
     state.brake[:] = brake
     for _ in range(800):
@@ -304,8 +303,6 @@ def test_the_quick_stop_bound_never_undercuts_the_exact_one_nor_the_plant(logic)
 
 def test_the_clear_time_bound_is_never_beaten_by_the_plant(logic):
     """Full throttle on the plant itself covers the distance no later than the bound says."""
-    from safeswitch.sim.vehicle import VehicleState, vehicle_step
-
     rng = np.random.default_rng(6)
     n = 20_000
     speed, throttle, brake = rng.uniform(0, 12, n), rng.uniform(0, 1, n), rng.uniform(0, 1, n)
@@ -326,3 +323,23 @@ def test_the_clear_time_bound_is_never_beaten_by_the_plant(logic):
             break
     assert (reached <= bound + 1e-9).all()
     assert (bound - reached).mean() < 0.5  # a useful bound, not a vacuous one
+
+
+def test_the_filter_predicts_the_learned_tick_exactly_as_the_plant_drives_it(logic):
+    """The one-tick prediction runs the plant's own longitudinal model: speed and pedal positions
+    agree bit for bit, and the true progress lies within the predicted bounds."""
+    rng = np.random.default_rng(8)
+    n = 50_000
+    state = random_states(logic, rng, n)
+    pedals = np.stack([rng.uniform(0, 1, n), rng.choice([0.0, 0.3, 1.0], n)], axis=1)
+    low, high, speed, throttle, brake = logic.predict(state, pedals)
+    plant = VehicleState.at(0.0, 0.0, 0.0, state.ego_speed, state.ego_throttle)
+    plant.brake = state.ego_brake.copy()
+    plant, _ = vehicle_step(logic.vehicle, plant, pedals[:, 0], pedals[:, 1], 0.0, logic.dt)
+    np.testing.assert_array_equal(speed, plant.speed)
+    np.testing.assert_array_equal(throttle, plant.throttle)
+    np.testing.assert_array_equal(brake, plant.brake)
+    step = plant.x  # driven straight east from 0: the arc length of the tick
+    assert (low <= state.ego_progress + step + 1e-12).all()
+    assert (state.ego_progress + step <= high + 1e-12).all()
+    assert (high - low > 0).any()

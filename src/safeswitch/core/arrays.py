@@ -1,15 +1,24 @@
 """Small array helpers for hot paths, where numpy's general-purpose functions cost more in
 call overhead than the arithmetic they do (``np.clip`` is several times slower than
-``np.minimum(np.maximum(...))``, and ``np.stack`` than filling a preallocated array)."""
+``np.minimum(np.maximum(...))``, and ``np.stack`` than filling a preallocated array), and the
+decorator that compiles scalar per-element code."""
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 A = TypeVar("A", bound=np.generic)
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def jit(fn: F) -> F:
+    """Compile ``fn`` with numba (nopython, machine code cached on disk); typed as ``fn``."""
+    return cast(F, numba.njit(cache=True, nogil=True)(fn))
 
 
 def clamp(x: NDArray[A], low: ArrayLike, high: ArrayLike) -> NDArray[A]:

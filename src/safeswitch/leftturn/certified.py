@@ -40,22 +40,24 @@ same compiled functions.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import jit
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import CertifiedConfig
 from safeswitch.leftturn.switching import ConflictState
 from safeswitch.sim.vehicle import (
-    AIR_DENSITY,
     GRAVITY,
+    K_ALPHA_BRAKE,
+    K_ALPHA_THROTTLE,
     VehicleParams,
-    lag_factor,
-    longitudinal_force,
+    drive_force,
+    longitudinal_constants,
+    longitudinal_tick,
+    resistance,
 )
 
 #: Reason codes of the backups (indices into ``CertifiedSwitching.reasons``).
@@ -90,15 +92,8 @@ STOP, CLEAR, NO_BACKUP_BRAKE, NO_BACKUP_CLEAR = 1, 2, 3, 4
     _GB_SUM,
 ) = range(25)
 
-_F = TypeVar("_F", bound=Callable[..., Any])
 
-
-def _jit(fn: _F) -> _F:
-    """Compile ``fn`` with numba (machine code cached on disk); typed as ``fn`` for mypy."""
-    return cast(_F, numba.njit(cache=True, nogil=True)(fn))
-
-
-@_jit
+@jit
 def _stop_distance(
     speed: float, throttle: float, brake: float, c: FloatArray, rho_t: FloatArray, rho_b: FloatArray
 ) -> float:
@@ -125,7 +120,7 @@ def _stop_distance(
     return total + v * v / (2.0 * decel)
 
 
-@_jit
+@jit
 def _quick_stop_distance(speed: float, c: FloatArray) -> float:
     """A looser stopping bound for any pedal positions: the largest drive force for the whole
     lag phase, then the lag phase's weakest deceleration [m]."""
@@ -134,7 +129,7 @@ def _quick_stop_distance(speed: float, c: FloatArray) -> float:
     return (speed + 0.5 * a * t) * t + top * top / (2.0 * c[_DECEL_TAIL_WORST])
 
 
-@_jit
+@jit
 def _tail_time(rest: float, v: float, a: float, cap: float) -> float:
     """Time to drive ``rest`` [m] from speed ``v`` at constant ``a`` up to ``cap``, then at
     the cap [s]."""
@@ -148,7 +143,7 @@ def _tail_time(rest: float, v: float, a: float, cap: float) -> float:
     return math.inf
 
 
-@_jit
+@jit
 def _clear_time(
     distance: float,
     speed: float,
@@ -190,7 +185,7 @@ def _clear_time(
     return c[_LAG_TIME] + _tail_time(max(distance - covered, 0.0), v, accel, cap)
 
 
-@_jit
+@jit
 def _north_arrival(progress: float, speed: float, c: FloatArray) -> float:
     """Earliest time the north car can enter its zone within the assumptions [s] (0 inside,
     ``inf`` once it has left)."""
@@ -205,7 +200,7 @@ def _north_arrival(progress: float, speed: float, c: FloatArray) -> float:
     return (top - speed) / a + (distance - to_top) / top
 
 
-@_jit
+@jit
 def _stop_ok(
     progress: float,
     speed: float,
@@ -224,7 +219,7 @@ def _stop_ok(
     return _stop_distance(speed, throttle, brake, c, rho_t, rho_b) <= room
 
 
-@_jit
+@jit
 def _clear_ok(
     progress: float,
     speed: float,
@@ -241,7 +236,7 @@ def _clear_ok(
     return _clear_time(distance, speed, throttle, brake, c, rho_t, rho_b) <= deadline
 
 
-@_jit
+@jit
 def _certified(
     low: float,
     high: float,
@@ -262,7 +257,7 @@ def _certified(
     return _clear_ok(low, speed, throttle, brake, arrival, c, rho_t, rho_b)
 
 
-@_jit
+@jit
 def _settled(progress: float, speed: float, north_progress: float, c: FloatArray) -> bool:
     """No learned action can matter: the conflict is over, or even after a tick of the hardest
     acceleration the plant can give, a full brake (quick bound) still stops before the zone."""
@@ -274,7 +269,30 @@ def _settled(progress: float, speed: float, north_progress: float, c: FloatArray
     return _quick_stop_distance(top, c) <= room
 
 
-@_jit
+@jit
+def _predict(
+    progress: float,
+    speed: float,
+    throttle: float,
+    brake: float,
+    throttle_cmd: float,
+    brake_cmd: float,
+    c: FloatArray,
+    k: FloatArray,
+) -> tuple[float, float, float, float, float]:
+    """The ego one tick ahead under the given pedals, on the plant's own longitudinal model
+    (:func:`~safeswitch.sim.vehicle.longitudinal_tick`): progress bounds (low, high) — the path
+    length over the tick is known within ``progress_factor`` of the speed-integrated step —,
+    speed, throttle and brake."""
+    next_throttle, next_brake, next_speed = longitudinal_tick(
+        speed, throttle, brake, throttle_cmd, brake_cmd, k
+    )
+    step = 0.5 * (speed + next_speed) * c[_DT]
+    f = c[_PROGRESS_FACTOR]
+    return progress + step / f, progress + step * f, next_speed, next_throttle, next_brake
+
+
+@jit
 def _decide(
     progress: FloatArray,
     speed: FloatArray,
@@ -282,34 +300,28 @@ def _decide(
     brake: FloatArray,
     north_progress: FloatArray,
     north_speed: FloatArray,
-    low: FloatArray,
-    high: FloatArray,
-    next_speed: FloatArray,
-    next_throttle: FloatArray,
-    next_brake: FloatArray,
+    learned: FloatArray,
     c: FloatArray,
     rho_t: FloatArray,
     rho_b: FloatArray,
+    k: FloatArray,
     use: BoolArray,
     reason: NDArray[np.int8],
     pedals: FloatArray,
 ) -> None:
-    """The filter, element by element (for elements the screen did not settle): certificate of
-    the state after the learned tick, and the backup where it fails (written into ``use``,
-    ``reason``, ``pedals``)."""
+    """The filter, element by element: elements the screen settles keep the learned action;
+    for the rest, the certificate of the state after one learned tick, and the backup where it
+    fails (written into ``use``, ``reason``, ``pedals``)."""
     for i in range(progress.shape[0]):
+        if _settled(progress[i], speed[i], north_progress[i], c):
+            continue
+        low, high, next_speed, next_throttle, next_brake = _predict(
+            progress[i], speed[i], throttle[i], brake[i], learned[i, 0], learned[i, 1], c, k
+        )
         arrival = _north_arrival(north_progress[i], north_speed[i], c)
         # The north car may arrive one tick sooner after the learned tick.
         if _certified(
-            low[i],
-            high[i],
-            next_speed[i],
-            next_throttle[i],
-            next_brake[i],
-            arrival - c[_DT],
-            c,
-            rho_t,
-            rho_b,
+            low, high, next_speed, next_throttle, next_brake, arrival - c[_DT], c, rho_t, rho_b
         ):
             continue
         use[i] = True
@@ -326,7 +338,24 @@ def _decide(
         pedals[i, 1] = 0.0 if go else 1.0
 
 
-@_jit
+@jit
+def _map_predict(
+    progress: FloatArray,
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    pedals: FloatArray,
+    c: FloatArray,
+    k: FloatArray,
+    out: FloatArray,
+) -> None:
+    for i in range(progress.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4] = _predict(
+            progress[i], speed[i], throttle[i], brake[i], pedals[i, 0], pedals[i, 1], c, k
+        )
+
+
+@jit
 def _map_stop_distance(
     speed: FloatArray,
     throttle: FloatArray,
@@ -340,7 +369,7 @@ def _map_stop_distance(
         out[i] = _stop_distance(speed[i], throttle[i], brake[i], c, rho_t, rho_b)
 
 
-@_jit
+@jit
 def _map_clear_time(
     distance: FloatArray,
     speed: FloatArray,
@@ -355,13 +384,13 @@ def _map_clear_time(
         out[i] = _clear_time(distance[i], speed[i], throttle[i], brake[i], c, rho_t, rho_b)
 
 
-@_jit
+@jit
 def _map_quick_stop_distance(speed: FloatArray, c: FloatArray, out: NDArray[Any]) -> None:
     for i in range(speed.shape[0]):
         out[i] = _quick_stop_distance(speed[i], c)
 
 
-@_jit
+@jit
 def _map_north_arrival(
     progress: FloatArray, speed: FloatArray, c: FloatArray, out: NDArray[Any]
 ) -> None:
@@ -369,7 +398,7 @@ def _map_north_arrival(
         out[i] = _north_arrival(progress[i], speed[i], c)
 
 
-@_jit
+@jit
 def _map_certified(
     low: FloatArray,
     high: FloatArray,
@@ -388,7 +417,7 @@ def _map_certified(
         )
 
 
-@_jit
+@jit
 def _map_settled(
     progress: FloatArray,
     speed: FloatArray,
@@ -443,11 +472,11 @@ class CertifiedSwitching:
         self.north_zone = north_zone
         p = vehicle
         grip = p.friction_coefficient * p.mass * GRAVITY
-        self._alpha_throttle = lag_factor(p.throttle_time_constant, dt)
-        self._alpha_brake = lag_factor(p.brake_time_constant, dt)
+        #: The plant's longitudinal model the learned tick is predicted with.
+        self._plant = plant = longitudinal_constants(vehicle, dt)
         k = np.arange(1, config.lag_ticks + 1, dtype=np.float64)
-        throttle_decay = (1.0 - self._alpha_throttle) ** k  # ρ_t^k, [K]
-        brake_decay = (1.0 - self._alpha_brake) ** k  # ρ_b^k, [K]
+        throttle_decay = (1.0 - plant[K_ALPHA_THROTTLE]) ** k  # ρ_t^k, [K]
+        brake_decay = (1.0 - plant[K_ALPHA_BRAKE]) ** k  # ρ_b^k, [K]
         # The constants the compiled functions read, by slot.
         c = np.zeros(25)
         c[_DT], c[_MASS] = dt, p.mass
@@ -455,10 +484,8 @@ class CertifiedSwitching:
         c[_DRIVE_MAX] = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
         c[_BRAKE_MAX] = min(p.max_brake_force, grip)
         c[_CAP] = cap = config.clear_speed_cap
-        c[_DRIVE_AT_CAP] = min(c[_DRIVE_MAX], p.max_power / cap)
-        c[_RESIST_AT_CAP] = (
-            p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * cap * cap
-        )
+        c[_DRIVE_AT_CAP] = drive_force(cap, plant)
+        c[_RESIST_AT_CAP] = resistance(cap, plant)
         c[_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
         # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
         # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
@@ -571,37 +598,22 @@ class CertifiedSwitching:
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """The ego one tick ahead under ``pedals`` ``[B, 2]`` (throttle, brake), with the plant's
         own longitudinal model: progress bounds (low, high), speed, throttle and brake."""
-        p, dt = self.vehicle, self.dt
-        throttle = state.ego_throttle + self._alpha_throttle * (pedals[:, 0] - state.ego_throttle)
-        brake = state.ego_brake + self._alpha_brake * (pedals[:, 1] - state.ego_brake)
-        accel = longitudinal_force(p, state.ego_speed, throttle, brake) / p.mass
-        speed = np.maximum(state.ego_speed + accel * dt, 0.0)
-        step = 0.5 * (state.ego_speed + speed) * dt
-        f = self.config.progress_factor
-        return (
-            state.ego_progress + step / f,
-            state.ego_progress + step * f,
-            speed,
-            throttle,
-            brake,
-        )
+        out = np.empty((state.ego_speed.shape[0], 5))
+        s = state
+        _map_predict(
+            s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake,
+            np.asarray(pedals, dtype=np.float64), self._c, self._plant, out,
+        )  # fmt: skip
+        return out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4]
 
     def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
         batch = learned.shape[0]
         use = np.zeros(batch, dtype=np.bool_)
         reason = np.zeros(batch, dtype=np.int8)
         action = np.zeros((batch, 2))
-        rest = np.flatnonzero(~self.settled(state))
-        if rest.size == 0:
-            return Decision(use, reason, action)
-        whole = rest.size == batch
-        s = state if whole else state.take(rest)
-        low, high, speed, throttle, brake = self.predict(s, learned if whole else learned[rest])
-        out = (use, reason, action) if whole else (use[rest], reason[rest], action[rest])
+        s = state
         _decide(
             s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake, s.north_progress,
-            s.north_speed, low, high, speed, throttle, brake, *self._tables, *out,
+            s.north_speed, learned, *self._tables, self._plant, use, reason, action,
         )  # fmt: skip
-        if not whole:
-            use[rest], reason[rest], action[rest] = out
         return Decision(use, reason, action)

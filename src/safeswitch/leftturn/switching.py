@@ -26,10 +26,9 @@ stop it before the zone). The ``certified`` logic closes that gap.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import PaperSwitchingConfig
@@ -63,10 +62,6 @@ class ConflictState:
     north_progress: FloatArray
     ego_throttle: FloatArray
     ego_brake: FloatArray
-
-    def take(self, index: NDArray[np.intp]) -> ConflictState:
-        """The elements ``index`` only."""
-        return ConflictState(*(getattr(self, f.name)[index] for f in fields(self)))
 
 
 def time_to_reach(distance: FloatArray, speed: FloatArray, min_speed: float) -> FloatArray:

@@ -10,19 +10,22 @@ The model is the smallest one that reproduces what the paper's controllers act o
   slip is small and a kinematic model is accurate);
 * no reversing: the car stops at zero speed.
 
-All functions take arrays of any shape ``[...]`` (one element per vehicle) and never loop over
-vehicles.
+All functions take arrays of any shape ``[...]`` (one element per vehicle). The longitudinal
+model — lags, forces, speed — is scalar code compiled with numba (:func:`longitudinal_tick`),
+run over every vehicle of a batch by one compiled loop; the certified switching logic predicts
+the ego's next tick with the very same function, so the filter and the plant cannot disagree.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import clamp
+from safeswitch.core.arrays import clamp, jit
 
 FloatArray = NDArray[np.float64]
 
@@ -207,58 +210,180 @@ def lag_factor(time_constant: float, dt: float) -> float:
     return 1.0 - math.exp(-dt / time_constant)
 
 
-def available_drive_force(params: VehicleParams, speed: FloatArray) -> FloatArray:
-    """Drive force at full throttle [N]: ``min(F_max, P/v, μ·m·g·f_driven)``."""
+# Slots of the longitudinal model's constants vector (see longitudinal_constants).
+(
+    K_DT,
+    K_MASS,
+    K_ALPHA_THROTTLE,
+    K_ALPHA_BRAKE,
+    K_DRIVE_MAX,
+    K_POWER,
+    K_TRACTION,
+    K_ENGINE_BRAKE_BASE,
+    K_ENGINE_BRAKE_SLOPE,
+    K_ENGINE_BRAKE_MAX,
+    K_BRAKE_FORCE,
+    K_ROLLING,
+    K_AERO,
+    K_GRIP,
+) = range(14)
+
+
+@functools.lru_cache(maxsize=16)
+def longitudinal_constants(params: VehicleParams, dt: float) -> FloatArray:
+    """The constants :func:`longitudinal_tick` and the force functions read, by slot ``K_*``
+    (read-only; computed once per parameter set and tick)."""
     p = params
-    traction = p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction
-    return np.minimum(np.minimum(p.max_drive_force, p.max_power / np.maximum(speed, 0.1)), traction)
+    k = np.zeros(14)
+    k[K_DT], k[K_MASS] = dt, p.mass
+    k[K_ALPHA_THROTTLE] = lag_factor(p.throttle_time_constant, dt)
+    k[K_ALPHA_BRAKE] = lag_factor(p.brake_time_constant, dt)
+    k[K_DRIVE_MAX], k[K_POWER] = p.max_drive_force, p.max_power
+    k[K_TRACTION] = p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction
+    k[K_ENGINE_BRAKE_BASE] = p.engine_brake_base_force
+    k[K_ENGINE_BRAKE_SLOPE] = p.engine_brake_coefficient
+    k[K_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
+    k[K_BRAKE_FORCE] = p.max_brake_force
+    k[K_ROLLING] = p.rolling_resistance * p.mass * GRAVITY
+    k[K_AERO] = 0.5 * AIR_DENSITY * p.drag_area
+    k[K_GRIP] = p.friction_coefficient * p.mass * GRAVITY
+    k.flags.writeable = False
+    return k
+
+
+@jit
+def drive_force(speed: float, k: FloatArray) -> float:
+    """Drive force at full throttle [N]: ``min(F_max, P/v, μ·m·g·f_driven)``."""
+    return min(min(k[K_DRIVE_MAX], k[K_POWER] / max(speed, 0.1)), k[K_TRACTION])
+
+
+@jit
+def engine_drag(speed: float, k: FloatArray) -> float:
+    """Engine braking at closed throttle [N]: ``min(F_0·min(v, 1) + c·v, F_max)``."""
+    base = k[K_ENGINE_BRAKE_BASE] * min(speed, 1.0) + k[K_ENGINE_BRAKE_SLOPE] * speed
+    return min(base, k[K_ENGINE_BRAKE_MAX])
+
+
+@jit
+def resistance(speed: float, k: FloatArray) -> float:
+    """Rolling resistance plus aerodynamic drag [N] (for speed > 0)."""
+    return k[K_ROLLING] + k[K_AERO] * speed * speed
+
+
+@jit
+def net_force(speed: float, throttle: float, brake: float, k: FloatArray) -> float:
+    """Net longitudinal force on the car [N] for actual pedal positions, at speed > 0:
+    ``throttle · F_drive(v) − (1 − throttle) · F_drag(v) − brake · F_brake − F_res(v)``, bounded
+    by the tyres' grip ``μ·m·g``."""
+    force = (
+        throttle * drive_force(speed, k)
+        - (1.0 - throttle) * engine_drag(speed, k)
+        - brake * k[K_BRAKE_FORCE]
+        - resistance(speed, k)
+    )
+    return min(max(force, -k[K_GRIP]), k[K_GRIP])
+
+
+@jit
+def longitudinal_tick(
+    speed: float,
+    throttle: float,
+    brake: float,
+    throttle_cmd: float,
+    brake_cmd: float,
+    k: FloatArray,
+) -> tuple[float, float, float]:
+    """One tick of the longitudinal model: the commands (clipped to [0, 1]) through the
+    actuator lags, then the speed under the net force (never negative). Returns the new
+    throttle and brake positions and the new speed."""
+    throttle += k[K_ALPHA_THROTTLE] * (min(max(throttle_cmd, 0.0), 1.0) - throttle)
+    brake += k[K_ALPHA_BRAKE] * (min(max(brake_cmd, 0.0), 1.0) - brake)
+    accel = net_force(speed, throttle, brake, k) / k[K_MASS]
+    return throttle, brake, max(speed + accel * k[K_DT], 0.0)
+
+
+@jit
+def _map_longitudinal_tick(
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    throttle_cmd: FloatArray,
+    brake_cmd: FloatArray,
+    k: FloatArray,
+    throttle_out: FloatArray,
+    brake_out: FloatArray,
+    speed_out: FloatArray,
+) -> None:
+    for i in range(speed.shape[0]):
+        throttle_out[i], brake_out[i], speed_out[i] = longitudinal_tick(
+            speed[i], throttle[i], brake[i], throttle_cmd[i], brake_cmd[i], k
+        )
+
+
+@jit
+def _map_forces(
+    speed: FloatArray,
+    throttle: FloatArray,
+    brake: FloatArray,
+    k: FloatArray,
+    net: FloatArray,
+    drive: FloatArray,
+    drag: FloatArray,
+    resist: FloatArray,
+) -> None:
+    for i in range(speed.shape[0]):
+        net[i] = net_force(speed[i], throttle[i], brake[i], k)
+        drive[i] = drive_force(speed[i], k)
+        drag[i] = engine_drag(speed[i], k)
+        resist[i] = resistance(speed[i], k)
+
+
+def forces(
+    params: VehicleParams,
+    speed: FloatArray,
+    throttle: FloatArray | float = 0.0,
+    brake: FloatArray | float = 0.0,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The force model on arrays (broadcast together) [N]: net force (:func:`net_force`), full
+    drive force, closed-throttle engine braking and driving resistance."""
+    arrays = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (speed, throttle, brake))
+    )
+    flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
+    outs = [np.empty(arrays[0].shape) for _ in range(4)]
+    # The tick length does not enter the forces: any valid one selects the same constants.
+    _map_forces(*flat, longitudinal_constants(params, 0.02), *(o.reshape(-1) for o in outs))
+    return outs[0], outs[1], outs[2], outs[3]
+
+
+def available_drive_force(params: VehicleParams, speed: FloatArray) -> FloatArray:
+    """Drive force at full throttle [N] (see :func:`drive_force`)."""
+    return forces(params, speed)[1]
 
 
 def closed_throttle_drag(params: VehicleParams, speed: FloatArray) -> FloatArray:
-    """Engine braking at closed throttle [N]: ``min(F_0·min(v, 1) + c·v, F_max)``."""
-    p = params
-    return np.minimum(
-        p.engine_brake_base_force * np.minimum(speed, 1.0) + p.engine_brake_coefficient * speed,
-        p.max_engine_brake_force,
-    )
+    """Engine braking at closed throttle [N] (see :func:`engine_drag`)."""
+    return forces(params, speed)[2]
 
 
 def driving_resistance(params: VehicleParams, speed: FloatArray) -> FloatArray:
-    """Rolling resistance plus aerodynamic drag [N] (for speed > 0)."""
-    p = params
-    return p.rolling_resistance * p.mass * GRAVITY + 0.5 * AIR_DENSITY * p.drag_area * speed * speed
+    """Rolling resistance plus aerodynamic drag [N] (see :func:`resistance`)."""
+    return forces(params, speed)[3]
 
 
 def longitudinal_force(
     params: VehicleParams, speed: FloatArray, throttle: FloatArray, brake: FloatArray
 ) -> FloatArray:
-    """Net longitudinal force on the car [N] for actual pedal positions, at speed > 0.
-
-    ``throttle · F_drive(v) − (1 − throttle) · F_drag(v) − brake · F_brake − F_res(v)``
-    (see :func:`available_drive_force`, :func:`closed_throttle_drag`,
-    :func:`driving_resistance`), bounded by the tyres' grip ``μ·m·g``.
-    """
-    p = params
-    force = (
-        throttle * available_drive_force(p, speed)
-        - (1.0 - throttle) * closed_throttle_drag(p, speed)
-        - brake * p.max_brake_force
-        - driving_resistance(p, speed)
-    )
-    grip = p.friction_coefficient * p.mass * GRAVITY
-    return clamp(force, -grip, grip)
+    """Net longitudinal force on the car [N] for actual pedal positions (see
+    :func:`net_force`)."""
+    return forces(params, speed, throttle, brake)[0]
 
 
 def steady_state_throttle(params: VehicleParams, speed: FloatArray) -> FloatArray:
     """Throttle position that holds ``speed`` on a level road (feed-forward for speed control)."""
-    speed = np.asarray(speed, dtype=np.float64)
-    drag = closed_throttle_drag(params, speed)
+    _, drive, drag, resist = forces(params, speed)
     # throttle·F_drive − (1 − throttle)·F_drag − F_res = 0
-    return clamp(
-        (drag + driving_resistance(params, speed)) / (available_drive_force(params, speed) + drag),
-        0.0,
-        1.0,
-    )
+    return clamp((drag + resist) / (drive + drag), 0.0, 1.0)
 
 
 def vehicle_step(
@@ -287,18 +412,19 @@ def vehicle_step(
         The next state and this tick's measured outputs.
     """
     p = params
-    throttle = state.throttle + lag_factor(p.throttle_time_constant, dt) * (
-        clamp(throttle_cmd, 0.0, 1.0) - state.throttle
-    )
-    brake = state.brake + lag_factor(p.brake_time_constant, dt) * (
-        clamp(brake_cmd, 0.0, 1.0) - state.brake
+    shape = state.speed.shape
+    throttle, brake, speed = np.empty(shape), np.empty(shape), np.empty(shape)
+    _map_longitudinal_tick(
+        *(_flat(a, shape) for a in (state.speed, state.throttle, state.brake)),
+        *(_flat(a, shape) for a in (throttle_cmd, brake_cmd)),
+        longitudinal_constants(p, dt),
+        throttle.reshape(-1),
+        brake.reshape(-1),
+        speed.reshape(-1),
     )
     steer = state.steer + lag_factor(p.steer_time_constant, dt) * (
         clamp(steer_cmd, -1.0, 1.0) - state.steer
     )
-
-    accel = longitudinal_force(p, state.speed, throttle, brake) / p.mass
-    speed = np.maximum(state.speed + accel * dt, 0.0)
     mean_speed = 0.5 * (state.speed + speed)
 
     # Kinematic bicycle about the centre of gravity: slip angle β = atan(l_r/L · tan δ).
@@ -321,6 +447,14 @@ def vehicle_step(
         accel_lon=(speed - state.speed) / dt, accel_lat=mean_speed * yaw_rate, yaw_rate=yaw_rate
     )
     return VehicleState(x, y, cos_yaw, sin_yaw, speed, throttle, brake, steer), outputs
+
+
+def _flat(values: FloatArray | float, shape: tuple[int, ...]) -> FloatArray:
+    """``values`` broadcast to ``shape``, as a flat float64 vector (a view when possible)."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != shape:
+        array = np.broadcast_to(array, shape)
+    return np.ascontiguousarray(array).reshape(-1)
 
 
 def _rotate(c: FloatArray, s: FloatArray, angle: FloatArray) -> tuple[FloatArray, FloatArray]:
