@@ -55,9 +55,9 @@ from safeswitch.sim.vehicle import (
     K_ALPHA_THROTTLE,
     VehicleParams,
     drive_force,
-    longitudinal_constants,
     longitudinal_tick,
     resistance,
+    vehicle_constants,
 )
 
 #: Reason codes of the backups (indices into ``CertifiedSwitching.reasons``).
@@ -473,7 +473,7 @@ class CertifiedSwitching:
         p = vehicle
         grip = p.friction_coefficient * p.mass * GRAVITY
         #: The plant's longitudinal model the learned tick is predicted with.
-        self._plant = plant = longitudinal_constants(vehicle, dt)
+        self._plant = plant = vehicle_constants(vehicle, dt)
         k = np.arange(1, config.lag_ticks + 1, dtype=np.float64)
         throttle_decay = (1.0 - plant[K_ALPHA_THROTTLE]) ** k  # ρ_t^k, [K]
         brake_decay = (1.0 - plant[K_ALPHA_BRAKE]) ** k  # ρ_b^k, [K]

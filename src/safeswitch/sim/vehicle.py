@@ -226,15 +226,19 @@ def lag_factor(time_constant: float, dt: float) -> float:
     K_ROLLING,
     K_AERO,
     K_GRIP,
-) = range(14)
+    K_ALPHA_STEER,
+    K_MAX_STEER,
+    K_REAR_RATIO,
+    K_WHEELBASE,
+) = range(18)
 
 
 @functools.lru_cache(maxsize=16)
-def longitudinal_constants(params: VehicleParams, dt: float) -> FloatArray:
-    """The constants :func:`longitudinal_tick` and the force functions read, by slot ``K_*``
+def vehicle_constants(params: VehicleParams, dt: float) -> FloatArray:
+    """The constants :func:`vehicle_tick` and the force functions read, by slot ``K_*``
     (read-only; computed once per parameter set and tick)."""
     p = params
-    k = np.zeros(14)
+    k = np.zeros(18)
     k[K_DT], k[K_MASS] = dt, p.mass
     k[K_ALPHA_THROTTLE] = lag_factor(p.throttle_time_constant, dt)
     k[K_ALPHA_BRAKE] = lag_factor(p.brake_time_constant, dt)
@@ -247,6 +251,10 @@ def longitudinal_constants(params: VehicleParams, dt: float) -> FloatArray:
     k[K_ROLLING] = p.rolling_resistance * p.mass * GRAVITY
     k[K_AERO] = 0.5 * AIR_DENSITY * p.drag_area
     k[K_GRIP] = p.friction_coefficient * p.mass * GRAVITY
+    k[K_ALPHA_STEER] = lag_factor(p.steer_time_constant, dt)
+    k[K_MAX_STEER] = p.max_steer_angle
+    k[K_REAR_RATIO] = p.cg_to_rear_axle / p.wheelbase
+    k[K_WHEELBASE] = p.wheelbase
     k.flags.writeable = False
     return k
 
@@ -303,21 +311,57 @@ def longitudinal_tick(
 
 
 @jit
-def _map_longitudinal_tick(
-    speed: FloatArray,
-    throttle: FloatArray,
-    brake: FloatArray,
-    throttle_cmd: FloatArray,
-    brake_cmd: FloatArray,
-    k: FloatArray,
-    throttle_out: FloatArray,
-    brake_out: FloatArray,
-    speed_out: FloatArray,
-) -> None:
-    for i in range(speed.shape[0]):
-        throttle_out[i], brake_out[i], speed_out[i] = longitudinal_tick(
-            speed[i], throttle[i], brake[i], throttle_cmd[i], brake_cmd[i], k
+def _rotate(c: float, s: float, angle: float) -> tuple[float, float]:
+    """Rotate the unit vector ``(c, s)`` by a small angle [rad].
+
+    Taylor series to fifth order: the error is below ``angle⁶/720``, 1e-11 at the 0.05 rad a car
+    turns in a tick at most here (8e-8 at 0.2 rad, a full-lock turn at 35 m/s).
+    """
+    a2 = angle * angle
+    cos_a = 1.0 - a2 * (0.5 - a2 * (1.0 / 24.0))
+    sin_a = angle * (1.0 - a2 * ((1.0 / 6.0) - a2 * (1.0 / 120.0)))
+    return c * cos_a - s * sin_a, s * cos_a + c * sin_a
+
+
+@jit
+def _map_vehicle_tick(
+    state: tuple[FloatArray, ...], throttle_cmd: FloatArray, brake_cmd: FloatArray,
+    steer_cmd: FloatArray, k: FloatArray, out: tuple[FloatArray, ...],
+    outputs: tuple[FloatArray, ...],
+) -> None:  # fmt: skip
+    """One tick of every vehicle: ``state`` and ``out`` hold the fields of
+    :class:`VehicleState` in order, ``outputs`` those of :class:`VehicleOutputs`, each a flat
+    vector (separate vectors, not one block: fresh memory of a large batch costs more in page
+    faults than the arithmetic)."""
+    dt = k[K_DT]
+    for i in range(throttle_cmd.shape[0]):
+        x, y, cos_yaw, sin_yaw = state[0][i], state[1][i], state[2][i], state[3][i]
+        speed0 = state[4][i]
+        throttle, brake, speed = longitudinal_tick(
+            speed0, state[5][i], state[6][i], throttle_cmd[i], brake_cmd[i], k
         )
+        steer = state[7][i]
+        steer += k[K_ALPHA_STEER] * (min(max(steer_cmd[i], -1.0), 1.0) - steer)
+        mean_speed = 0.5 * (speed0 + speed)
+        # Kinematic bicycle about the centre of gravity: slip angle β = atan(l_r/L · tan δ).
+        tan_delta = math.tan(steer * k[K_MAX_STEER])
+        tan_slip = k[K_REAR_RATIO] * tan_delta
+        cos_slip = 1.0 / math.sqrt(1.0 + tan_slip * tan_slip)
+        sin_slip = tan_slip * cos_slip
+        yaw_rate = mean_speed * cos_slip * tan_delta / k[K_WHEELBASE]
+        # Midpoint heading over the tick, then the course ψ + β, by rotating the heading vector.
+        cos_mid, sin_mid = _rotate(cos_yaw, sin_yaw, 0.5 * yaw_rate * dt)
+        step = mean_speed * dt
+        out[0][i] = x + step * (cos_mid * cos_slip - sin_mid * sin_slip)  # cos(ψ + β)
+        out[1][i] = y + step * (sin_mid * cos_slip + cos_mid * sin_slip)  # sin(ψ + β)
+        cos_yaw, sin_yaw = _rotate(cos_yaw, sin_yaw, yaw_rate * dt)
+        # Keep the heading a unit vector (rounding would otherwise drift over long runs).
+        norm = 1.5 - 0.5 * (cos_yaw * cos_yaw + sin_yaw * sin_yaw)  # a Newton step of 1/sqrt
+        out[2][i], out[3][i] = cos_yaw * norm, sin_yaw * norm
+        out[4][i], out[5][i], out[6][i], out[7][i] = speed, throttle, brake, steer
+        outputs[0][i] = (speed - speed0) / dt
+        outputs[1][i] = mean_speed * yaw_rate
+        outputs[2][i] = yaw_rate
 
 
 @jit
@@ -346,13 +390,14 @@ def forces(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The force model on arrays (broadcast together) [N]: net force (:func:`net_force`), full
     drive force, closed-throttle engine braking and driving resistance."""
-    arrays = np.broadcast_arrays(
-        *(np.asarray(a, dtype=np.float64) for a in (speed, throttle, brake))
-    )
-    flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
-    outs = [np.empty(arrays[0].shape) for _ in range(4)]
+    shape = np.broadcast_shapes(np.shape(speed), np.shape(throttle), np.shape(brake))
+    outs = [np.empty(shape) for _ in range(4)]
     # The tick length does not enter the forces: any valid one selects the same constants.
-    _map_forces(*flat, longitudinal_constants(params, 0.02), *(o.reshape(-1) for o in outs))
+    _map_forces(
+        *(_flat(a, shape) for a in (speed, throttle, brake)),
+        vehicle_constants(params, 0.02),
+        *(o.reshape(-1) for o in outs),
+    )
     return outs[0], outs[1], outs[2], outs[3]
 
 
@@ -411,42 +456,19 @@ def vehicle_step(
     Returns:
         The next state and this tick's measured outputs.
     """
-    p = params
     shape = state.speed.shape
-    throttle, brake, speed = np.empty(shape), np.empty(shape), np.empty(shape)
-    _map_longitudinal_tick(
-        *(_flat(a, shape) for a in (state.speed, state.throttle, state.brake)),
-        *(_flat(a, shape) for a in (throttle_cmd, brake_cmd)),
-        longitudinal_constants(p, dt),
-        throttle.reshape(-1),
-        brake.reshape(-1),
-        speed.reshape(-1),
+    n = state.speed.size
+    out = tuple(np.empty(n) for _ in range(8))
+    outputs = (np.empty(n), np.empty(n), np.empty(n))
+    _map_vehicle_tick(
+        tuple(_flat(getattr(state, f.name), shape) for f in fields(VehicleState)),
+        *(_flat(a, shape) for a in (throttle_cmd, brake_cmd, steer_cmd)),
+        vehicle_constants(params, dt),
+        out,
+        outputs,
     )
-    steer = state.steer + lag_factor(p.steer_time_constant, dt) * (
-        clamp(steer_cmd, -1.0, 1.0) - state.steer
-    )
-    mean_speed = 0.5 * (state.speed + speed)
-
-    # Kinematic bicycle about the centre of gravity: slip angle β = atan(l_r/L · tan δ).
-    tan_delta = np.tan(steer * p.max_steer_angle)
-    tan_slip = (p.cg_to_rear_axle / p.wheelbase) * tan_delta
-    cos_slip = 1.0 / np.sqrt(1.0 + tan_slip * tan_slip)
-    sin_slip = tan_slip * cos_slip
-    yaw_rate = mean_speed * cos_slip * tan_delta / p.wheelbase
-    # Midpoint heading over the tick, then the course ψ + β, both by rotating the heading vector.
-    cos_mid, sin_mid = _rotate(state.cos_yaw, state.sin_yaw, 0.5 * yaw_rate * dt)
-    step = mean_speed * dt
-    x = state.x + step * (cos_mid * cos_slip - sin_mid * sin_slip)  # cos(ψ + β)
-    y = state.y + step * (sin_mid * cos_slip + cos_mid * sin_slip)  # sin(ψ + β)
-    cos_yaw, sin_yaw = _rotate(state.cos_yaw, state.sin_yaw, yaw_rate * dt)
-    # Keep the heading a unit vector (rounding would otherwise drift over long runs).
-    norm = 1.5 - 0.5 * (cos_yaw * cos_yaw + sin_yaw * sin_yaw)  # one Newton step of 1/sqrt
-    cos_yaw, sin_yaw = cos_yaw * norm, sin_yaw * norm
-
-    outputs = VehicleOutputs(
-        accel_lon=(speed - state.speed) / dt, accel_lat=mean_speed * yaw_rate, yaw_rate=yaw_rate
-    )
-    return VehicleState(x, y, cos_yaw, sin_yaw, speed, throttle, brake, steer), outputs
+    new = VehicleState(*(a.reshape(shape) for a in out))
+    return new, VehicleOutputs(*(a.reshape(shape) for a in outputs))
 
 
 def _flat(values: FloatArray | float, shape: tuple[int, ...]) -> FloatArray:
@@ -455,15 +477,3 @@ def _flat(values: FloatArray | float, shape: tuple[int, ...]) -> FloatArray:
     if array.shape != shape:
         array = np.broadcast_to(array, shape)
     return np.ascontiguousarray(array).reshape(-1)
-
-
-def _rotate(c: FloatArray, s: FloatArray, angle: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Rotate unit vectors ``(c, s)`` by small angles [rad].
-
-    Taylor series to fifth order: the error is below ``angle⁶/720``, 1e-11 at the 0.05 rad a car
-    turns in a tick at most here (8e-8 at 0.2 rad, a full-lock turn at 35 m/s).
-    """
-    a2 = angle * angle
-    cos_a = 1.0 - a2 * (0.5 - a2 * (1.0 / 24.0))
-    sin_a = angle * (1.0 - a2 * ((1.0 / 6.0) - a2 * (1.0 / 120.0)))
-    return c * cos_a - s * sin_a, s * cos_a + c * sin_a
