@@ -32,3 +32,12 @@ def columns(*arrays: NDArray[Any]) -> NDArray[np.float64]:
     for j, a in enumerate(arrays):
         out[:, j] = a
     return out
+
+
+def flat(values: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """``values`` broadcast to ``shape`` as a flat, contiguous float64 vector (a view when
+    possible): what the compiled per-element loops take."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != shape:
+        array = np.broadcast_to(array, shape)
+    return np.ascontiguousarray(array).reshape(-1)

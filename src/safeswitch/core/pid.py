@@ -6,13 +6,14 @@ batch of 10,000: the caller owns the state (:class:`PIDState`) and passes it bac
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import clamp
+from safeswitch.core.arrays import flat, jit
 
 FloatArray = NDArray[np.float64]
 
@@ -52,6 +53,14 @@ class PIDGains:
                 f"PIDGains needs out_min < out_max, got out_min={self.out_min!r}, "
                 f"out_max={self.out_max!r}"
             )
+
+    @functools.cached_property
+    def vector(self) -> FloatArray:
+        """``(kp, ki, kd, out_min, out_max, derivative_filter_s)`` (what the compiled loop
+        reads)."""
+        return np.array(
+            [self.kp, self.ki, self.kd, self.out_min, self.out_max, self.derivative_filter_s]
+        )
 
 
 @dataclass
@@ -102,18 +111,49 @@ def pid_step(
     Returns:
         The clamped output and the new state.
     """
-    error = np.asarray(error, dtype=np.float64)
-    raw = np.where(np.isnan(state.prev_error), 0.0, (error - state.prev_error) / dt)
-    if gains.derivative_filter_s > 0:
-        alpha = dt / (gains.derivative_filter_s + dt)
-        derivative = state.derivative + alpha * (raw - state.derivative)
-    else:
-        derivative = raw
-    integral_candidate = state.integral + error * dt
-    unclamped = gains.kp * error + gains.ki * integral_candidate + gains.kd * derivative
-    winding_up = ((unclamped > gains.out_max) & (error > 0)) | (
-        (unclamped < gains.out_min) & (error < 0)
+    shape = state.integral.shape
+    error = flat(error, shape)
+    out, integral, derivative = np.empty(shape), np.empty(shape), np.empty(shape)
+    _pid_loop(
+        gains.vector,
+        dt,
+        error,
+        flat(state.integral, shape),
+        flat(state.prev_error, shape),
+        flat(state.derivative, shape),
+        out.reshape(-1),
+        integral.reshape(-1),
+        derivative.reshape(-1),
     )
-    integral = np.where(winding_up, state.integral, integral_candidate)
-    output = gains.kp * error + gains.ki * integral + gains.kd * derivative
-    return clamp(output, gains.out_min, gains.out_max), PIDState(integral, error, derivative)
+    return out, PIDState(integral, error.reshape(shape), derivative)
+
+
+@jit
+def _pid_loop(
+    gains: FloatArray,
+    dt: float,
+    error: FloatArray,
+    integral: FloatArray,
+    prev_error: FloatArray,
+    derivative: FloatArray,
+    out: FloatArray,
+    new_integral: FloatArray,
+    new_derivative: FloatArray,
+) -> None:
+    """:func:`pid_step`, element by element."""
+    kp, ki, kd = gains[0], gains[1], gains[2]
+    out_min, out_max, filter_s = gains[3], gains[4], gains[5]
+    for i in range(error.shape[0]):
+        e = error[i]
+        raw = 0.0 if math.isnan(prev_error[i]) else (e - prev_error[i]) / dt
+        d = raw
+        if filter_s > 0:
+            d = derivative[i] + dt / (filter_s + dt) * (raw - derivative[i])
+        candidate = integral[i] + e * dt
+        unclamped = kp * e + ki * candidate + kd * d
+        winding_up = (unclamped > out_max and e > 0) or (unclamped < out_min and e < 0)
+        kept = integral[i] if winding_up else candidate
+        output = kp * e + ki * kept + kd * d
+        out[i] = min(max(output, out_min), out_max)
+        new_integral[i] = kept
+        new_derivative[i] = d

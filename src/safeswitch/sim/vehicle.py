@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import clamp, jit
+from safeswitch.core.arrays import clamp, flat, jit
 
 FloatArray = NDArray[np.float64]
 
@@ -394,7 +394,7 @@ def forces(
     outs = [np.empty(shape) for _ in range(4)]
     # The tick length does not enter the forces: any valid one selects the same constants.
     _map_forces(
-        *(_flat(a, shape) for a in (speed, throttle, brake)),
+        *(flat(a, shape) for a in (speed, throttle, brake)),
         vehicle_constants(params, 0.02),
         *(o.reshape(-1) for o in outs),
     )
@@ -461,19 +461,11 @@ def vehicle_step(
     out = tuple(np.empty(n) for _ in range(8))
     outputs = (np.empty(n), np.empty(n), np.empty(n))
     _map_vehicle_tick(
-        tuple(_flat(getattr(state, f.name), shape) for f in fields(VehicleState)),
-        *(_flat(a, shape) for a in (throttle_cmd, brake_cmd, steer_cmd)),
+        tuple(flat(getattr(state, f.name), shape) for f in fields(VehicleState)),
+        *(flat(a, shape) for a in (throttle_cmd, brake_cmd, steer_cmd)),
         vehicle_constants(params, dt),
         out,
         outputs,
     )
     new = VehicleState(*(a.reshape(shape) for a in out))
     return new, VehicleOutputs(*(a.reshape(shape) for a in outputs))
-
-
-def _flat(values: FloatArray | float, shape: tuple[int, ...]) -> FloatArray:
-    """``values`` broadcast to ``shape``, as a flat float64 vector (a view when possible)."""
-    array = np.asarray(values, dtype=np.float64)
-    if array.shape != shape:
-        array = np.broadcast_to(array, shape)
-    return np.ascontiguousarray(array).reshape(-1)
