@@ -58,9 +58,11 @@ class PIDGains:
     def vector(self) -> FloatArray:
         """``(kp, ki, kd, out_min, out_max, derivative_filter_s)`` (what the compiled loop
         reads)."""
-        return np.array(
+        vector = np.array(
             [self.kp, self.ki, self.kd, self.out_min, self.out_max, self.derivative_filter_s]
         )
+        vector.flags.writeable = False
+        return vector
 
 
 @dataclass

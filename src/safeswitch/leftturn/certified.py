@@ -32,9 +32,11 @@ reason says so.
 
 **Implementation.** The bounds follow the lag phase tick by tick, per element, in scalar code
 compiled with numba: a few dozen floating-point operations per element instead of a few hundred
-numpy calls per batch, so the filter costs little at any batch size. The numpy-facing methods
-(:meth:`CertifiedSwitching.stop_distance`, :meth:`~CertifiedSwitching.clear_time`, …) run the
-same compiled functions.
+numpy calls per batch, so the filter costs little at any batch size. The learned tick is
+predicted inside the same loop with the plant's own compiled
+:func:`~safeswitch.sim.vehicle.longitudinal_tick`, so the filter and the plant cannot disagree
+about it. The numpy-facing methods (:meth:`CertifiedSwitching.stop_distance`,
+:meth:`~CertifiedSwitching.clear_time`, …) run the same compiled functions.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """The embedded plant: road geometry and lane graph, vehicle dynamics, traffic, collisions.
 
-Batch-first numpy throughout; nothing in here knows about rewards or learning.
+Batch-first throughout (numpy, with the vehicle tick compiled per element by numba); nothing
+in here knows about rewards or learning.
 """
 
 from safeswitch.sim.collision import rectangle_separation, rectangles_overlap
