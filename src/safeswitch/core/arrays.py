@@ -5,6 +5,7 @@ decorator that compiles scalar per-element code."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
@@ -38,6 +39,8 @@ def flat(values: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
     """``values`` broadcast to ``shape`` as a flat, contiguous float64 vector (a view when
     possible): what the compiled per-element loops take."""
     array = np.asarray(values, dtype=np.float64)
-    if array.shape != shape:
-        array = np.broadcast_to(array, shape)
-    return np.ascontiguousarray(array).reshape(-1)
+    if array.shape == shape:
+        return array.reshape(-1)  # a view when contiguous, else a copy
+    if array.ndim == 0:
+        return np.full(math.prod(shape), array)
+    return np.ascontiguousarray(np.broadcast_to(array, shape)).reshape(-1)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from safeswitch.core.arrays import flat, jit
+
 FloatArray = NDArray[np.float64]
 
 
@@ -66,18 +68,42 @@ def separation_from_axes(
 ) -> FloatArray:
     """:func:`rectangle_separation` from the centre offset ``(dx, dy)`` = b − a [m] and each
     rectangle's heading as a unit vector (no trigonometry: the simulator's hot path)."""
-    ha_l, ha_w = 0.5 * np.asarray(length_a), 0.5 * np.asarray(width_a)
-    hb_l, hb_w = 0.5 * np.asarray(length_b), 0.5 * np.asarray(width_b)
+    args = (dx, dy, cos_a, sin_a, length_a, width_a, cos_b, sin_b, length_b, width_b)
+    shape = np.broadcast_shapes(*(np.shape(a) for a in args))
+    out = np.empty(shape)
+    _map_separation(*(flat(a, shape) for a in args), out.reshape(-1))
+    return out
+
+
+@jit
+def _separation(
+    dx: float, dy: float, cos_a: float, sin_a: float, length_a: float, width_a: float,
+    cos_b: float, sin_b: float, length_b: float, width_b: float,
+) -> float:  # fmt: skip
+    """:func:`separation_from_axes` for one pair."""
+    ha_l, ha_w = 0.5 * length_a, 0.5 * width_a
+    hb_l, hb_w = 0.5 * length_b, 0.5 * width_b
     # |cos(ya - yb)| and |sin(ya - yb)| give every cross projection of the half extents.
-    c = np.abs(cos_a * cos_b + sin_a * sin_b)
-    s = np.abs(sin_a * cos_b - cos_a * sin_b)
-    gaps = (
-        np.abs(dx * cos_a + dy * sin_a) - ha_l - (hb_l * c + hb_w * s),  # a's long axis
-        np.abs(-dx * sin_a + dy * cos_a) - ha_w - (hb_l * s + hb_w * c),  # a's short axis
-        np.abs(dx * cos_b + dy * sin_b) - hb_l - (ha_l * c + ha_w * s),  # b's long axis
-        np.abs(-dx * sin_b + dy * cos_b) - hb_w - (ha_l * s + ha_w * c),  # b's short axis
-    )
-    return np.maximum(np.maximum(gaps[0], gaps[1]), np.maximum(gaps[2], gaps[3]))
+    c = abs(cos_a * cos_b + sin_a * sin_b)
+    s = abs(sin_a * cos_b - cos_a * sin_b)
+    gap_a_long = abs(dx * cos_a + dy * sin_a) - ha_l - (hb_l * c + hb_w * s)
+    gap_a_short = abs(-dx * sin_a + dy * cos_a) - ha_w - (hb_l * s + hb_w * c)
+    gap_b_long = abs(dx * cos_b + dy * sin_b) - hb_l - (ha_l * c + ha_w * s)
+    gap_b_short = abs(-dx * sin_b + dy * cos_b) - hb_w - (ha_l * s + ha_w * c)
+    return max(max(gap_a_long, gap_a_short), max(gap_b_long, gap_b_short))
+
+
+@jit
+def _map_separation(
+    dx: FloatArray, dy: FloatArray, cos_a: FloatArray, sin_a: FloatArray, length_a: FloatArray,
+    width_a: FloatArray, cos_b: FloatArray, sin_b: FloatArray, length_b: FloatArray,
+    width_b: FloatArray, out: FloatArray,
+) -> None:  # fmt: skip
+    for i in range(out.shape[0]):
+        out[i] = _separation(
+            dx[i], dy[i], cos_a[i], sin_a[i], length_a[i], width_a[i],
+            cos_b[i], sin_b[i], length_b[i], width_b[i],
+        )  # fmt: skip
 
 
 def rectangles_overlap(

@@ -7,12 +7,13 @@ batch of thousands of vehicles with a fixed, small amount of work per vehicle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import clamp
+from safeswitch.core.arrays import flat, jit
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -168,6 +169,9 @@ class RouteSet:
         self._dx, self._dy = d[..., 0].ravel(), d[..., 1].ravel()
         self._heading = heading.ravel()
         self.lengths = np.array([r.length for r in routes])
+        #: What the compiled look-ups read: per-waypoint arrays, rows x, y, dx, dy, heading.
+        self._tables = np.stack([self._px, self._py, self._dx, self._dy, self._heading])
+        self._tables.flags.writeable = False
 
     def base_index(self, route_index: IntArray) -> IntArray:
         """Flat index of each named route's first waypoint (pass it to the ``*_flat`` calls)."""
@@ -182,12 +186,19 @@ class RouteSet:
         self, base: IntArray, s: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """x [m], y [m] and heading [rad] at arc lengths ``s``; ``base`` from :meth:`base_index`."""
-        k = clamp(np.floor(s / self.spacing).astype(np.intp), 0, self.size - 2)
-        i = base + k
-        frac = s - k * self.spacing
-        x = self._px.take(i) + frac * self._dx.take(i)
-        y = self._py.take(i) + frac * self._dy.take(i)
-        return x, y, self._heading_at(i, frac)
+        shape = np.broadcast_shapes(np.shape(base), np.shape(s))
+        x, y, heading = np.empty(shape), np.empty(shape), np.empty(shape)
+        _map_pose(
+            self._tables,
+            self.spacing,
+            self.size - 2,
+            np.ascontiguousarray(np.broadcast_to(base, shape)).reshape(-1),
+            flat(s, shape),
+            x.reshape(-1),
+            y.reshape(-1),
+            heading.reshape(-1),
+        )
+        return x, y, heading
 
     def _heading_at(self, i: IntArray, frac: FloatArray) -> FloatArray:
         h0 = self._heading.take(i)
@@ -234,19 +245,24 @@ class RouteSet:
         self, base: IntArray, x: FloatArray, y: FloatArray, s_guess: FloatArray
     ) -> tuple[IntArray, FloatArray, FloatArray, FloatArray]:
         """Flat segment index, arc length, distance along the segment and lateral deviation."""
-        k_max = self.size - 2
-        k = clamp(np.floor(s_guess / self.spacing).astype(np.intp), 0, k_max)
-        for _ in range(self.WALK_STEPS):
-            i = base + k
-            along = (x - self._px.take(i)) * self._dx.take(i) + (y - self._py.take(i)) * (
-                self._dy.take(i)
-            )
-            k = clamp(k + np.floor(along / self.spacing).astype(np.intp), 0, k_max)
-        i = base + k
-        rx, ry = x - self._px.take(i), y - self._py.take(i)
-        dx, dy = self._dx.take(i), self._dy.take(i)
-        along = clamp(rx * dx + ry * dy, 0.0, self.spacing)
-        return i, k * self.spacing + along, along, dx * ry - dy * rx
+        shape = np.broadcast_shapes(np.shape(base), np.shape(x), np.shape(y), np.shape(s_guess))
+        i = np.empty(shape, dtype=np.intp)
+        s, along, lateral = np.empty(shape), np.empty(shape), np.empty(shape)
+        _map_locate(
+            self._tables,
+            self.spacing,
+            self.size - 2,
+            self.WALK_STEPS,
+            np.ascontiguousarray(np.broadcast_to(base, shape)).reshape(-1),
+            flat(x, shape),
+            flat(y, shape),
+            flat(s_guess, shape),
+            i.reshape(-1),
+            s.reshape(-1),
+            along.reshape(-1),
+            lateral.reshape(-1),
+        )
+        return i, s, along, lateral
 
     def project_global(
         self, route_index: IntArray, xy: FloatArray
@@ -310,3 +326,59 @@ def wrap_angle(angle: FloatArray) -> FloatArray:
     """Wrap angles to ``[-pi, pi]`` [rad]."""
     angle = np.asarray(angle)
     return angle - (2 * np.pi) * np.rint(angle * (1 / (2 * np.pi)))
+
+
+@jit
+def _map_pose(
+    tables: FloatArray,
+    spacing: float,
+    k_max: int,
+    base: IntArray,
+    s: FloatArray,
+    x_out: FloatArray,
+    y_out: FloatArray,
+    heading_out: FloatArray,
+) -> None:
+    """:meth:`RouteSet.pose_at_flat`, element by element (``tables`` rows: x, y, dx, dy and
+    heading of every flat waypoint)."""
+    for n in range(s.shape[0]):
+        k = min(max(math.floor(s[n] / spacing), 0), k_max)
+        i = base[n] + k
+        frac = s[n] - k * spacing
+        x_out[n] = tables[0, i] + frac * tables[2, i]
+        y_out[n] = tables[1, i] + frac * tables[3, i]
+        h0 = tables[4, i]
+        heading_out[n] = h0 + (tables[4, i + 1] - h0) * (frac / spacing)
+
+
+@jit
+def _map_locate(
+    tables: FloatArray,
+    spacing: float,
+    k_max: int,
+    walk_steps: int,
+    base: IntArray,
+    x: FloatArray,
+    y: FloatArray,
+    s_guess: FloatArray,
+    i_out: IntArray,
+    s_out: FloatArray,
+    along_out: FloatArray,
+    lateral_out: FloatArray,
+) -> None:
+    """:meth:`RouteSet._locate`, element by element: walk from the previous segment to the
+    nearest one, then project."""
+    for n in range(x.shape[0]):
+        k = min(max(math.floor(s_guess[n] / spacing), 0), k_max)
+        for _ in range(walk_steps):
+            i = base[n] + k
+            along = (x[n] - tables[0, i]) * tables[2, i] + (y[n] - tables[1, i]) * tables[3, i]
+            k = min(max(k + math.floor(along / spacing), 0), k_max)
+        i = base[n] + k
+        rx, ry = x[n] - tables[0, i], y[n] - tables[1, i]
+        dx, dy = tables[2, i], tables[3, i]
+        along = min(max(rx * dx + ry * dy, 0.0), spacing)
+        i_out[n] = i
+        s_out[n] = k * spacing + along
+        along_out[n] = along
+        lateral_out[n] = dx * ry - dy * rx
