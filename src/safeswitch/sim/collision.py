@@ -70,8 +70,11 @@ def separation_from_axes(
     rectangle's heading as a unit vector (no trigonometry: the simulator's hot path)."""
     args = (dx, dy, cos_a, sin_a, length_a, width_a, cos_b, sin_b, length_b, width_b)
     shape = np.broadcast_shapes(*(np.shape(a) for a in args))
+    f = [flat(a, shape) for a in args]
     out = np.empty(shape)
-    _map_separation(*(flat(a, shape) for a in args), out.reshape(-1))
+    _map_separation(
+        f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9], out.reshape(-1)
+    )  # fmt: skip
     return out
 
 

@@ -391,14 +391,19 @@ def forces(
     """The force model on arrays (broadcast together) [N]: net force (:func:`net_force`), full
     drive force, closed-throttle engine braking and driving resistance."""
     shape = np.broadcast_shapes(np.shape(speed), np.shape(throttle), np.shape(brake))
-    outs = [np.empty(shape) for _ in range(4)]
+    net, drive, drag, resist = (np.empty(shape) for _ in range(4))
     # The tick length does not enter the forces: any valid one selects the same constants.
     _map_forces(
-        *(flat(a, shape) for a in (speed, throttle, brake)),
+        flat(speed, shape),
+        flat(throttle, shape),
+        flat(brake, shape),
         vehicle_constants(params, 0.02),
-        *(o.reshape(-1) for o in outs),
+        net.reshape(-1),
+        drive.reshape(-1),
+        drag.reshape(-1),
+        resist.reshape(-1),
     )
-    return outs[0], outs[1], outs[2], outs[3]
+    return net, drive, drag, resist
 
 
 def available_drive_force(params: VehicleParams, speed: FloatArray) -> FloatArray:
@@ -462,7 +467,9 @@ def vehicle_step(
     outputs = (np.empty(n), np.empty(n), np.empty(n))
     _map_vehicle_tick(
         tuple(flat(getattr(state, f.name), shape) for f in fields(VehicleState)),
-        *(flat(a, shape) for a in (throttle_cmd, brake_cmd, steer_cmd)),
+        flat(throttle_cmd, shape),
+        flat(brake_cmd, shape),
+        flat(steer_cmd, shape),
         vehicle_constants(params, dt),
         out,
         outputs,
