@@ -79,7 +79,7 @@ def separation_from_axes(
 
 
 @jit
-def _separation(
+def separation(
     dx: float, dy: float, cos_a: float, sin_a: float, length_a: float, width_a: float,
     cos_b: float, sin_b: float, length_b: float, width_b: float,
 ) -> float:  # fmt: skip
@@ -103,7 +103,7 @@ def _map_separation(
     width_b: FloatArray, out: FloatArray,
 ) -> None:  # fmt: skip
     for i in range(out.shape[0]):
-        out[i] = _separation(
+        out[i] = separation(
             dx[i], dy[i], cos_a[i], sin_a[i], length_a[i], width_a[i],
             cos_b[i], sin_b[i], length_b[i], width_b[i],
         )  # fmt: skip

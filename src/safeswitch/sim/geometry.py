@@ -170,8 +170,8 @@ class RouteSet:
         self._heading = heading.ravel()
         self.lengths = np.array([r.length for r in routes])
         #: What the compiled look-ups read: per-waypoint arrays, rows x, y, dx, dy, heading.
-        self._tables = np.stack([self._px, self._py, self._dx, self._dy, self._heading])
-        self._tables.flags.writeable = False
+        self.tables = np.stack([self._px, self._py, self._dx, self._dy, self._heading])
+        self.tables.flags.writeable = False
 
     def base_index(self, route_index: IntArray) -> IntArray:
         """Flat index of each named route's first waypoint (pass it to the ``*_flat`` calls)."""
@@ -189,7 +189,7 @@ class RouteSet:
         shape = np.broadcast_shapes(np.shape(base), np.shape(s))
         x, y, heading = np.empty(shape), np.empty(shape), np.empty(shape)
         _map_pose(
-            self._tables,
+            self.tables,
             self.spacing,
             self.size - 2,
             np.ascontiguousarray(np.broadcast_to(base, shape)).reshape(-1),
@@ -249,7 +249,7 @@ class RouteSet:
         i = np.empty(shape, dtype=np.intp)
         s, along, lateral = np.empty(shape), np.empty(shape), np.empty(shape)
         _map_locate(
-            self._tables,
+            self.tables,
             self.spacing,
             self.size - 2,
             self.WALK_STEPS,
@@ -366,19 +366,34 @@ def _map_locate(
     along_out: FloatArray,
     lateral_out: FloatArray,
 ) -> None:
-    """:meth:`RouteSet._locate`, element by element: walk from the previous segment to the
-    nearest one, then project."""
+    """:func:`locate`, element by element."""
     for n in range(x.shape[0]):
-        k = min(max(math.floor(s_guess[n] / spacing), 0), k_max)
-        for _ in range(walk_steps):
-            i = base[n] + k
-            along = (x[n] - tables[0, i]) * tables[2, i] + (y[n] - tables[1, i]) * tables[3, i]
-            k = min(max(k + math.floor(along / spacing), 0), k_max)
-        i = base[n] + k
-        rx, ry = x[n] - tables[0, i], y[n] - tables[1, i]
-        dx, dy = tables[2, i], tables[3, i]
-        along = min(max(rx * dx + ry * dy, 0.0), spacing)
-        i_out[n] = i
-        s_out[n] = k * spacing + along
-        along_out[n] = along
-        lateral_out[n] = dx * ry - dy * rx
+        i_out[n], s_out[n], along_out[n], lateral_out[n] = locate(
+            tables, spacing, k_max, walk_steps, base[n], x[n], y[n], s_guess[n]
+        )
+
+
+@jit
+def locate(
+    tables: FloatArray,
+    spacing: float,
+    k_max: int,
+    walk_steps: int,
+    base: int,
+    x: float,
+    y: float,
+    s_guess: float,
+) -> tuple[int, float, float, float]:
+    """One position on its route: walk from the segment of ``s_guess`` to the nearest one, then
+    project. Returns the flat segment index, the arc length, the distance along the segment and
+    the lateral deviation (``tables`` rows: x, y, dx, dy, heading of every flat waypoint)."""
+    k = min(max(math.floor(s_guess / spacing), 0), k_max)
+    for _ in range(walk_steps):
+        i = base + k
+        along = (x - tables[0, i]) * tables[2, i] + (y - tables[1, i]) * tables[3, i]
+        k = min(max(k + math.floor(along / spacing), 0), k_max)
+    i = base + k
+    rx, ry = x - tables[0, i], y - tables[1, i]
+    dx, dy = tables[2, i], tables[3, i]
+    along = min(max(rx * dx + ry * dy, 0.0), spacing)
+    return i, k * spacing + along, along, dx * ry - dy * rx

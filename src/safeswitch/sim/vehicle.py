@@ -324,44 +324,55 @@ def _rotate(c: float, s: float, angle: float) -> tuple[float, float]:
 
 
 @jit
-def _map_vehicle_tick(
+def vehicle_tick(
+    x: float, y: float, cos_yaw: float, sin_yaw: float, speed0: float, throttle: float,
+    brake: float, steer: float, throttle_cmd: float, brake_cmd: float, steer_cmd: float,
+    k: FloatArray,
+) -> tuple[float, ...]:  # fmt: skip
+    """One tick of one vehicle: its :class:`VehicleState` fields in, the new ones followed by
+    its :class:`VehicleOutputs` (``accel_lon``, ``accel_lat``, ``yaw_rate``) out."""
+    dt = k[K_DT]
+    throttle, brake, speed = longitudinal_tick(speed0, throttle, brake, throttle_cmd, brake_cmd, k)
+    steer += k[K_ALPHA_STEER] * (min(max(steer_cmd, -1.0), 1.0) - steer)
+    mean_speed = 0.5 * (speed0 + speed)
+    # Kinematic bicycle about the centre of gravity: slip angle β = atan(l_r/L · tan δ).
+    tan_delta = math.tan(steer * k[K_MAX_STEER])
+    tan_slip = k[K_REAR_RATIO] * tan_delta
+    cos_slip = 1.0 / math.sqrt(1.0 + tan_slip * tan_slip)
+    sin_slip = tan_slip * cos_slip
+    yaw_rate = mean_speed * cos_slip * tan_delta / k[K_WHEELBASE]
+    # Midpoint heading over the tick, then the course ψ + β, by rotating the heading vector.
+    cos_mid, sin_mid = _rotate(cos_yaw, sin_yaw, 0.5 * yaw_rate * dt)
+    step = mean_speed * dt
+    x_new = x + step * (cos_mid * cos_slip - sin_mid * sin_slip)  # cos(ψ + β)
+    y_new = y + step * (sin_mid * cos_slip + cos_mid * sin_slip)  # sin(ψ + β)
+    cos_yaw, sin_yaw = _rotate(cos_yaw, sin_yaw, yaw_rate * dt)
+    # Keep the heading a unit vector (rounding would otherwise drift over long runs).
+    norm = 1.5 - 0.5 * (cos_yaw * cos_yaw + sin_yaw * sin_yaw)  # a Newton step of 1/sqrt
+    return (
+        x_new, y_new, cos_yaw * norm, sin_yaw * norm, speed, throttle, brake, steer,
+        (speed - speed0) / dt, mean_speed * yaw_rate, yaw_rate,
+    )  # fmt: skip
+
+
+@jit
+def map_vehicle_tick(
     state: tuple[FloatArray, ...], throttle_cmd: FloatArray, brake_cmd: FloatArray,
     steer_cmd: FloatArray, k: FloatArray, out: tuple[FloatArray, ...],
     outputs: tuple[FloatArray, ...],
 ) -> None:  # fmt: skip
-    """One tick of every vehicle: ``state`` and ``out`` hold the fields of
+    """:func:`vehicle_tick` for every vehicle: ``state`` and ``out`` hold the fields of
     :class:`VehicleState` in order, ``outputs`` those of :class:`VehicleOutputs`, each a flat
     vector (separate vectors, not one block: fresh memory of a large batch costs more in page
     faults than the arithmetic)."""
-    dt = k[K_DT]
     for i in range(throttle_cmd.shape[0]):
-        x, y, cos_yaw, sin_yaw = state[0][i], state[1][i], state[2][i], state[3][i]
-        speed0 = state[4][i]
-        throttle, brake, speed = longitudinal_tick(
-            speed0, state[5][i], state[6][i], throttle_cmd[i], brake_cmd[i], k
-        )
-        steer = state[7][i]
-        steer += k[K_ALPHA_STEER] * (min(max(steer_cmd[i], -1.0), 1.0) - steer)
-        mean_speed = 0.5 * (speed0 + speed)
-        # Kinematic bicycle about the centre of gravity: slip angle β = atan(l_r/L · tan δ).
-        tan_delta = math.tan(steer * k[K_MAX_STEER])
-        tan_slip = k[K_REAR_RATIO] * tan_delta
-        cos_slip = 1.0 / math.sqrt(1.0 + tan_slip * tan_slip)
-        sin_slip = tan_slip * cos_slip
-        yaw_rate = mean_speed * cos_slip * tan_delta / k[K_WHEELBASE]
-        # Midpoint heading over the tick, then the course ψ + β, by rotating the heading vector.
-        cos_mid, sin_mid = _rotate(cos_yaw, sin_yaw, 0.5 * yaw_rate * dt)
-        step = mean_speed * dt
-        out[0][i] = x + step * (cos_mid * cos_slip - sin_mid * sin_slip)  # cos(ψ + β)
-        out[1][i] = y + step * (sin_mid * cos_slip + cos_mid * sin_slip)  # sin(ψ + β)
-        cos_yaw, sin_yaw = _rotate(cos_yaw, sin_yaw, yaw_rate * dt)
-        # Keep the heading a unit vector (rounding would otherwise drift over long runs).
-        norm = 1.5 - 0.5 * (cos_yaw * cos_yaw + sin_yaw * sin_yaw)  # a Newton step of 1/sqrt
-        out[2][i], out[3][i] = cos_yaw * norm, sin_yaw * norm
-        out[4][i], out[5][i], out[6][i], out[7][i] = speed, throttle, brake, steer
-        outputs[0][i] = (speed - speed0) / dt
-        outputs[1][i] = mean_speed * yaw_rate
-        outputs[2][i] = yaw_rate
+        r = vehicle_tick(
+            state[0][i], state[1][i], state[2][i], state[3][i], state[4][i], state[5][i],
+            state[6][i], state[7][i], throttle_cmd[i], brake_cmd[i], steer_cmd[i], k,
+        )  # fmt: skip
+        out[0][i], out[1][i], out[2][i], out[3][i] = r[0], r[1], r[2], r[3]
+        out[4][i], out[5][i], out[6][i], out[7][i] = r[4], r[5], r[6], r[7]
+        outputs[0][i], outputs[1][i], outputs[2][i] = r[8], r[9], r[10]
 
 
 @jit
@@ -465,7 +476,7 @@ def vehicle_step(
     n = state.speed.size
     out = tuple(np.empty(n) for _ in range(8))
     outputs = (np.empty(n), np.empty(n), np.empty(n))
-    _map_vehicle_tick(
+    map_vehicle_tick(
         tuple(flat(getattr(state, f.name), shape) for f in fields(VehicleState)),
         flat(throttle_cmd, shape),
         flat(brake_cmd, shape),

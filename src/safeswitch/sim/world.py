@@ -8,18 +8,21 @@ against every other vehicle's. The world knows nothing of controllers, rewards o
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from safeswitch.sim.collision import separation_from_axes
-from safeswitch.sim.geometry import FloatArray, Route, RouteSet, wrap_angle
+from safeswitch.core.arrays import flat, jit
+from safeswitch.sim.collision import separation, separation_from_axes
+from safeswitch.sim.geometry import FloatArray, IntArray, Route, RouteSet, locate, wrap_angle
 from safeswitch.sim.vehicle import (
     VehicleOutputs,
     VehicleParams,
     VehicleState,
     steady_state_throttle,
-    vehicle_step,
+    vehicle_constants,
+    vehicle_tick,
 )
 
 
@@ -98,14 +101,24 @@ class World:
             between the ego's footprint and the nearest other vehicle's [m], ``[B]``
             (``<= 0`` is a collision).
         """
-        vehicles, outputs = vehicle_step(
-            self.params, state.vehicles, throttle, brake, steer, self.dt
+        shape = state.progress.shape
+        n = state.progress.size
+        out = tuple(np.empty(n) for _ in range(8))
+        outputs = (np.empty(n), np.empty(n), np.empty(n))
+        progress, lateral, separation = np.empty(n), np.empty(n), np.empty(shape[0])
+        routes, p, v = self.route_set, self.params, state.vehicles
+        _world_tick(
+            (v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, v.throttle, v.brake, v.steer),
+            flat(throttle, shape), flat(brake, shape), flat(steer, shape),
+            vehicle_constants(p, self.dt), routes.tables, routes.spacing, routes.size - 2,
+            routes.WALK_STEPS, self._base, state.progress, p.length, p.width,
+            out, outputs, progress, lateral, separation,
+        )  # fmt: skip
+        vehicles = VehicleState(*(a.reshape(shape) for a in out))
+        new = WorldState(
+            vehicles, progress.reshape(shape), lateral.reshape(shape), state.time + self.dt
         )
-        progress, lateral = self.route_set.track_flat(
-            self._base, vehicles.x, vehicles.y, state.progress
-        )
-        new = WorldState(vehicles, progress, lateral, state.time + self.dt)
-        return new, outputs, self.ego_separation(vehicles)
+        return new, VehicleOutputs(*(a.reshape(shape) for a in outputs)), separation
 
     def ego_separation(self, vehicles: VehicleState) -> FloatArray:
         """Separation between the ego's footprint and the nearest other vehicle's [m], ``[B]``."""
@@ -138,3 +151,44 @@ def heading_errors(world: World, state: WorldState) -> FloatArray:
     """Each vehicle's heading minus its route's heading at its progress [rad], ``[B, V]``."""
     _, _, route_heading = world.route_set.pose_at_flat(world._base, state.progress)
     return wrap_angle(state.vehicles.yaw - route_heading)
+
+
+@jit
+def _world_tick(
+    state: tuple[FloatArray, ...], throttle: FloatArray, brake: FloatArray, steer: FloatArray,
+    k: FloatArray, tables: FloatArray, spacing: float, k_max: int, walk_steps: int,
+    base: IntArray, progress: FloatArray, length: float, width: float,
+    out: tuple[FloatArray, ...], outputs: tuple[FloatArray, ...], progress_out: FloatArray,
+    lateral_out: FloatArray, separation_out: FloatArray,
+) -> None:  # fmt: skip
+    """:meth:`World.step` in one loop: every vehicle's tick (:func:`vehicle_tick`) and route
+    tracking (:func:`locate`), then each scene's separation between the ego (slot 0) and its
+    nearest other vehicle. ``state`` holds the ``[B, V]`` fields of :class:`VehicleState`, the
+    outputs are flat ``[B·V]`` (``separation_out``: ``[B]``)."""
+    scenes, slots = progress.shape
+    for b in range(scenes):
+        for j in range(slots):
+            i = b * slots + j
+            r = vehicle_tick(
+                state[0][b, j], state[1][b, j], state[2][b, j], state[3][b, j], state[4][b, j],
+                state[5][b, j], state[6][b, j], state[7][b, j], throttle[i], brake[i], steer[i],
+                k,
+            )  # fmt: skip
+            out[0][i], out[1][i], out[2][i], out[3][i] = r[0], r[1], r[2], r[3]
+            out[4][i], out[5][i], out[6][i], out[7][i] = r[4], r[5], r[6], r[7]
+            outputs[0][i], outputs[1][i], outputs[2][i] = r[8], r[9], r[10]
+            _, progress_out[i], _, lateral_out[i] = locate(
+                tables, spacing, k_max, walk_steps, base[j], r[0], r[1], progress[b, j]
+            )
+        ego = b * slots
+        gap = math.inf
+        for j in range(1, slots):
+            i = ego + j
+            gap = min(
+                gap,
+                separation(
+                    out[0][i] - out[0][ego], out[1][i] - out[1][ego], out[2][ego], out[3][ego],
+                    length, width, out[2][i], out[3][i], length, width,
+                ),
+            )  # fmt: skip
+        separation_out[b] = gap
