@@ -143,19 +143,32 @@ def _pid_loop(
     new_derivative: FloatArray,
 ) -> None:
     """:func:`pid_step`, element by element."""
+    for i in range(error.shape[0]):
+        out[i], new_integral[i], new_derivative[i] = pid_tick(
+            gains, dt, error[i], integral[i], prev_error[i], derivative[i]
+        )
+
+
+@jit
+def pid_tick(
+    gains: FloatArray,
+    dt: float,
+    error: float,
+    integral: float,
+    prev_error: float,
+    derivative: float,
+) -> tuple[float, float, float]:
+    """One PID (see :func:`pid_step`) for one element; ``gains`` is :attr:`PIDGains.vector`.
+    Returns the clamped output, the new integral and the new (filtered) derivative."""
     kp, ki, kd = gains[0], gains[1], gains[2]
     out_min, out_max, filter_s = gains[3], gains[4], gains[5]
-    for i in range(error.shape[0]):
-        e = error[i]
-        raw = 0.0 if math.isnan(prev_error[i]) else (e - prev_error[i]) / dt
-        d = raw
-        if filter_s > 0:
-            d = derivative[i] + dt / (filter_s + dt) * (raw - derivative[i])
-        candidate = integral[i] + e * dt
-        unclamped = kp * e + ki * candidate + kd * d
-        winding_up = (unclamped > out_max and e > 0) or (unclamped < out_min and e < 0)
-        kept = integral[i] if winding_up else candidate
-        output = kp * e + ki * kept + kd * d
-        out[i] = min(max(output, out_min), out_max)
-        new_integral[i] = kept
-        new_derivative[i] = d
+    raw = 0.0 if math.isnan(prev_error) else (error - prev_error) / dt
+    d = raw
+    if filter_s > 0:
+        d = derivative + dt / (filter_s + dt) * (raw - derivative)
+    candidate = integral + error * dt
+    unclamped = kp * error + ki * candidate + kd * d
+    winding_up = (unclamped > out_max and error > 0) or (unclamped < out_min and error < 0)
+    kept = integral if winding_up else candidate
+    output = kp * error + ki * kept + kd * d
+    return min(max(output, out_min), out_max), kept, d

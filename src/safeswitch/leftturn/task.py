@@ -23,12 +23,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import columns
-from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.core.arrays import columns, jit
+from safeswitch.core.pid import PIDState, pid_tick
 from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.certified import CertifiedSwitching
 from safeswitch.leftturn.config import LeftTurnConfig, resolve_config
-from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
+from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
     counter_uniforms,
@@ -37,11 +37,11 @@ from safeswitch.leftturn.scenarios import (
 )
 from safeswitch.leftturn.switching import ConflictState, PaperSwitching
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
-from safeswitch.sim.geometry import FloatArray, Route
+from safeswitch.sim.geometry import FloatArray, IntArray, Route, pose
 from safeswitch.sim.road import Intersection
-from safeswitch.sim.traffic import AutopilotParams, autopilot_pedals
-from safeswitch.sim.vehicle import steady_state_throttle
-from safeswitch.sim.world import World, WorldState, preview_offsets
+from safeswitch.sim.traffic import AutopilotParams
+from safeswitch.sim.vehicle import steady_state_throttle, steady_throttle, vehicle_constants
+from safeswitch.sim.world import World, WorldState
 
 BoolArray = NDArray[np.bool_]
 
@@ -201,6 +201,24 @@ class LeftTurnTask:
         self.reasons = reason_names(self.switching)
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
+        ctrl = config.controllers
+        #: What the compiled controllers read: the gain vectors of PID_th, PID_b, PID_lka and
+        #: the north car's speed controller, and the plant's constants (for its feed-forward).
+        self._gains = np.stack(
+            [
+                ctrl.throttle_pid.vector,
+                ctrl.brake_pid.vector,
+                ctrl.lane_pid.vector,
+                self.autopilot.speed_gains.vector,
+            ]
+        )
+        self._plant = vehicle_constants(config.vehicle, config.episode.dt)
+        r, geo = config.rewards, self.conflict
+        self._reward_tables = reward_tables(r)
+        #: Horizon [ticks], the ego's route end [m], the exits of both conflict zones [m].
+        self._limits = np.array(
+            [config.episode.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1]]
+        )
 
     # -- pure functions -------------------------------------------------------------------
 
@@ -300,30 +318,28 @@ class LeftTurnTask:
         c, dt = self.config, self.config.episode.dt
         ctrl = c.controllers
         world = state.world
-        ego_speed = world.vehicles.speed[:, 0]
         batch = state.batch_size
 
-        # 1. Every controller, side by side.
-        rule_throttle, pid_throttle = pid_step(
-            ctrl.throttle_pid, state.pid_throttle, ctrl.speed_limit - ego_speed, dt
-        )
-        safety_brake, pid_brake = pid_step(
-            ctrl.brake_pid, state.pid_brake, ctrl.emergency_decel + state.accel_lon, dt
-        )
-        steer, pid_lane = pid_step(
-            ctrl.lane_pid,
-            state.pid_lane,
-            preview_offsets(self.world, world, ctrl.lane_lookahead_m),
-            dt,
-        )
-        north_throttle, north_brake, pid_north = autopilot_pedals(
-            self.autopilot,
-            c.vehicle,
-            world.vehicles.speed[:, 1],
+        # 1. Every controller, side by side (one compiled loop, see _controllers).
+        pids = (state.pid_throttle, state.pid_brake, state.pid_north)
+        one = [np.empty(batch) for _ in range(13)]
+        two = [np.empty((batch, 2)) for _ in range(4)]
+        v, routes = world.vehicles, self.world.route_set
+        _controllers(
+            self._gains, dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
+            self._plant, routes.tables, routes.spacing, routes.size - 2, self.world._base,
+            v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress, state.accel_lon,
             state.scenarios.north_speed,
-            state.pid_north,
-            dt,
+            tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
+            (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
+            tuple(one), tuple(two),
+        )  # fmt: skip
+        rule_throttle, safety_brake, north_throttle, north_brake = one[:4]
+        pid_throttle, pid_brake, pid_north = (
+            PIDState(*one[4 + 3 * j : 7 + 3 * j]) for j in range(3)
         )
+        steer = two[0]
+        pid_lane = PIDState(*two[1:])
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
 
         # 2. Who proposes the ego's pedals.
@@ -351,34 +367,22 @@ class LeftTurnTask:
         new_world, outputs, separation = self.world.step(
             world, columns(throttle, north_throttle), columns(brake, north_brake), steer
         )
-        collision = separation <= 0.0
         speed = new_world.vehicles.speed
-        terms = reward_terms(
-            c.rewards,
-            speed=speed[:, 0],
-            lateral=new_world.lateral[:, 0],
-            accel_lon=outputs.accel_lon[:, 0],
-            accel_lat=outputs.accel_lat[:, 0],
-            safety_active=sup.safety_active,
-            adas_enabled=c.adas_penalty,
-        )
-        reward: FloatArray = np.sum([terms[name] for name in REWARD_TERMS], axis=0)
-        if c.rewards.collision_penalty:
-            reward = reward + np.where(collision, c.rewards.collision_penalty, 0.0)
-
-        tick = state.tick + 1
-        terminated = collision
-        truncated = ~terminated & (
-            (tick >= c.episode.horizon_ticks) | (new_world.progress[:, 0] >= self._ego_route_end)
-        )
-        geo = self.conflict
-        ego_cleared = new_world.progress[:, 0] > geo.zone_a[1]
-        north_cleared = new_world.progress[:, 1] > geo.zone_b[1]
-        outcome = np.where(
-            state.outcome != 0,
-            state.outcome,
-            np.where(ego_cleared, 1, np.where(north_cleared, 2, 0)),
-        ).astype(np.int8)
+        terms_out = tuple(np.empty(batch) for _ in REWARD_TERMS)
+        reward, tick = np.empty(batch), np.empty(batch, dtype=np.int64)
+        flags = tuple(np.empty(batch, dtype=np.bool_) for _ in range(4))
+        outcome = np.empty(batch, dtype=np.int8)
+        observation = np.empty((batch, 6), dtype=np.float32)
+        nv = new_world.vehicles
+        _after_plant(
+            self._reward_tables, c.rewards.adas_penalty if c.adas_penalty else 0.0,
+            c.rewards.collision_penalty, self._limits, sup.safety_active, separation,
+            nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
+            outputs.accel_lat, state.tick, state.outcome,
+            terms_out, reward, tick, flags, outcome, observation,
+        )  # fmt: skip
+        terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
+        collision, terminated, truncated, ego_cleared = flags
 
         new_state = TaskState(
             new_world,
@@ -392,7 +396,7 @@ class LeftTurnTask:
             outcome,
         )
         record = StepRecord(
-            observation=self.observe(new_state),
+            observation=observation,
             reward=reward,
             terms=terms,
             terminated=terminated,
@@ -426,3 +430,97 @@ def build_task(
     if render_mode not in (None, "rgb_array"):
         raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
     return LeftTurnTask(resolve_config(config, **overrides))
+
+
+@jit
+def _controllers(
+    gains: FloatArray, dt: float, speed_limit: float, emergency_decel: float, lookahead: float,
+    plant: FloatArray, tables: FloatArray, spacing: float, k_max: int, base: IntArray,
+    x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, speed: FloatArray,
+    progress: FloatArray, accel_lon: FloatArray, north_target: FloatArray,
+    pids: tuple[FloatArray, ...], lane: tuple[FloatArray, ...],
+    one: tuple[FloatArray, ...], two: tuple[FloatArray, ...],
+) -> None:  # fmt: skip
+    """Step 1 of the tick for every episode: ``PID_th`` on ``v_lim − v``, ``PID_b`` on
+    ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, and the
+    north car's autopilot (feed-forward throttle for its target speed plus a speed PID).
+
+    ``pids`` holds (integral, previous error, derivative) of PID_th, PID_b and the autopilot's
+    PID, ``[B]`` each; ``lane`` those of PID_lka, ``[B, 2]``. Written: ``one`` = rule throttle,
+    safety brake, north throttle, north brake, then the new (integral, error, derivative) of the
+    three ``[B]`` PIDs; ``two`` = steering of both cars, then PID_lka's new state.
+    """
+    for b in range(x.shape[0]):
+        pid = pids
+        error = speed_limit - speed[b, 0]
+        out, integral, derivative = pid_tick(gains[0], dt, error, pid[0][b], pid[1][b], pid[2][b])
+        one[0][b], one[4][b], one[5][b], one[6][b] = out, integral, error, derivative
+        error = emergency_decel + accel_lon[b]
+        out, integral, derivative = pid_tick(gains[1], dt, error, pid[3][b], pid[4][b], pid[5][b])
+        one[1][b], one[7][b], one[8][b], one[9][b] = out, integral, error, derivative
+        target = north_target[b]
+        error = target - speed[b, 1]
+        out, integral, derivative = pid_tick(gains[3], dt, error, pid[6][b], pid[7][b], pid[8][b])
+        one[10][b], one[11][b], one[12][b] = integral, error, derivative
+        pedal = steady_throttle(target, plant) + out
+        one[2][b] = min(max(pedal, 0.0), 1.0)
+        one[3][b] = min(max(-pedal, 0.0), 1.0)
+        for j in range(2):
+            tx, ty, _ = pose(tables, spacing, k_max, base[j], progress[b, j] + lookahead)
+            error = cos_yaw[b, j] * (ty - y[b, j]) - sin_yaw[b, j] * (tx - x[b, j])
+            out, integral, derivative = pid_tick(
+                gains[2], dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
+            )
+            two[0][b, j], two[1][b, j], two[2][b, j], two[3][b, j] = (
+                out,
+                integral,
+                error,
+                derivative,
+            )
+
+
+@jit
+def _after_plant(
+    tables: tuple[FloatArray, ...], adas_penalty: float, collision_penalty: float,
+    limits: FloatArray,
+    safety_active: BoolArray, separation: FloatArray, x: FloatArray, y: FloatArray,
+    speed: FloatArray, progress: FloatArray, lateral: FloatArray, accel_lon: FloatArray,
+    accel_lat: FloatArray, tick: NDArray[np.int64], outcome: NDArray[np.int8],
+    terms: tuple[FloatArray, ...], reward: FloatArray, new_tick: NDArray[np.int64],
+    flags: tuple[BoolArray, ...], new_outcome: NDArray[np.int8],
+    observation: NDArray[np.float32],
+) -> None:  # fmt: skip
+    """Step 4's bookkeeping for every episode, from the new plant state: the five reward terms
+    (Eq. 5, in :data:`REWARD_TERMS` order) and their sum, collision, termination, truncation
+    (horizon or end of route), the ego leaving its zone, who crossed first, and the observation.
+    ``flags`` = (collision, terminated, truncated, ego_cleared)."""
+    for b in range(x.shape[0]):
+        adas, lka, v, lon, lat = tick_terms(
+            tables, adas_penalty, safety_active[b], lateral[b, 0], speed[b, 0], accel_lon[b, 0],
+            accel_lat[b, 0],
+        )  # fmt: skip
+        terms[0][b], terms[1][b], terms[2][b], terms[3][b], terms[4][b] = adas, lka, v, lon, lat
+        collision = separation[b] <= 0.0
+        total = adas + lka + v + lon + lat
+        if collision_penalty != 0.0:
+            total = total + (collision_penalty if collision else 0.0)
+        reward[b] = total
+        t = tick[b] + 1
+        new_tick[b] = t
+        flags[0][b] = collision
+        flags[1][b] = collision
+        flags[2][b] = (not collision) and (t >= limits[0] or progress[b, 0] >= limits[1])
+        cleared = progress[b, 0] > limits[2]
+        flags[3][b] = cleared
+        if outcome[b] != 0:
+            new_outcome[b] = outcome[b]
+        elif cleared:
+            new_outcome[b] = 1
+        elif progress[b, 1] > limits[3]:
+            new_outcome[b] = 2
+        else:
+            new_outcome[b] = 0
+        for j in range(2):
+            observation[b, 3 * j] = x[b, j]
+            observation[b, 3 * j + 1] = y[b, j]
+            observation[b, 3 * j + 2] = speed[b, j]

@@ -342,13 +342,24 @@ def _map_pose(
     """:meth:`RouteSet.pose_at_flat`, element by element (``tables`` rows: x, y, dx, dy and
     heading of every flat waypoint)."""
     for n in range(s.shape[0]):
-        k = min(max(math.floor(s[n] / spacing), 0), k_max)
-        i = base[n] + k
-        frac = s[n] - k * spacing
-        x_out[n] = tables[0, i] + frac * tables[2, i]
-        y_out[n] = tables[1, i] + frac * tables[3, i]
-        h0 = tables[4, i]
-        heading_out[n] = h0 + (tables[4, i + 1] - h0) * (frac / spacing)
+        x_out[n], y_out[n], heading_out[n] = pose(tables, spacing, k_max, base[n], s[n])
+
+
+@jit
+def pose(
+    tables: FloatArray, spacing: float, k_max: int, base: int, s: float
+) -> tuple[float, float, float]:
+    """Position [m] and heading [rad] at arc length ``s`` on the route starting at flat
+    waypoint ``base`` (linear between waypoints)."""
+    k = min(max(math.floor(s / spacing), 0), k_max)
+    i = base + k
+    frac = s - k * spacing
+    h0 = tables[4, i]
+    return (
+        tables[0, i] + frac * tables[2, i],
+        tables[1, i] + frac * tables[3, i],
+        h0 + (tables[4, i + 1] - h0) * (frac / spacing),
+    )
 
 
 @jit

@@ -293,6 +293,15 @@ def net_force(speed: float, throttle: float, brake: float, k: FloatArray) -> flo
 
 
 @jit
+def steady_throttle(speed: float, k: FloatArray) -> float:
+    """Throttle position that holds ``speed`` on a level road:
+    ``throttle·F_drive − (1 − throttle)·F_drag − F_res = 0``, clipped to [0, 1]."""
+    drag = engine_drag(speed, k)
+    throttle = (drag + resistance(speed, k)) / (drive_force(speed, k) + drag)
+    return min(max(throttle, 0.0), 1.0)
+
+
+@jit
 def longitudinal_tick(
     speed: float,
     throttle: float,
