@@ -92,3 +92,51 @@ def test_supervisor_never_executes_nan_and_clips_out_of_range():
     assert [names[r] for r in sup.reason] == [INVALID_LEARNED_ACTION] * 2 + ["learned"] * 2
     np.testing.assert_array_equal(sup.executed, [[0, 0.8], [0, 0.8], [1.0, 0.0], [0.4, 0.0]])
     assert np.isnan(sup.learned[0, 0])  # the record keeps what was proposed
+
+
+@pytest.mark.parametrize("switching", ["none", "paper", "certified"])
+@pytest.mark.parametrize("scope", ["window", "episode"])
+def test_the_compiled_tick_switches_exactly_as_supervise_composes_the_logic(switching, scope):
+    """The task runs steps 2–3 of the tick as one compiled loop; it must decide exactly what
+    the framework's generic composition — supervise() with the task's switching logic object —
+    decides from the same state, NaN/inf learned actions included."""
+    from safeswitch.core.arrays import columns
+    from safeswitch.core.pid import pid_step
+    from safeswitch.leftturn.config import resolve_config
+    from safeswitch.leftturn.task import LeftTurnTask
+
+    task = LeftTurnTask(resolve_config({"episode": {"learned_scope": scope}}, switching=switching))
+    ctrl, dt = task.config.controllers, task.config.episode.dt
+    n = 256
+    state = task.initial(task.draw_scenarios(3, np.arange(n), np.zeros(n, dtype=np.int64)))
+    rng = np.random.default_rng(5)
+    interventions = 0
+    for _ in range(400):
+        action = rng.uniform(-1.3, 1.3, n)
+        action[rng.random(n) < 0.03] = np.nan
+        action[rng.random(n) < 0.01] = np.inf
+        conflict = task.conflict_state(state)
+        rule, _ = pid_step(
+            ctrl.throttle_pid, state.pid_throttle, ctrl.speed_limit - conflict.ego_speed, dt
+        )
+        in_charge = conflict.both_at_intersection if scope == "window" else np.ones(n, dtype=bool)
+        new_state, record = task.step(state, action)
+        proposed = np.where(in_charge, 0.5 * (action + 1.0), rule)
+        zeros = np.zeros(n)
+        sup = supervise(
+            task.switching,
+            conflict,
+            columns(proposed, zeros),
+            columns(zeros, record.safety_brake),
+            0.0,
+            1.0,
+        )
+        np.testing.assert_array_equal(record.both_at_intersection, conflict.both_at_intersection)
+        np.testing.assert_array_equal(record.throttle, sup.executed[:, 0])
+        np.testing.assert_array_equal(record.brake, sup.executed[:, 1])
+        np.testing.assert_array_equal(record.safety_active, sup.safety_active)
+        np.testing.assert_array_equal(record.reason, sup.reason)
+        interventions += int((sup.safety_active & np.isfinite(proposed)).sum())
+        state = new_state
+    if switching != "none":
+        assert interventions > 0  # the comparison covered the logic's own decisions

@@ -311,33 +311,47 @@ def _decide(
     reason: NDArray[np.int8],
     pedals: FloatArray,
 ) -> None:
-    """The filter, element by element: elements the screen settles keep the learned action;
-    for the rest, the certificate of the state after one learned tick, and the backup where it
-    fails (written into ``use``, ``reason``, ``pedals``)."""
+    """The filter, element by element (:func:`certify_one`), written into ``use``, ``reason``
+    and ``pedals``."""
     for i in range(progress.shape[0]):
-        if _settled(progress[i], speed[i], north_progress[i], c):
-            continue
-        low, high, next_speed, next_throttle, next_brake = _predict(
-            progress[i], speed[i], throttle[i], brake[i], learned[i, 0], learned[i, 1], c, k
-        )
-        arrival = _north_arrival(north_progress[i], north_speed[i], c)
-        # The north car may arrive one tick sooner after the learned tick.
-        if _certified(
-            low, high, next_speed, next_throttle, next_brake, arrival - c[_DT], c, rho_t, rho_b
-        ):
-            continue
-        use[i] = True
-        # Stop where it can; else clear; else best effort: brake before the zone, go inside it.
-        if _stop_ok(progress[i], speed[i], throttle[i], brake[i], c, rho_t, rho_b):
-            reason[i], go = STOP, False
-        elif _clear_ok(progress[i], speed[i], throttle[i], brake[i], arrival, c, rho_t, rho_b):
-            reason[i], go = CLEAR, True
-        elif progress[i] < c[_EGO_ENTER]:
-            reason[i], go = NO_BACKUP_BRAKE, False
-        else:
-            reason[i], go = NO_BACKUP_CLEAR, True
-        pedals[i, 0] = 1.0 if go else 0.0
-        pedals[i, 1] = 0.0 if go else 1.0
+        switch, code, go = certify_one(
+            progress[i], speed[i], throttle[i], brake[i], north_progress[i], north_speed[i],
+            learned[i, 0], learned[i, 1], c, rho_t, rho_b, k,
+        )  # fmt: skip
+        if switch:
+            use[i], reason[i] = True, code
+            pedals[i, 0] = 1.0 if go else 0.0
+            pedals[i, 1] = 0.0 if go else 1.0
+
+
+@jit
+def certify_one(
+    progress: float, speed: float, throttle: float, brake: float, north_progress: float,
+    north_speed: float, throttle_cmd: float, brake_cmd: float, c: FloatArray, rho_t: FloatArray,
+    rho_b: FloatArray, k: FloatArray,
+) -> tuple[bool, int, bool]:  # fmt: skip
+    """The filter for one episode and learned pedals: a state the screen settles keeps them; else
+    the certificate of the state after one learned tick, and where it fails the backup. Returns
+    (switch to a backup, reason code, the backup accelerates — else it brakes)."""
+    if _settled(progress, speed, north_progress, c):
+        return False, 0, False
+    low, high, next_speed, next_throttle, next_brake = _predict(
+        progress, speed, throttle, brake, throttle_cmd, brake_cmd, c, k
+    )
+    arrival = _north_arrival(north_progress, north_speed, c)
+    # The north car may arrive one tick sooner after the learned tick.
+    if _certified(
+        low, high, next_speed, next_throttle, next_brake, arrival - c[_DT], c, rho_t, rho_b
+    ):
+        return False, 0, False
+    # Stop where it can; else clear; else best effort: brake before the zone, go inside it.
+    if _stop_ok(progress, speed, throttle, brake, c, rho_t, rho_b):
+        return True, STOP, False
+    if _clear_ok(progress, speed, throttle, brake, arrival, c, rho_t, rho_b):
+        return True, CLEAR, True
+    if progress < c[_EGO_ENTER]:
+        return True, NO_BACKUP_BRAKE, False
+    return True, NO_BACKUP_CLEAR, True
 
 
 @jit
@@ -517,6 +531,12 @@ class CertifiedSwitching:
         self._c = c
         #: Everything the compiled bounds read: constants, ρ_t^k and ρ_b^k.
         self._tables = (c, throttle_decay, brake_decay)
+
+    @property
+    def kernel_tables(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """What :func:`certify_one` reads after the per-episode values: constants, ρ_t^k,
+        ρ_b^k and the plant's longitudinal constants."""
+        return (*self._tables, self._plant)
 
     # -- bounds (each element through the compiled scalar functions) ------------------------
 

@@ -27,9 +27,11 @@ stop it before the zone). The ``certified`` logic closes that gap.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
+from safeswitch.core.arrays import jit
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import PaperSwitchingConfig
 
@@ -64,14 +66,59 @@ class ConflictState:
     ego_brake: FloatArray
 
 
-def time_to_reach(distance: FloatArray, speed: FloatArray, min_speed: float) -> FloatArray:
-    """``TTR = d_c / v`` (Eq. 2) [s], with ``v`` floored at ``min_speed`` [m/s]."""
+#: Arrays or scalars: the Eq. 2 and Eq. 3 helpers serve the numpy code and the compiled loops.
+Values = TypeVar("Values", FloatArray, float)
+
+
+@jit
+def time_to_reach(distance: Values, speed: Values, min_speed: float) -> Values:
+    """``TTR = d_c / v`` (Eq. 2) [s], with ``v`` floored at ``min_speed`` [m/s] (arrays or
+    scalars)."""
     return distance / np.maximum(speed, min_speed)
 
 
-def braking_distance(speed: FloatArray, deceleration: float) -> FloatArray:
-    """``d_safe = (v_f² − v_i²) / (2a)`` with ``v_f = 0`` and ``a = −deceleration`` (Eq. 3) [m]."""
+@jit
+def braking_distance(speed: Values, deceleration: float) -> Values:
+    """``d_safe = (v_f² − v_i²) / (2a)`` with ``v_f = 0`` and ``a = −deceleration`` (Eq. 3) [m]
+    (arrays or scalars)."""
     return speed * speed / (2.0 * deceleration)
+
+
+@jit
+def paper_switches(
+    ego_to_conflict: float,
+    ego_to_stop: float,
+    ego_speed: float,
+    north_to_conflict: float,
+    north_speed: float,
+    both_at_intersection: bool,
+    c: FloatArray,
+) -> bool:
+    """Algorithm 1 for one episode: both cars at the intersection, ``TTR_n − TTR_e <
+    threshold`` (no gap to cut in front) and ``d_stop ≤ d_safe + v·latency + margin`` (the last
+    moment to stop before the zone). ``c`` = (threshold, min speed, emergency deceleration,
+    latency, stop margin), see :attr:`PaperSwitching.constants`."""
+    if not both_at_intersection:
+        return False
+    ttr_e = time_to_reach(max(ego_to_conflict, 0.0), ego_speed, c[1])
+    ttr_n = time_to_reach(north_to_conflict, north_speed, c[1])
+    if not ttr_n - ttr_e < c[0]:
+        return False
+    reach = braking_distance(ego_speed, c[2]) + ego_speed * c[3] + c[4]
+    return ego_to_stop <= reach
+
+
+@jit
+def _map_paper_switches(
+    ego_to_conflict: FloatArray, ego_to_stop: FloatArray, ego_speed: FloatArray,
+    north_to_conflict: FloatArray, north_speed: FloatArray, both: BoolArray, c: FloatArray,
+    out: BoolArray,
+) -> None:  # fmt: skip
+    for i in range(out.shape[0]):
+        out[i] = paper_switches(
+            ego_to_conflict[i], ego_to_stop[i], ego_speed[i], north_to_conflict[i],
+            north_speed[i], both[i], c,
+        )  # fmt: skip
 
 
 class PaperSwitching:
@@ -88,23 +135,20 @@ class PaperSwitching:
         self.config = config
         self.emergency_decel = emergency_decel
 
-    def no_gap(self, s: ConflictState) -> BoolArray:
-        """``TTR_n − TTR_e < threshold``: cutting in front is not an option."""
+    @property
+    def constants(self) -> FloatArray:
+        """(threshold, min speed, emergency deceleration, latency, stop margin) for
+        :func:`paper_switches`."""
         c = self.config
-        ttr_e = time_to_reach(np.maximum(s.ego_to_conflict, 0.0), s.ego_speed, c.min_speed)
-        ttr_n = time_to_reach(s.north_to_conflict, s.north_speed, c.min_speed)
-        return ttr_n - ttr_e < c.ttr_threshold_s
-
-    def at_braking_point(self, s: ConflictState) -> BoolArray:
-        """``d_stop ≤ d_safe + v·latency + margin``: the last moment to stop before the zone."""
-        c = self.config
-        reach = (
-            braking_distance(s.ego_speed, self.emergency_decel)
-            + s.ego_speed * c.latency_s
-            + c.stop_margin_m
+        return np.array(
+            [c.ttr_threshold_s, c.min_speed, self.emergency_decel, c.latency_s, c.stop_margin_m]
         )
-        return s.ego_to_stop <= reach
 
     def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
-        use = state.both_at_intersection & self.no_gap(state) & self.at_braking_point(state)
+        s = state
+        use = np.empty(learned.shape[0], dtype=np.bool_)
+        _map_paper_switches(
+            s.ego_to_conflict, s.ego_to_stop, s.ego_speed, s.north_to_conflict, s.north_speed,
+            np.asarray(s.both_at_intersection, dtype=np.bool_), self.constants, use,
+        )  # fmt: skip
         return Decision(use, use.astype(np.int8), safe)

@@ -17,6 +17,7 @@ One tick (paper Fig. 3 and Algorithm 1):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -25,8 +26,8 @@ from numpy.typing import NDArray
 
 from safeswitch.core.arrays import columns, jit
 from safeswitch.core.pid import PIDState, pid_tick
-from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names, supervise
-from safeswitch.leftturn.certified import CertifiedSwitching
+from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names
+from safeswitch.leftturn.certified import CertifiedSwitching, certify_one
 from safeswitch.leftturn.config import LeftTurnConfig, resolve_config
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
@@ -35,7 +36,7 @@ from safeswitch.leftturn.scenarios import (
     named_scenarios,
     sample_scenarios,
 )
-from safeswitch.leftturn.switching import ConflictState, PaperSwitching
+from safeswitch.leftturn.switching import ConflictState, PaperSwitching, paper_switches
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
 from safeswitch.sim.geometry import FloatArray, IntArray, Route, pose
 from safeswitch.sim.road import Intersection
@@ -215,6 +216,22 @@ class LeftTurnTask:
         self._plant = vehicle_constants(config.vehicle, config.episode.dt)
         r, geo = config.rewards, self.conflict
         self._reward_tables = reward_tables(r)
+        # What the compiled switching step reads (see _switch).
+        ep = config.episode
+        self._switch_code = SWITCHING_CODES[config.switching]
+        self._scope_code = ("window", "episode", "never").index(ep.learned_scope)
+        self._geometry = np.array(
+            [geo.s_point_a, geo.s_point_b, *geo.zone_a, geo.zone_b[1], ep.approach_distance_m]
+        )
+        logic = self.switching
+        self._switch_constants = (
+            logic.constants if isinstance(logic, PaperSwitching) else np.zeros(5)
+        )
+        self._certified_tables = (
+            logic.kernel_tables
+            if isinstance(logic, CertifiedSwitching)
+            else (np.zeros(25), np.zeros(1), np.zeros(1), np.zeros(18))
+        )
         #: Horizon [ticks], the ego's route end [m], the exits of both conflict zones [m].
         self._limits = np.array(
             [config.episode.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1]]
@@ -340,28 +357,19 @@ class LeftTurnTask:
         )
         steer = two[0]
         pid_lane = PIDState(*two[1:])
+        # 2.-3. Who proposes the ego's pedals, and the switching logic decides (one compiled
+        # loop; the same as supervise() with self.switching, see _switch).
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
-
-        # 2. Who proposes the ego's pedals.
-        conflict = self.conflict_state(state)
-        if c.episode.learned_scope == "window":
-            learned_in_charge = conflict.both_at_intersection
-        else:
-            learned_in_charge = np.full(batch, c.episode.learned_scope == "episode")
-        zeros = np.zeros(batch)
-        proposed_throttle = np.where(learned_in_charge, learned_throttle, rule_throttle)
-
-        # 3. The switching logic decides.
-        sup = supervise(
-            self.switching,
-            conflict,
-            columns(proposed_throttle, zeros),
-            columns(zeros, safety_brake),
-            0.0,
-            1.0,
-        )
-        throttle, brake = sup.executed[:, 0], sup.executed[:, 1]
-        controller = np.where(sup.safety_active, 2, np.where(learned_in_charge, 0, 1))
+        throttle, brake = np.empty(batch), np.empty(batch)
+        safety_active, both = np.empty(batch, dtype=np.bool_), np.empty(batch, dtype=np.bool_)
+        reason, controller = np.empty(batch, dtype=np.int8), np.empty(batch, dtype=np.int8)
+        _switch(
+            self._switch_code, len(self.switching.reasons), self._scope_code, self._geometry,
+            self._switch_constants,
+            self._certified_tables, world.progress, v.speed, v.throttle, v.brake,
+            learned_throttle, rule_throttle, safety_brake,
+            throttle, brake, safety_active, reason, controller, both,
+        )  # fmt: skip
 
         # 4. The plant.
         new_world, outputs, separation = self.world.step(
@@ -376,7 +384,7 @@ class LeftTurnTask:
         nv = new_world.vehicles
         _after_plant(
             self._reward_tables, c.rewards.adas_penalty if c.adas_penalty else 0.0,
-            c.rewards.collision_penalty, self._limits, sup.safety_active, separation,
+            c.rewards.collision_penalty, self._limits, safety_active, separation,
             nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
             outputs.accel_lat, state.tick, state.outcome,
             terms_out, reward, tick, flags, outcome, observation,
@@ -402,10 +410,10 @@ class LeftTurnTask:
             terminated=terminated,
             truncated=truncated,
             collision=collision,
-            safety_active=sup.safety_active,
-            reason=sup.reason,
-            controller=controller.astype(np.int8),
-            both_at_intersection=conflict.both_at_intersection,
+            safety_active=safety_active,
+            reason=reason,
+            controller=controller,
+            both_at_intersection=both,
             learned_throttle=learned_throttle,
             safety_brake=safety_brake,
             throttle=throttle,
@@ -524,3 +532,63 @@ def _after_plant(
             observation[b, 3 * j] = x[b, j]
             observation[b, 3 * j + 1] = y[b, j]
             observation[b, 3 * j + 2] = speed[b, j]
+
+
+#: Codes of the switching logics in the compiled step.
+SWITCHING_CODES = {"none": 0, "paper": 1, "certified": 2}
+
+
+@jit
+def _switch(
+    switching: int, invalid: int, scope: int, geometry: FloatArray, paper: FloatArray,
+    certified: tuple[FloatArray, FloatArray, FloatArray, FloatArray], progress: FloatArray,
+    speed: FloatArray, actual_throttle: FloatArray, actual_brake: FloatArray,
+    learned_throttle: FloatArray, rule_throttle: FloatArray, safety_brake: FloatArray,
+    throttle: FloatArray, brake: FloatArray, safety_active: BoolArray, reason: NDArray[np.int8],
+    controller: NDArray[np.int8], both: BoolArray,
+) -> None:  # fmt: skip
+    """Steps 2 and 3 of the tick for every episode, exactly as
+    :func:`~safeswitch.core.switching.supervise` composes them with :attr:`LeftTurnTask.switching`
+    (``tests/leftturn/test_env.py`` checks it against that composition): the proposal (the
+    learned throttle while the learned controller is in charge, else ``PID_th``'s), its validity
+    (a NaN/inf proposal is replaced by the Safety controller's action and recorded with the
+    invalid-action reason), clipping, the logic's decision and the executed pedals.
+
+    ``geometry`` = (conflict point on the ego's route, on the north car's, ego zone entry and
+    exit, north zone exit, approach distance); ``paper`` = :attr:`PaperSwitching.constants`;
+    ``certified`` = :attr:`CertifiedSwitching.kernel_tables` (unused by the other logics).
+    """
+    c, rho_t, rho_b, k = certified
+    for b in range(progress.shape[0]):
+        s_e, s_n = progress[b, 0], progress[b, 1]
+        ego_to_conflict, north_to_conflict = geometry[0] - s_e, geometry[1] - s_n
+        at = (ego_to_conflict <= geometry[5]) and (s_e <= geometry[3])
+        at = at and (north_to_conflict <= geometry[5]) and (s_n <= geometry[4])
+        both[b] = at
+        in_charge = at if scope == 0 else scope == 1
+        proposed = learned_throttle[b] if in_charge else rule_throttle[b]
+        valid = math.isfinite(proposed)
+        candidate_throttle = min(max(proposed if valid else 0.0, 0.0), 1.0)
+        candidate_brake = min(max(0.0 if valid else safety_brake[b], 0.0), 1.0)
+        use, code = False, 0
+        backup_throttle, backup_brake = 0.0, safety_brake[b]
+        if switching == 1:
+            use = paper_switches(
+                ego_to_conflict, geometry[2] - s_e, speed[b, 0], north_to_conflict, speed[b, 1],
+                at, paper,
+            )  # fmt: skip
+            code = 1 if use else 0
+        elif switching == 2:
+            use, code, go = certify_one(
+                s_e, speed[b, 0], actual_throttle[b, 0], actual_brake[b, 0], s_n, speed[b, 1],
+                candidate_throttle, candidate_brake, c, rho_t, rho_b, k,
+            )  # fmt: skip
+            backup_throttle, backup_brake = (1.0, 0.0) if go else (0.0, 1.0)
+        if use:
+            throttle[b] = min(max(backup_throttle, 0.0), 1.0)
+            brake[b] = min(max(backup_brake, 0.0), 1.0)
+        else:
+            throttle[b], brake[b] = candidate_throttle, candidate_brake
+        safety_active[b] = use or not valid
+        reason[b] = code if valid else invalid
+        controller[b] = 2 if safety_active[b] else (0 if in_charge else 1)
