@@ -10,9 +10,16 @@ One tick (paper Fig. 3 and Algorithm 1):
    car's autopilot, and the learned action ``a ∈ [-1, 1]`` → throttle ``(a + 1) / 2``.
 2. Who proposes the ego's pedals: the learned controller while both cars are at the
    intersection (or always, with ``learned_scope="episode"``), ``PID_th`` otherwise.
-3. The switching logic, wrapped by :func:`safeswitch.core.switching.supervise`, executes the
-   proposal or the safety action; a NaN/inf learned action is never executed.
+3. The switching logic, composed as :func:`safeswitch.core.switching.supervise` composes it,
+   executes the proposal or the safety action; a NaN/inf learned action is never executed.
 4. The plant advances 20 ms; the five reward terms are computed from the new state.
+
+Each step is one loop compiled with numba over the episodes (:func:`_controllers`,
+:func:`_switch`, the world's tick, :func:`_after_plant`), built from the same scalar functions
+the numpy-facing API runs (``pid_tick``, ``paper_switches``, ``certify_one``, ``vehicle_tick``,
+``tick_terms``, …): a tick costs a few dozen Python calls whatever the batch size, so the
+Gymnasium ``Env`` is fast too. ``tests/leftturn/test_switching.py`` checks that the compiled
+step 2–3 decides exactly as ``supervise`` with the logic object does.
 """
 
 from __future__ import annotations
