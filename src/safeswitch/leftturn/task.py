@@ -45,10 +45,10 @@ from safeswitch.leftturn.scenarios import (
 )
 from safeswitch.leftturn.switching import ConflictState, PaperSwitching, paper_switches
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
-from safeswitch.sim.geometry import FloatArray, IntArray, Route, pose
+from safeswitch.sim.geometry import FloatArray, IntArray, Route, preview
 from safeswitch.sim.road import Intersection
-from safeswitch.sim.traffic import AutopilotParams
-from safeswitch.sim.vehicle import steady_state_throttle, steady_throttle, vehicle_constants
+from safeswitch.sim.traffic import AutopilotParams, autopilot_tick
+from safeswitch.sim.vehicle import steady_state_throttle, vehicle_constants
 from safeswitch.sim.world import World, WorldState
 
 BoolArray = NDArray[np.bool_]
@@ -473,16 +473,14 @@ def _controllers(
         error = emergency_decel + accel_lon[b]
         out, integral, derivative = pid_tick(gains[1], dt, error, pid[3][b], pid[4][b], pid[5][b])
         one[1][b], one[7][b], one[8][b], one[9][b] = out, integral, error, derivative
-        target = north_target[b]
-        error = target - speed[b, 1]
-        out, integral, derivative = pid_tick(gains[3], dt, error, pid[6][b], pid[7][b], pid[8][b])
-        one[10][b], one[11][b], one[12][b] = integral, error, derivative
-        pedal = steady_throttle(target, plant) + out
-        one[2][b] = min(max(pedal, 0.0), 1.0)
-        one[3][b] = min(max(-pedal, 0.0), 1.0)
+        one[2][b], one[3][b], one[10][b], one[11][b], one[12][b] = autopilot_tick(
+            gains[3], dt, plant, speed[b, 1], north_target[b], pid[6][b], pid[7][b], pid[8][b]
+        )
         for j in range(2):
-            tx, ty, _ = pose(tables, spacing, k_max, base[j], progress[b, j] + lookahead)
-            error = cos_yaw[b, j] * (ty - y[b, j]) - sin_yaw[b, j] * (tx - x[b, j])
+            error = preview(
+                tables, spacing, k_max, base[j], progress[b, j], x[b, j], y[b, j],
+                cos_yaw[b, j], sin_yaw[b, j], lookahead,
+            )  # fmt: skip
             out, integral, derivative = pid_tick(
                 gains[2], dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )

@@ -318,8 +318,30 @@ class RouteSet:
         lookahead: float,
     ) -> FloatArray:
         """:meth:`preview_offset` with ``base`` from :meth:`base_index` and coordinates split."""
-        tx, ty, _ = self.pose_at_flat(base, s + lookahead)
-        return np.cos(yaw) * (ty - y) - np.sin(yaw) * (tx - x)
+        yaw = np.asarray(yaw, dtype=np.float64)
+        return self.preview_offset_axes(base, s, x, y, np.cos(yaw), np.sin(yaw), lookahead)
+
+    def preview_offset_axes(
+        self,
+        base: IntArray,
+        s: FloatArray,
+        x: FloatArray,
+        y: FloatArray,
+        cos_yaw: FloatArray,
+        sin_yaw: FloatArray,
+        lookahead: float,
+    ) -> FloatArray:
+        """:meth:`preview_offset_flat` with the heading as a unit vector (see :func:`preview`)."""
+        args = (base, s, x, y, cos_yaw, sin_yaw)
+        shape = np.broadcast_shapes(*(np.shape(a) for a in args))
+        out = np.empty(shape)
+        _map_preview(
+            self.tables, self.spacing, self.size - 2,
+            np.ascontiguousarray(np.broadcast_to(base, shape)).reshape(-1),
+            flat(s, shape), flat(x, shape), flat(y, shape), flat(cos_yaw, shape),
+            flat(sin_yaw, shape), lookahead, out.reshape(-1),
+        )  # fmt: skip
+        return out
 
 
 def wrap_angle(angle: FloatArray) -> FloatArray:
@@ -408,3 +430,26 @@ def locate(
     dx, dy = tables[2, i], tables[3, i]
     along = min(max(rx * dx + ry * dy, 0.0), spacing)
     return i, k * spacing + along, along, dx * ry - dy * rx
+
+
+@jit
+def preview(
+    tables: FloatArray, spacing: float, k_max: int, base: int, s: float, x: float, y: float,
+    cos_yaw: float, sin_yaw: float, lookahead: float,
+) -> float:  # fmt: skip
+    """Lateral offset of the route point ``lookahead`` metres ahead of arc length ``s``, in the
+    frame of a vehicle at ``(x, y)`` heading ``(cos_yaw, sin_yaw)`` [m] (positive: to its left)."""
+    tx, ty, _ = pose(tables, spacing, k_max, base, s + lookahead)
+    return cos_yaw * (ty - y) - sin_yaw * (tx - x)
+
+
+@jit
+def _map_preview(
+    tables: FloatArray, spacing: float, k_max: int, base: IntArray, s: FloatArray,
+    x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, lookahead: float,
+    out: FloatArray,
+) -> None:  # fmt: skip
+    for n in range(s.shape[0]):
+        out[n] = preview(
+            tables, spacing, k_max, base[n], s[n], x[n], y[n], cos_yaw[n], sin_yaw[n], lookahead
+        )

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from safeswitch.core.arrays import clamp
-from safeswitch.core.pid import PIDGains, PIDState, pid_step
+import numpy as np
+
+from safeswitch.core.arrays import flat, jit
+from safeswitch.core.pid import PIDGains, PIDState, pid_tick
 from safeswitch.sim.geometry import FloatArray
-from safeswitch.sim.vehicle import VehicleParams, steady_state_throttle
+from safeswitch.sim.vehicle import VehicleParams, steady_throttle, vehicle_constants
 
 
 @dataclass(frozen=True)
@@ -43,6 +45,40 @@ def autopilot_pedals(
     Returns:
         Throttle in [0, 1], brake in [0, 1] and the new PID state.
     """
-    correction, pid = pid_step(params.speed_gains, pid, target_speed - speed, dt)
-    pedal = steady_state_throttle(vehicle, target_speed) + correction
-    return clamp(pedal, 0.0, 1.0), clamp(-pedal, 0.0, 1.0), pid
+    shape = pid.integral.shape
+    throttle, brake = np.empty(shape), np.empty(shape)
+    integral, error, derivative = np.empty(shape), np.empty(shape), np.empty(shape)
+    _map_autopilot(
+        params.speed_gains.vector, dt, vehicle_constants(vehicle, dt), flat(speed, shape),
+        flat(target_speed, shape), flat(pid.integral, shape), flat(pid.prev_error, shape),
+        flat(pid.derivative, shape),
+        (throttle.reshape(-1), brake.reshape(-1), integral.reshape(-1), error.reshape(-1),
+         derivative.reshape(-1)),
+    )  # fmt: skip
+    return throttle, brake, PIDState(integral, error, derivative)
+
+
+@jit
+def autopilot_tick(
+    gains: FloatArray, dt: float, plant: FloatArray, speed: float, target: float,
+    integral: float, prev_error: float, derivative: float,
+) -> tuple[float, float, float, float, float]:  # fmt: skip
+    """:func:`autopilot_pedals` for one car (``gains``: the speed PID's
+    :attr:`~safeswitch.core.pid.PIDGains.vector`, ``plant``: its vehicle constants). Returns
+    throttle, brake and the PID's new integral, error and derivative."""
+    error = target - speed
+    correction, integral, derivative = pid_tick(gains, dt, error, integral, prev_error, derivative)
+    pedal = steady_throttle(target, plant) + correction
+    return min(max(pedal, 0.0), 1.0), min(max(-pedal, 0.0), 1.0), integral, error, derivative
+
+
+@jit
+def _map_autopilot(
+    gains: FloatArray, dt: float, plant: FloatArray, speed: FloatArray, target: FloatArray,
+    integral: FloatArray, prev_error: FloatArray, derivative: FloatArray,
+    out: tuple[FloatArray, ...],
+) -> None:  # fmt: skip
+    for i in range(speed.shape[0]):
+        out[0][i], out[1][i], out[2][i], out[3][i], out[4][i] = autopilot_tick(
+            gains, dt, plant, speed[i], target[i], integral[i], prev_error[i], derivative[i]
+        )

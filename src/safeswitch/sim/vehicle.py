@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import clamp, flat, jit
+from safeswitch.core.arrays import flat, jit
 
 FloatArray = NDArray[np.float64]
 
@@ -450,10 +450,18 @@ def longitudinal_force(
 
 
 def steady_state_throttle(params: VehicleParams, speed: FloatArray) -> FloatArray:
-    """Throttle position that holds ``speed`` on a level road (feed-forward for speed control)."""
-    _, drive, drag, resist = forces(params, speed)
-    # throttle·F_drive − (1 − throttle)·F_drag − F_res = 0
-    return clamp((drag + resist) / (drive + drag), 0.0, 1.0)
+    """Throttle position that holds ``speed`` on a level road (feed-forward for speed control;
+    see :func:`steady_throttle`)."""
+    speed = np.asarray(speed, dtype=np.float64)
+    out = np.empty(speed.shape)
+    _map_steady_throttle(flat(speed, speed.shape), vehicle_constants(params, 0.02), out.reshape(-1))
+    return out
+
+
+@jit
+def _map_steady_throttle(speed: FloatArray, k: FloatArray, out: FloatArray) -> None:
+    for i in range(speed.shape[0]):
+        out[i] = steady_throttle(speed[i], k)
 
 
 def vehicle_step(

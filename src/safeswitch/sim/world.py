@@ -143,8 +143,9 @@ def preview_offsets(world: World, state: WorldState, lookahead: float) -> FloatA
     frame [m], ``[B, V]`` (the lane keepers' error signal; see
     :meth:`~safeswitch.sim.geometry.RouteSet.preview_offset`)."""
     v = state.vehicles
-    tx, ty, _ = world.route_set.pose_at_flat(world._base, state.progress + lookahead)
-    return v.cos_yaw * (ty - v.y) - v.sin_yaw * (tx - v.x)
+    return world.route_set.preview_offset_axes(
+        world._base, state.progress, v.x, v.y, v.cos_yaw, v.sin_yaw, lookahead
+    )
 
 
 def heading_errors(world: World, state: WorldState) -> FloatArray:
