@@ -84,3 +84,14 @@ def test_a_fast_safe_crossing_earns_more_than_a_slow_one():
 
 def record_speed(state):
     return state.world.vehicles.speed[:, 0]
+
+
+def test_the_compiled_interpolation_is_np_interp_bit_for_bit():
+    config = RewardConfig()
+    rng = np.random.default_rng(2)
+    speed = np.concatenate([rng.uniform(-1, 17, 100_000), np.array(config.speed_points_kmh) / 3.6])
+    expected = np.interp(speed * 3.6, config.speed_points_kmh, config.speed_values)
+    np.testing.assert_array_equal(speed_reward(config, speed), expected)
+    lateral = np.concatenate([rng.uniform(-4, 4, 100_000), config.lateral_points_m])
+    expected = np.interp(np.abs(lateral), config.lateral_points_m, config.lateral_values)
+    np.testing.assert_array_equal(lane_keeping_reward(config, lateral), expected)

@@ -35,6 +35,12 @@ def columns(*arrays: NDArray[Any]) -> NDArray[np.float64]:
     return out
 
 
+def broadcast_flat(*values: ArrayLike) -> tuple[tuple[int, ...], list[NDArray[np.float64]]]:
+    """The common broadcast shape of ``values`` and each of them :func:`flat` to it."""
+    shape = np.broadcast_shapes(*(np.shape(v) for v in values))
+    return shape, [flat(v, shape) for v in values]
+
+
 def flat(values: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
     """``values`` broadcast to ``shape`` as a flat, contiguous float64 vector (a view when
     possible): what the compiled per-element loops take."""

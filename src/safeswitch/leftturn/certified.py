@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import jit
+from safeswitch.core.arrays import broadcast_flat, jit
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import CertifiedConfig
 from safeswitch.leftturn.switching import ConflictState
@@ -448,8 +448,7 @@ def _map_settled(
 def _columns(*values: FloatArray | float) -> list[FloatArray]:
     """The values as contiguous float64 vectors of one common length (what the compiled
     functions take)."""
-    arrays = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in values))
-    return [np.ascontiguousarray(a) for a in arrays]
+    return broadcast_flat(*values)[1]
 
 
 class CertifiedSwitching:

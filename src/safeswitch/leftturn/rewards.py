@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import flat, jit
-from safeswitch.core.switching import intervention_penalty
+from safeswitch.core.arrays import broadcast_flat, jit
 from safeswitch.leftturn.config import RewardConfig
 from safeswitch.sim.geometry import FloatArray
 
@@ -14,24 +15,10 @@ from safeswitch.sim.geometry import FloatArray
 REWARD_TERMS: tuple[str, ...] = ("adas", "lka", "speed", "accel_lon", "accel_lat")
 
 
-def piecewise_linear(
-    x: FloatArray, points: tuple[float, ...], values: tuple[float, ...]
-) -> FloatArray:
-    """Linear interpolation through ``(points, values)``, constant beyond the ends."""
-    x = np.asarray(x, dtype=np.float64)
-    out = np.empty(x.shape)
-    _map_interpolate(
-        np.ascontiguousarray(x).reshape(-1),
-        np.asarray(points, dtype=np.float64),
-        np.asarray(values, dtype=np.float64),
-        out.reshape(-1),
-    )
-    return out
-
-
 @jit
 def interpolate(x: float, points: FloatArray, values: FloatArray) -> float:
-    """:func:`piecewise_linear` of one value, with ``np.interp``'s arithmetic (the same bits)."""
+    """Linear interpolation through ``(points, values)``, constant beyond the ends: ``np.interp``
+    for one value, with its arithmetic (the same bits)."""
     last = points.shape[0] - 1
     if x <= points[0]:
         return values[0]
@@ -42,14 +29,6 @@ def interpolate(x: float, points: FloatArray, values: FloatArray) -> float:
         j += 1
     slope = (values[j + 1] - values[j]) / (points[j + 1] - points[j])
     return slope * (x - points[j]) + values[j]
-
-
-@jit
-def _map_interpolate(
-    x: FloatArray, points: FloatArray, values: FloatArray, out: FloatArray
-) -> None:
-    for i in range(x.shape[0]):
-        out[i] = interpolate(x[i], points, values)
 
 
 def reward_tables(config: RewardConfig) -> tuple[FloatArray, ...]:
@@ -67,29 +46,42 @@ def reward_tables(config: RewardConfig) -> tuple[FloatArray, ...]:
 
 def speed_reward(config: RewardConfig, speed: FloatArray) -> FloatArray:
     """``R_v`` of a speed [m/s] (breakpoints in km/h)."""
-    return piecewise_linear(np.asarray(speed) * 3.6, config.speed_points_kmh, config.speed_values)
+    return _term(config, "speed", speed=speed)
 
 
 def lane_keeping_reward(config: RewardConfig, lateral: FloatArray) -> FloatArray:
     """``R_lka`` of the signed lateral deviation from the route [m]."""
-    return piecewise_linear(np.abs(lateral), config.lateral_points_m, config.lateral_values)
+    return _term(config, "lka", lateral=lateral)
 
 
 def accel_lon_reward(config: RewardConfig, accel: FloatArray) -> FloatArray:
     """``R_a_lon`` of the longitudinal acceleration [m/s²]."""
-    return piecewise_linear(np.abs(accel), config.accel_lon_points, config.accel_lon_values)
+    return _term(config, "accel_lon", accel_lon=accel)
 
 
 def accel_lat_reward(config: RewardConfig, accel: FloatArray) -> FloatArray:
     """``R_a_lat`` of the lateral acceleration [m/s²]."""
-    return piecewise_linear(np.abs(accel), config.accel_lat_points, config.accel_lat_values)
+    return _term(config, "accel_lat", accel_lat=accel)
 
 
 def adas_reward(
     config: RewardConfig, safety_active: NDArray[np.bool_], enabled: bool = True
 ) -> FloatArray:
     """``R_ADAS`` (Eq. 4): the penalty on ticks where the safety action was executed."""
-    return intervention_penalty(safety_active, config.adas_penalty if enabled else 0.0)
+    return _term(config, "adas", safety_active=safety_active, adas_enabled=enabled)
+
+
+def _term(config: RewardConfig, name: str, **given: Any) -> FloatArray:
+    """One term of :func:`reward_terms` (its other inputs at zero)."""
+    inputs: dict[str, Any] = {
+        "speed": 0.0,
+        "lateral": 0.0,
+        "accel_lon": 0.0,
+        "accel_lat": 0.0,
+        "safety_active": False,
+        "adas_enabled": True,
+    }
+    return reward_terms(config, **(inputs | given))[name]
 
 
 def reward_terms(
@@ -103,15 +95,15 @@ def reward_terms(
     adas_enabled: bool,
 ) -> dict[str, FloatArray]:
     """All five terms of Eq. 5, each of shape ``[B]``, keyed by :data:`REWARD_TERMS`."""
-    values = (lateral, speed, accel_lon, accel_lat, safety_active)
-    shape = np.broadcast_shapes(*(np.shape(a) for a in values))
-    f = [flat(a, shape) for a in values[:4]]
+    shape, (lat, v, lon, alat, _) = broadcast_flat(
+        lateral, speed, accel_lon, accel_lat, np.zeros(np.shape(safety_active))
+    )
     active = np.ascontiguousarray(np.broadcast_to(safety_active, shape), dtype=np.bool_)
     out = tuple(np.empty(shape) for _ in REWARD_TERMS)
     _map_terms(
         reward_tables(config),
         config.adas_penalty if adas_enabled else 0.0,
-        active.reshape(-1), f[0], f[1], f[2], f[3],
+        active.reshape(-1), lat, v, lon, alat,
         tuple(a.reshape(-1) for a in out),
     )  # fmt: skip
     return dict(zip(REWARD_TERMS, out, strict=True))

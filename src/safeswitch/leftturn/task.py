@@ -48,7 +48,7 @@ from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
 from safeswitch.sim.geometry import FloatArray, IntArray, Route, preview
 from safeswitch.sim.road import Intersection
 from safeswitch.sim.traffic import AutopilotParams, autopilot_tick
-from safeswitch.sim.vehicle import steady_state_throttle, vehicle_constants
+from safeswitch.sim.vehicle import steady_state_throttle
 from safeswitch.sim.world import World, WorldState
 
 BoolArray = NDArray[np.bool_]
@@ -220,7 +220,7 @@ class LeftTurnTask:
                 self.autopilot.speed_gains.vector,
             ]
         )
-        self._plant = vehicle_constants(config.vehicle, config.episode.dt)
+        self._plant = self.world.vehicle_constants
         r, geo = config.rewards, self.conflict
         self._reward_tables = reward_tables(r)
         # What the compiled switching step reads (see _switch).
@@ -308,12 +308,10 @@ class LeftTurnTask:
 
     def conflict_state(self, state: TaskState) -> ConflictState:
         """Distances and speeds relative to the conflict point, for the switching logics."""
-        geo, approach = self.conflict, self.config.episode.approach_distance_m
+        geo = self.conflict
         s_e, s_n = state.world.progress[:, 0], state.world.progress[:, 1]
         ego_to_conflict = geo.s_point_a - s_e
         north_to_conflict = geo.s_point_b - s_n
-        ego_at = (ego_to_conflict <= approach) & (s_e <= geo.zone_a[1])
-        north_at = (north_to_conflict <= approach) & (s_n <= geo.zone_b[1])
         v = state.world.vehicles
         return ConflictState(
             ego_to_conflict=ego_to_conflict,
@@ -321,7 +319,7 @@ class LeftTurnTask:
             ego_speed=v.speed[:, 0],
             north_to_conflict=north_to_conflict,
             north_speed=v.speed[:, 1],
-            both_at_intersection=ego_at & north_at,
+            both_at_intersection=at_intersection(s_e, s_n, self._geometry),
             ego_progress=s_e,
             north_progress=s_n,
             ego_throttle=v.throttle[:, 0],
@@ -351,7 +349,7 @@ class LeftTurnTask:
         v, routes = world.vehicles, self.world.route_set
         _controllers(
             self._gains, dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
-            self._plant, routes.tables, routes.spacing, routes.size - 2, self.world._base,
+            self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
             v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress, state.accel_lon,
             state.scenarios.north_speed,
             tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
@@ -539,6 +537,21 @@ def _after_plant(
             observation[b, 3 * j + 2] = speed[b, j]
 
 
+@jit
+def at_intersection(
+    ego_progress: FloatArray | float, north_progress: FloatArray | float, geometry: FloatArray
+) -> Any:
+    """Algorithm 1's While condition: both cars within the approach distance of their conflict
+    point and not yet out of their conflict zone; a bool array for arrays, a bool for scalars
+    (``geometry`` as in :func:`_switch`)."""
+    return (
+        (geometry[0] - ego_progress <= geometry[5])
+        & (ego_progress <= geometry[3])
+        & (geometry[1] - north_progress <= geometry[5])
+        & (north_progress <= geometry[4])
+    )
+
+
 #: Codes of the switching logics in the compiled step.
 SWITCHING_CODES = {"none": 0, "paper": 1, "certified": 2}
 
@@ -554,7 +567,7 @@ def _switch(
 ) -> None:  # fmt: skip
     """Steps 2 and 3 of the tick for every episode, exactly as
     :func:`~safeswitch.core.switching.supervise` composes them with :attr:`LeftTurnTask.switching`
-    (``tests/leftturn/test_env.py`` checks it against that composition): the proposal (the
+    (``tests/leftturn/test_switching.py`` checks it against that composition): the proposal (the
     learned throttle while the learned controller is in charge, else ``PID_th``'s), its validity
     (a NaN/inf proposal is replaced by the Safety controller's action and recorded with the
     invalid-action reason), clipping, the logic's decision and the executed pedals.
@@ -567,8 +580,7 @@ def _switch(
     for b in range(progress.shape[0]):
         s_e, s_n = progress[b, 0], progress[b, 1]
         ego_to_conflict, north_to_conflict = geometry[0] - s_e, geometry[1] - s_n
-        at = (ego_to_conflict <= geometry[5]) and (s_e <= geometry[3])
-        at = at and (north_to_conflict <= geometry[5]) and (s_n <= geometry[4])
+        at = at_intersection(s_e, s_n, geometry)
         both[b] = at
         in_charge = at if scope == 0 else scope == 1
         proposed = learned_throttle[b] if in_charge else rule_throttle[b]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from safeswitch.core.arrays import flat, jit
+from safeswitch.core.arrays import broadcast_flat, jit
 
 FloatArray = NDArray[np.float64]
 
@@ -68,9 +68,9 @@ def separation_from_axes(
 ) -> FloatArray:
     """:func:`rectangle_separation` from the centre offset ``(dx, dy)`` = b − a [m] and each
     rectangle's heading as a unit vector (no trigonometry: the simulator's hot path)."""
-    args = (dx, dy, cos_a, sin_a, length_a, width_a, cos_b, sin_b, length_b, width_b)
-    shape = np.broadcast_shapes(*(np.shape(a) for a in args))
-    f = [flat(a, shape) for a in args]
+    shape, f = broadcast_flat(
+        dx, dy, cos_a, sin_a, length_a, width_a, cos_b, sin_b, length_b, width_b
+    )
     out = np.empty(shape)
     _map_separation(
         f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9], out.reshape(-1)

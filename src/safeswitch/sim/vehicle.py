@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import flat, jit
+from safeswitch.core.arrays import broadcast_flat, flat, jit
 
 FloatArray = NDArray[np.float64]
 
@@ -210,7 +210,7 @@ def lag_factor(time_constant: float, dt: float) -> float:
     return 1.0 - math.exp(-dt / time_constant)
 
 
-# Slots of the longitudinal model's constants vector (see longitudinal_constants).
+# Slots of the vehicle model's constants vector (see vehicle_constants).
 (
     K_DT,
     K_MASS,
@@ -379,9 +379,18 @@ def map_vehicle_tick(
             state[0][i], state[1][i], state[2][i], state[3][i], state[4][i], state[5][i],
             state[6][i], state[7][i], throttle_cmd[i], brake_cmd[i], steer_cmd[i], k,
         )  # fmt: skip
-        out[0][i], out[1][i], out[2][i], out[3][i] = r[0], r[1], r[2], r[3]
-        out[4][i], out[5][i], out[6][i], out[7][i] = r[4], r[5], r[6], r[7]
-        outputs[0][i], outputs[1][i], outputs[2][i] = r[8], r[9], r[10]
+        store_tick(out, outputs, i, r)
+
+
+@jit
+def store_tick(
+    out: tuple[FloatArray, ...], outputs: tuple[FloatArray, ...], i: int, r: tuple[float, ...]
+) -> None:
+    """Write one :func:`vehicle_tick` result at flat index ``i``: the new state into ``out``,
+    the measured outputs into ``outputs``."""
+    out[0][i], out[1][i], out[2][i], out[3][i] = r[0], r[1], r[2], r[3]
+    out[4][i], out[5][i], out[6][i], out[7][i] = r[4], r[5], r[6], r[7]
+    outputs[0][i], outputs[1][i], outputs[2][i] = r[8], r[9], r[10]
 
 
 @jit
@@ -402,6 +411,12 @@ def _map_forces(
         resist[i] = resistance(speed[i], k)
 
 
+def _force_constants(params: VehicleParams) -> FloatArray:
+    """The constants the force functions read; the tick length does not enter the forces, so
+    any valid one selects the same values."""
+    return vehicle_constants(params, 0.02)
+
+
 def forces(
     params: VehicleParams,
     speed: FloatArray,
@@ -410,14 +425,13 @@ def forces(
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The force model on arrays (broadcast together) [N]: net force (:func:`net_force`), full
     drive force, closed-throttle engine braking and driving resistance."""
-    shape = np.broadcast_shapes(np.shape(speed), np.shape(throttle), np.shape(brake))
+    shape, (v, th, br) = broadcast_flat(speed, throttle, brake)
     net, drive, drag, resist = (np.empty(shape) for _ in range(4))
-    # The tick length does not enter the forces: any valid one selects the same constants.
     _map_forces(
-        flat(speed, shape),
-        flat(throttle, shape),
-        flat(brake, shape),
-        vehicle_constants(params, 0.02),
+        v,
+        th,
+        br,
+        _force_constants(params),
         net.reshape(-1),
         drive.reshape(-1),
         drag.reshape(-1),
@@ -454,7 +468,7 @@ def steady_state_throttle(params: VehicleParams, speed: FloatArray) -> FloatArra
     see :func:`steady_throttle`)."""
     speed = np.asarray(speed, dtype=np.float64)
     out = np.empty(speed.shape)
-    _map_steady_throttle(flat(speed, speed.shape), vehicle_constants(params, 0.02), out.reshape(-1))
+    _map_steady_throttle(flat(speed, speed.shape), _force_constants(params), out.reshape(-1))
     return out
 
 

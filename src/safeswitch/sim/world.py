@@ -21,6 +21,7 @@ from safeswitch.sim.vehicle import (
     VehicleParams,
     VehicleState,
     steady_state_throttle,
+    store_tick,
     vehicle_constants,
     vehicle_tick,
 )
@@ -62,7 +63,10 @@ class World:
             raise ValueError(f"World.dt must be in (0, 0.1] s, got {self.dt!r}")
         self.route_set = RouteSet(self.routes)
         self.slots = np.arange(len(self.routes))
-        self._base = self.route_set.base_index(self.slots)  # [V], broadcasts against [B, V]
+        #: Flat index of each slot's route in the route set's tables, ``[V]``.
+        self.route_base = self.route_set.base_index(self.slots)  # broadcasts against [B, V]
+        #: The vehicle model's constants for this world's parameters and tick.
+        self.vehicle_constants = vehicle_constants(self.params, self.dt)
 
     @property
     def num_vehicles(self) -> int:
@@ -105,20 +109,20 @@ class World:
         n = state.progress.size
         out = tuple(np.empty(n) for _ in range(8))
         outputs = (np.empty(n), np.empty(n), np.empty(n))
-        progress, lateral, separation = np.empty(n), np.empty(n), np.empty(shape[0])
+        progress, lateral, gap = np.empty(n), np.empty(n), np.empty(shape[0])
         routes, p, v = self.route_set, self.params, state.vehicles
         _world_tick(
             (v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, v.throttle, v.brake, v.steer),
             flat(throttle, shape), flat(brake, shape), flat(steer, shape),
-            vehicle_constants(p, self.dt), routes.tables, routes.spacing, routes.size - 2,
-            routes.WALK_STEPS, self._base, state.progress, p.length, p.width,
-            out, outputs, progress, lateral, separation,
+            self.vehicle_constants, routes.tables, routes.spacing, routes.size - 2,
+            routes.WALK_STEPS, self.route_base, state.progress, p.length, p.width,
+            out, outputs, progress, lateral, gap,
         )  # fmt: skip
         vehicles = VehicleState(*(a.reshape(shape) for a in out))
         new = WorldState(
             vehicles, progress.reshape(shape), lateral.reshape(shape), state.time + self.dt
         )
-        return new, VehicleOutputs(*(a.reshape(shape) for a in outputs)), separation
+        return new, VehicleOutputs(*(a.reshape(shape) for a in outputs)), gap
 
     def ego_separation(self, vehicles: VehicleState) -> FloatArray:
         """Separation between the ego's footprint and the nearest other vehicle's [m], ``[B]``."""
@@ -144,13 +148,13 @@ def preview_offsets(world: World, state: WorldState, lookahead: float) -> FloatA
     :meth:`~safeswitch.sim.geometry.RouteSet.preview_offset`)."""
     v = state.vehicles
     return world.route_set.preview_offset_axes(
-        world._base, state.progress, v.x, v.y, v.cos_yaw, v.sin_yaw, lookahead
+        world.route_base, state.progress, v.x, v.y, v.cos_yaw, v.sin_yaw, lookahead
     )
 
 
 def heading_errors(world: World, state: WorldState) -> FloatArray:
     """Each vehicle's heading minus its route's heading at its progress [rad], ``[B, V]``."""
-    _, _, route_heading = world.route_set.pose_at_flat(world._base, state.progress)
+    _, _, route_heading = world.route_set.pose_at_flat(world.route_base, state.progress)
     return wrap_angle(state.vehicles.yaw - route_heading)
 
 
@@ -175,9 +179,7 @@ def _world_tick(
                 state[5][b, j], state[6][b, j], state[7][b, j], throttle[i], brake[i], steer[i],
                 k,
             )  # fmt: skip
-            out[0][i], out[1][i], out[2][i], out[3][i] = r[0], r[1], r[2], r[3]
-            out[4][i], out[5][i], out[6][i], out[7][i] = r[4], r[5], r[6], r[7]
-            outputs[0][i], outputs[1][i], outputs[2][i] = r[8], r[9], r[10]
+            store_tick(out, outputs, i, r)
             _, progress_out[i], _, lateral_out[i] = locate(
                 tables, spacing, k_max, walk_steps, base[j], r[0], r[1], progress[b, j]
             )
