@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from safeswitch.core.arrays import flat, jit
-from safeswitch.sim.collision import separation, separation_from_axes
+from safeswitch.sim.collision import separation
 from safeswitch.sim.geometry import FloatArray, IntArray, Route, RouteSet, locate, wrap_angle
 from safeswitch.sim.vehicle import (
     VehicleOutputs,
@@ -125,21 +125,16 @@ class World:
         return new, VehicleOutputs(*(a.reshape(shape) for a in outputs)), gap
 
     def ego_separation(self, vehicles: VehicleState) -> FloatArray:
-        """Separation between the ego's footprint and the nearest other vehicle's [m], ``[B]``."""
+        """Separation between the ego's footprint and the nearest other vehicle's [m], ``[B]``
+        (what :meth:`step` reports, through the same :func:`nearest_gap`)."""
         p, v = self.params, vehicles
-        gap = separation_from_axes(
-            v.x[:, 1:] - v.x[:, :1],
-            v.y[:, 1:] - v.y[:, :1],
-            v.cos_yaw[:, :1],
-            v.sin_yaw[:, :1],
-            p.length,
-            p.width,
-            v.cos_yaw[:, 1:],
-            v.sin_yaw[:, 1:],
-            p.length,
-            p.width,
-        )
-        return gap.min(axis=1)
+        scenes, slots = v.x.shape
+        out = np.empty(scenes)
+        _map_nearest_gap(
+            flat(v.x, v.x.shape), flat(v.y, v.x.shape), flat(v.cos_yaw, v.x.shape),
+            flat(v.sin_yaw, v.x.shape), slots, p.length, p.width, out,
+        )  # fmt: skip
+        return out
 
 
 def preview_offsets(world: World, state: WorldState, lookahead: float) -> FloatArray:
@@ -183,15 +178,34 @@ def _world_tick(
             _, progress_out[i], _, lateral_out[i] = locate(
                 tables, spacing, k_max, walk_steps, base[j], r[0], r[1], progress[b, j]
             )
-        ego = b * slots
-        gap = math.inf
-        for j in range(1, slots):
-            i = ego + j
-            gap = min(
-                gap,
-                separation(
-                    out[0][i] - out[0][ego], out[1][i] - out[1][ego], out[2][ego], out[3][ego],
-                    length, width, out[2][i], out[3][i], length, width,
-                ),
-            )  # fmt: skip
-        separation_out[b] = gap
+        separation_out[b] = nearest_gap(
+            out[0], out[1], out[2], out[3], b * slots, slots, length, width
+        )
+
+
+@jit
+def nearest_gap(
+    x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, ego: int,
+    count: int, length: float, width: float,
+) -> float:  # fmt: skip
+    """Separation between the footprint of vehicle ``ego`` and the nearest of the next
+    ``count − 1`` vehicles of the flat arrays (one scene) [m]."""
+    gap = math.inf
+    for i in range(ego + 1, ego + count):
+        gap = min(
+            gap,
+            separation(
+                x[i] - x[ego], y[i] - y[ego], cos_yaw[ego], sin_yaw[ego], length, width,
+                cos_yaw[i], sin_yaw[i], length, width,
+            ),
+        )  # fmt: skip
+    return gap
+
+
+@jit
+def _map_nearest_gap(
+    x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, slots: int,
+    length: float, width: float, out: FloatArray,
+) -> None:  # fmt: skip
+    for b in range(out.shape[0]):
+        out[b] = nearest_gap(x, y, cos_yaw, sin_yaw, b * slots, slots, length, width)
