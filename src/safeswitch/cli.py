@@ -147,9 +147,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument(
         "--controller",
-        choices=("learned", "rule", "oracle"),
+        choices=("learned", "rule", "planner", "oracle"),
         default="learned",
         help="learned: a trained policy (--model); rule: PID_th under the paper switching logic; "
+        "planner: a throttle-only rule-based planner that avoids the paper logic's braking; "
         "oracle: the minimum-time crossing planned with knowledge of the north car",
     )
     ev.add_argument("--scenarios", choices=("paper", "random"), default="random")

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from safeswitch.evaluation.evaluate import scenario_set
 from safeswitch.evaluation.oracle import Oracle, efficiency
+from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import LeftTurnConfig
@@ -113,6 +114,11 @@ def test_no_controller_that_keeps_the_limits_is_faster_than_the_oracle(oracle, r
         "rule": ({"switching": "paper", "learned_scope": "never"}, cruise(25)),
         "shipped": ({"switching": "paper", "learned_scope": "episode"}, shipped.as_policy()),
     }
+    planner_config = replace(base, episode=replace(base.episode, learned_scope="episode"))
+    controllers["planner"] = (
+        {"switching": "paper", "learned_scope": "episode"},
+        Planner(LeftTurnTask(planner_config)),
+    )
     for target in (14, 18, 21):
         for switching in ("paper", "certified"):
             controllers[f"cruise{target}-{switching}"] = (

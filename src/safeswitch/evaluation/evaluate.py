@@ -14,9 +14,10 @@ import numpy as np
 
 from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import Oracle, OraclePlan, efficiency
+from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
-from safeswitch.leftturn.config import SCENARIO_NAMES, LeftTurnConfig
+from safeswitch.leftturn.config import SCENARIO_NAMES, LearnedScope, LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask, StepRecord, TaskState
 from safeswitch.sim.geometry import FloatArray
@@ -58,12 +59,21 @@ def controller_setup(
         trained = load_policy(model)
         env_config = load_config(trained.path / "config.yaml").env
         policy = trained.as_policy()
-    elif controller in ("rule", "oracle"):
+    elif controller in ("rule", "oracle", "planner"):
+        # The rule's PID_th proposes throughout; the planner drives with the learned
+        # controller's throttle throughout.
+        scope: LearnedScope = "episode" if controller == "planner" else "never"
         env_config = replace(LeftTurnConfig(), switching="paper")
-        env_config = replace(env_config, episode=replace(env_config.episode, learned_scope="never"))
-        policy = _rule_policy if controller == "rule" else None
+        env_config = replace(env_config, episode=replace(env_config.episode, learned_scope=scope))
+        policy = {
+            "rule": _rule_policy,
+            "oracle": None,
+            "planner": Planner(LeftTurnTask(replace(env_config, scenario=None))),
+        }[controller]
     else:
-        raise ValueError(f"--controller must be 'learned', 'rule' or 'oracle', got {controller!r}")
+        raise ValueError(
+            f"--controller must be 'learned', 'rule', 'planner' or 'oracle', got {controller!r}"
+        )
     if switching is not None:
         env_config = replace(env_config, switching=switching)  # type: ignore[arg-type]
     return replace(env_config, scenario=None), policy

@@ -137,6 +137,17 @@ class Oracle:
             w_sq[i] = min(w_sq[i], w_sq[i + 1] + step[i])
         self._w_sq = w_sq
 
+    @property
+    def grid(self) -> FloatArray:
+        """Arc lengths of the ego route's waypoints [m]."""
+        return self._grid
+
+    @property
+    def brake_profile_sq(self) -> FloatArray:
+        """``W(s)²`` on :attr:`grid`: the highest squared speed from which braking at the
+        limits' deceleration respects every speed cap ahead [m²/s²]."""
+        return self._w_sq
+
     def speed_cap_sq(self, s: FloatArray) -> FloatArray:
         """``V(s)²``: the squared speed limit at arc lengths ``s`` (linear between waypoints)."""
         return np.interp(s, self._grid, self._v_sq)

@@ -306,6 +306,10 @@ class LeftTurnTask:
             out[:, j] = getattr(v, field)[:, slot]
         return out
 
+    def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
+        """Algorithm 1's While condition for arc lengths of any (common) shape."""
+        return at_intersection(ego_progress, north_progress, self._geometry)
+
     def conflict_state(self, state: TaskState) -> ConflictState:
         """Distances and speeds relative to the conflict point, for the switching logics."""
         geo = self.conflict
@@ -319,7 +323,7 @@ class LeftTurnTask:
             ego_speed=v.speed[:, 0],
             north_to_conflict=north_to_conflict,
             north_speed=v.speed[:, 1],
-            both_at_intersection=at_intersection(s_e, s_n, self._geometry),
+            both_at_intersection=self.both_at_intersection(s_e, s_n),
             ego_progress=s_e,
             north_progress=s_n,
             ego_throttle=v.throttle[:, 0],

@@ -53,7 +53,7 @@ class Entry:
 
     Attributes:
         name: Short name (file names, tables).
-        kind: ``learned``, ``rule`` or ``oracle``.
+        kind: ``learned``, ``rule``, ``planner`` or ``oracle``.
         policy: Shipped policy name (``--quick``) of a learned controller.
         label: What it is, for the tables.
     """
@@ -67,6 +67,9 @@ class Entry:
 ENTRIES: tuple[Entry, ...] = (
     Entry("oracle", "oracle", None, "Oracle (minimum time, knows the north car's future)"),
     Entry("rule", "rule", None, "Rule-based: PID_th under the paper switching logic"),
+    Entry(
+        "planner", "planner", None, "Planner (ours): throttle only, plans around the paper logic"
+    ),
     Entry("ppo-paper", "learned", "paper", "PPO, paper switching, R_ADAS on (the paper)"),
     Entry("ppo-no-adas", "learned", "no_adas", "PPO, paper switching, R_ADAS off (ablation)"),
     Entry("ppo-certified", "learned", "certified", "PPO, certified switching"),

@@ -1,0 +1,95 @@
+"""Why the planner stops at ~0.83 of the oracle: the paper switching logic would fire on most of
+the oracle's crossings. On the README's 1,000 random scenarios (seed 1000003) it replays the
+oracle's plans through the paper logic's rule (Algorithm 1 with the task's constants; the
+north car's speed from its simulated trajectory) and counts, for the oracle's cuts and yields,
+the plans on which the rule fires; then it runs the planner and the rule-based system and
+breaks their times to clear down by the oracle's outcome.
+
+Run: ``python benchmarks/planner_gap.py [--json]`` (about a minute; numpy only).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+import _common
+from safeswitch.evaluation.evaluate import controller_setup, run_controller, scenario_set
+from safeswitch.evaluation.oracle import Oracle
+from safeswitch.leftturn.switching import ConflictState
+from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
+from safeswitch.report.reproduce import EVAL_SEED
+
+
+def rule_fires_on_plans(task: LeftTurnTask, oracle: Oracle, scenarios) -> np.ndarray:
+    """``[B]``: the paper logic fires on some tick of the oracle's plan."""
+    plan = oracle.plan(scenarios)
+    geo, dt = task.conflict, task.config.episode.dt
+    s, v, s_n = plan.progress[:, 1:], plan.speed[:, 1:], plan.north_progress[:, 1:]
+    v_n = np.diff(plan.north_progress, axis=1) / dt
+    both = task.both_at_intersection(s, s_n)
+    state = ConflictState(
+        ego_to_conflict=(geo.s_point_a - s).ravel(),
+        ego_to_stop=(geo.zone_a[0] - s).ravel(),
+        ego_speed=v.ravel(),
+        north_to_conflict=(geo.s_point_b - s_n).ravel(),
+        north_speed=v_n.ravel(),
+        both_at_intersection=both.ravel(),
+        ego_progress=s.ravel(),
+        north_progress=s_n.ravel(),
+        ego_throttle=np.zeros(s.size),
+        ego_brake=np.zeros(s.size),
+    )
+    decision = task.switching.decide(state, np.zeros((s.size, 1)), np.zeros((s.size, 1)))
+    return decision.use_safety.reshape(s.shape).any(axis=1), plan
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--episodes", type=int, default=1000)
+    args = parser.parse_args(argv)
+    config, planner = controller_setup("planner", None, None)
+    task = LeftTurnTask(config)
+    scenarios, _ = scenario_set(task, "random", args.episodes, EVAL_SEED)
+    oracle = Oracle(task)
+    fires, plan = rule_fires_on_plans(task, oracle, scenarios)
+    runs = {"planner": run_controller(task, planner, scenarios, plan=plan)[0]}
+    rule_config, rule = controller_setup("rule", None, None)
+    runs["rule"] = run_controller(LeftTurnTask(rule_config), rule, scenarios, plan=plan)[0]
+    horizon = config.episode.horizon_s
+    rows = []
+    for code in (OUTCOMES.index("cut"), OUTCOMES.index("yield")):
+        for fired in (False, True):
+            mask = (plan.outcome == code) & (fires == fired)
+            if not mask.any():
+                continue
+            row = {
+                "oracle_outcome": OUTCOMES[code],
+                "paper_logic_fires_on_oracle_plan": fired,
+                "episodes": int(mask.sum()),
+                "oracle_time_s": float(plan.time_to_clear[mask].mean()),
+            }
+            for name, result in runs.items():
+                t = np.where(np.isfinite(result.time_to_clear), result.time_to_clear, horizon)
+                row[f"{name}_time_s"] = float(t[mask].mean())
+                row[f"{name}_cuts"] = int((result.outcome[mask] == OUTCOMES.index("cut")).sum())
+            rows.append(row)
+    if args.json:
+        _common.emit({"benchmark": "planner_gap", "episodes": args.episodes, "rows": rows}, True)
+        return 0
+    print(f"{args.episodes} random scenarios (seed {EVAL_SEED}); times to clear [s], never = 12 s")
+    print("oracle   logic fires   episodes   oracle   planner (cuts)   rule (cuts)")
+    for r in rows:
+        print(
+            f"{r['oracle_outcome']:8s} {r['paper_logic_fires_on_oracle_plan']!s:11s} "
+            f"{r['episodes']:10d} {r['oracle_time_s']:8.2f} {r['planner_time_s']:9.2f} "
+            f"({r['planner_cuts']:3d}) {r['rule_time_s']:9.2f} ({r['rule_cuts']:3d})"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,187 @@
+"""The planner: a rule-based, throttle-only controller that plans around the paper switching logic.
+
+A baseline the paper did not have, and the answer to "how fast can a controller with the
+learned controller's means go without ever needing the Safety controller?". It drives with the
+learned controller's single action (throttle, no brake pedal), sees the same things plus the
+plant's model, and replans on every tick:
+
+- **Pass first** if a fast drive from the current state — the speed limit plus the tolerated
+  speeding on the straight, the lateral comfort limit (with a margin) in the turn — leaves the
+  conflict zone without the paper switching logic ever firing. It checks this by simulating that
+  drive on a copy of the plant with the switching logic in the loop (its TTR threshold raised
+  by ``ttr_margin_s``) and the north car's own controller, every ``recheck_ticks`` ticks.
+- **Otherwise yield**: reach the point where the switching logic would fire (``d_safe`` plus
+  latency and margin before the zone) no earlier than ``yield_margin_s`` after the north car
+  has left its conflict zone, as fast as possible: coast down now, then accelerate at
+  ``yield_accel`` so as to arrive at speed (the bang-bang shape of the oracle's yield, with
+  the only deceleration a closed throttle gives).
+
+Speed targets are tracked with the steady-state throttle plus a proportional term. The planner
+uses the full task state (the north car's position and speed, as the observation does, and the
+plant model for its check); it is a reference for what a learned policy could reach under the
+paper logic, not a deployable controller.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.core.config import check
+from safeswitch.evaluation.oracle import Oracle, OracleLimits
+from safeswitch.leftturn.task import LeftTurnTask, TaskState
+from safeswitch.sim.vehicle import steady_state_throttle
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Tuning of the planner (all ours; measured on 1,000 random scenarios, see the README).
+
+    Attributes:
+        top_speed_kmh: Speed on the straight when passing first [km/h] (the end of ``R_v``'s
+            tolerated speeding).
+        accel_lat: Lateral acceleration the turn is planned for [m/s²] (the plant's measured
+            lateral acceleration runs ~5 % above ``v² κ`` with ``PID_lka`` steering; 2.85
+            already exceeds the 3 m/s² comfort limit on 4 % of ticks).
+        curve_decel: Deceleration assumed when slowing for the turn [m/s²] (a closed throttle
+            gives ~1.2).
+        preview_s: The speed target is read this far ahead along the route [s].
+        speed_gain: Throttle per m/s of speed error.
+        ttr_margin_s: Added to the switching logic's TTR threshold in the pass-first check.
+        stop_extra_m: Added to the switching logic's stop margin when yielding [m].
+        yield_margin_s: Arrive at the firing point this long after the north car left its zone.
+        yield_accel: Acceleration planned for the end of a yield [m/s²].
+        creep: While waiting, never slower than this fraction of the constant speed that would
+            arrive on time (keeps the car rolling instead of stopping early).
+        recheck_ticks: Ticks between two pass-first checks (the decision holds in between).
+    """
+
+    top_speed_kmh: float = 30.0
+    accel_lat: float = 2.8
+    curve_decel: float = 1.0
+    preview_s: float = 0.3
+    speed_gain: float = 0.6
+    ttr_margin_s: float = 0.05
+    stop_extra_m: float = 0.3
+    yield_margin_s: float = 0.1
+    yield_accel: float = 1.5
+    creep: float = 0.5
+    recheck_ticks: int = 5
+
+    def __post_init__(self) -> None:
+        o = "planner"
+        for name in ("top_speed_kmh", "accel_lat", "curve_decel", "speed_gain", "yield_accel"):
+            value = getattr(self, name)
+            check(math.isfinite(value) and value > 0, o, name, value, "must be > 0")
+        for name in ("preview_s", "ttr_margin_s", "stop_extra_m", "yield_margin_s", "creep"):
+            value = getattr(self, name)
+            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
+        check(self.recheck_ticks >= 1, o, "recheck_ticks", self.recheck_ticks, "must be >= 1")
+
+
+class Planner:
+    """The planner as a rollout :data:`~safeswitch.evaluation.rollout.Policy` (see the module
+    docstring).
+
+    Args:
+        task: The task it drives (its road, plant and paper switching parameters are used; the
+            check always runs the paper logic, whatever logic ``task`` itself runs).
+        config: Its tuning.
+    """
+
+    def __init__(self, task: LeftTurnTask, config: PlannerConfig | None = None) -> None:
+        self.config = c = config or PlannerConfig()
+        tc = task.config
+        limits = dataclasses.replace(
+            OracleLimits.from_config(tc),
+            max_speed=c.top_speed_kmh / 3.6,
+            accel_lat=c.accel_lat,
+            max_decel=c.curve_decel,
+        )
+        oracle = Oracle(task, limits)
+        self._grid, self._cap_sq = oracle.grid, oracle.brake_profile_sq
+        geo = task.conflict
+        self._zone_entry, self._zone_exit = geo.zone_a[0], geo.zone_a[1]
+        self._north_exit = geo.zone_b[1]
+        paper = tc.paper
+        self._emergency = tc.controllers.emergency_decel
+        self._latency = paper.latency_s
+        self._stop_margin = paper.stop_margin_m + c.stop_extra_m
+        self._vehicle = tc.vehicle
+        self._horizon = tc.episode.horizon_ticks
+        check_paper = dataclasses.replace(
+            paper, ttr_threshold_s=paper.ttr_threshold_s + c.ttr_margin_s
+        )
+        self._check_task = LeftTurnTask(
+            dataclasses.replace(tc, switching="paper", paper=check_paper, scenario=None)
+        )
+        self._decision: NDArray[np.bool_] | None = None
+
+    def __call__(self, obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
+        """Throttle actions in [-1, 1] for every episode of ``state``."""
+        speed = state.world.vehicles.speed[:, 0]
+        return self._track(self.target_speed(state, tick), speed)
+
+    def target_speed(self, state: TaskState, tick: int) -> FloatArray:
+        """The speed the planner steers for [m/s] ``[B]``."""
+        w = state.world
+        s, s_n = w.progress[:, 0], w.progress[:, 1]
+        v, v_n = w.vehicles.speed[:, 0], w.vehicles.speed[:, 1]
+        fast = self._fast(s, v)
+        if (
+            self._decision is None
+            or self._decision.shape != s.shape
+            or tick % self.config.recheck_ticks == 0
+        ):
+            self._decision = self.passes_first(state)
+        return np.where(
+            self._decision | (s_n > self._north_exit), fast, self._yield(s, v_n, s_n, fast)
+        )
+
+    def passes_first(self, state: TaskState) -> NDArray[np.bool_]:
+        """Whether the fast drive from ``state`` leaves the ego's conflict zone with no
+        collision and without the (margin-raised) paper switching logic ever firing."""
+        bad = np.zeros(state.batch_size, dtype=bool)
+        done = state.world.progress[:, 0] > self._zone_exit
+        for _ in range(self._horizon):
+            if done.all():
+                break
+            v = state.world.vehicles.speed[:, 0]
+            action = self._track(self._fast(state.world.progress[:, 0], v), v)
+            state, record = self._check_task.step(state, action)
+            bad |= ~done & (record.safety_active | record.collision)
+            done |= state.world.progress[:, 0] > self._zone_exit
+        return ~bad
+
+    def _fast(self, s: FloatArray, v: FloatArray) -> FloatArray:
+        ahead = s + v * self.config.preview_s
+        return np.sqrt(np.maximum(np.interp(ahead, self._grid, self._cap_sq), 0.0))
+
+    def _firing_distance(self, v: FloatArray) -> FloatArray:
+        """How far before the zone the paper logic fires at speed ``v`` (Eq. 3 + margins)."""
+        return v * v / (2.0 * self._emergency) + v * self._latency + self._stop_margin
+
+    def _yield(
+        self, s: FloatArray, v_n: FloatArray, s_n: FloatArray, fast: FloatArray
+    ) -> FloatArray:
+        c = self.config
+        left = np.maximum(self._north_exit - s_n, 0.0) / np.maximum(v_n, 0.1) + c.yield_margin_s
+        arrive = fast.copy()
+        start = np.zeros_like(s)
+        distance = np.zeros_like(s)
+        for _ in range(3):  # the firing point depends on the arrival speed: a fixed point
+            distance = self._zone_entry - s - self._firing_distance(arrive)
+            start = (distance - 0.5 * c.yield_accel * left * left) / left
+            arrive = np.minimum(np.maximum(start, 0.0) + c.yield_accel * left, fast)
+        return np.clip(np.maximum(start, c.creep * distance / left), 0.0, fast)
+
+    def _track(self, target: FloatArray, speed: FloatArray) -> FloatArray:
+        throttle = steady_state_throttle(self._vehicle, target)
+        throttle = np.clip(throttle + self.config.speed_gain * (target - speed), 0.0, 1.0)
+        return 2.0 * throttle - 1.0
