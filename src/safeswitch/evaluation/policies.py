@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from stable_baselines3 import PPO
 
 from safeswitch.evaluation.rollout import Policy
 from safeswitch.leftturn.task import TaskState
+from safeswitch.training.ppo import SwitchPPO
 
 #: Where the shipped policies live, one folder each.
 SHIPPED_DIR = Path(__file__).resolve().parent.parent / "policies"
@@ -37,7 +37,7 @@ class TrainedPolicy:
         path: Where it was loaded from.
     """
 
-    model: PPO
+    model: SwitchPPO
     obs_mean: NDArray[np.float64]
     obs_var: NDArray[np.float64]
     clip_obs: float
@@ -76,7 +76,7 @@ def resolve_model_dir(model: str | Path) -> Path:
 def load_policy(model: str | Path) -> TrainedPolicy:
     """Load a policy from a run directory or by shipped name (see :func:`resolve_model_dir`)."""
     path = resolve_model_dir(model)
-    ppo = PPO.load(path / "model.zip", device="cpu")
+    ppo = SwitchPPO.load(path / "model.zip", device="cpu")
     stats = path / "vecnormalize.pkl"
     if stats.is_file():
         with open(stats, "rb") as handle:

@@ -40,6 +40,12 @@ class PPOConfig:
         normalize_rewards: Running return-based reward scaling (``VecNormalize``).
         log_std_init: Initial log standard deviation of the Gaussian policy (not in Table II;
             SB3's default 0 makes the first actions mostly noise on a [-1, 1] throttle).
+        learn_log_std: Learn the log standard deviation (SB3's default); ``false`` keeps the
+            exploration noise at ``log_std_init`` (ours, for a warm-started actor).
+        actor_learning_rate: The actor's own learning rate (``null``: ``learning_rate`` for
+            everything, as in Table II). See :mod:`safeswitch.training.ppo`.
+        actor_frozen_steps: Timesteps before the actor starts learning (value function only).
+        actor_ramp_steps: Timesteps over which the actor's rate then rises from 0.
     """
 
     learning_rate: float = 2.5e-4
@@ -57,9 +63,23 @@ class PPOConfig:
     normalize_observations: bool = True
     normalize_rewards: bool = True
     log_std_init: float = 0.0
+    learn_log_std: bool = True
+    actor_learning_rate: float | None = None
+    actor_frozen_steps: int = 0
+    actor_ramp_steps: int = 0
 
     def __post_init__(self) -> None:
         o = "ppo"
+        if self.actor_learning_rate is not None:
+            check(
+                0 < self.actor_learning_rate < 1,
+                o,
+                "actor_learning_rate",
+                self.actor_learning_rate,
+                "must be in (0, 1) or null",
+            )
+        for name in ("actor_frozen_steps", "actor_ramp_steps"):
+            check(getattr(self, name) >= 0, o, name, getattr(self, name), "must be >= 0")
         check(
             -5 <= self.log_std_init <= 2, o, "log_std_init", self.log_std_init, "must be in [-5, 2]"
         )
@@ -87,6 +107,34 @@ class PPOConfig:
 
 
 @dataclass(frozen=True)
+class WarmStartConfig:
+    """Behaviour cloning of the planner before PPO (ours; see
+    :mod:`safeswitch.training.warm_start`).
+
+    Attributes:
+        episodes: Scenarios per round (0: no warm start — PPO from a random initialisation).
+        rounds: DAgger rounds after the planner's own demonstrations (the clone drives, under
+            the certified switching logic, and the planner labels).
+        epochs: Passes over all labels so far after each round.
+        learning_rate: Adam step size of the cloning.
+    """
+
+    episodes: int = 0
+    rounds: int = 2
+    epochs: int = 8
+    learning_rate: float = 1e-3
+
+    def __post_init__(self) -> None:
+        o = "warm_start"
+        check(self.episodes >= 0, o, "episodes", self.episodes, "must be >= 0")
+        check(self.rounds >= 0, o, "rounds", self.rounds, "must be >= 0")
+        check(self.epochs >= 1, o, "epochs", self.epochs, "must be >= 1")
+        check(
+            0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
+        )
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     """One training run.
 
@@ -99,6 +147,7 @@ class TrainConfig:
         eval_episodes: Random scenarios of the final evaluation.
         eval_seed: Seed of the final evaluation's scenarios (never used in training).
         ppo: PPO hyper-parameters.
+        warm_start: Behaviour cloning of the planner before PPO (off by default).
         env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
     """
 
@@ -110,6 +159,7 @@ class TrainConfig:
     eval_episodes: int = 1000
     eval_seed: int = 1_000_003
     ppo: PPOConfig = field(default_factory=PPOConfig)
+    warm_start: WarmStartConfig = field(default_factory=WarmStartConfig)
     env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
 
     def __post_init__(self) -> None:

@@ -7,6 +7,7 @@ Run directory::
     progress.csv         one row per rollout (see training.callbacks)
     tb/                  TensorBoard logs
     checkpoints/step_N/  model.zip, vecnormalize.pkl, state.json (written whole, then renamed)
+    warm_start.json      what the warm start did (if configured; written before PPO starts)
     model.zip            final policy
     vecnormalize.pkl     its observation/reward statistics
     training_curves.png  the paper's Fig. 5 from progress.csv
@@ -24,7 +25,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecNormalize
 
 from safeswitch.evaluation.metrics import summarize
@@ -34,6 +34,8 @@ from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig, dump_config, load_config
+from safeswitch.training.ppo import SwitchPPO
+from safeswitch.training.warm_start import warm_start
 
 
 class RunDirectoryError(RuntimeError):
@@ -51,11 +53,11 @@ def _activation(name: str) -> type[torch.nn.Module]:
     return torch.nn.Tanh if name == "tanh" else torch.nn.ReLU
 
 
-def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | None) -> PPO:
+def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | None) -> SwitchPPO:
     """PPO with the configured hyper-parameters (Table II by default)."""
     ppo = config.ppo
     arch = list(ppo.net_arch)
-    return PPO(
+    return SwitchPPO(
         "MlpPolicy",
         env,
         learning_rate=ppo.learning_rate,
@@ -77,6 +79,10 @@ def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | 
         },
         tensorboard_log=str(tensorboard_log) if tensorboard_log else None,
         verbose=0,
+        actor_learning_rate=ppo.actor_learning_rate,
+        actor_frozen_steps=ppo.actor_frozen_steps,
+        actor_ramp_steps=ppo.actor_ramp_steps,
+        learn_log_std=ppo.learn_log_std,
     )
 
 
@@ -92,7 +98,7 @@ def complete_checkpoints(run: Path) -> list[Path]:
 
 
 def _save_checkpoint(
-    run: Path, model: PPO, env: VecNormalize, vec: LeftTurnVecEnv, monitor: TrainingMonitor
+    run: Path, model: SwitchPPO, env: VecNormalize, vec: LeftTurnVecEnv, monitor: TrainingMonitor
 ) -> Path:
     folder = run / "checkpoints"
     folder.mkdir(exist_ok=True)
@@ -163,7 +169,7 @@ def train(
         vec.episode_counters = np.asarray(counters, dtype=np.int64)
     if resume:
         env = VecNormalize.load(str(latest / "vecnormalize.pkl"), vec)
-        model = PPO.load(
+        model = SwitchPPO.load(
             latest / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
         )
     else:
@@ -181,6 +187,9 @@ def train(
         lambda m: _save_checkpoint(run, model, env, vec, m),
         totals,
     )
+    if not resume and config.warm_start.episodes > 0:
+        write_atomic(run / "warm_start.json", json.dumps(warm_start(model, env, config), indent=2))
+        _save_checkpoint(run, model, env, vec, monitor)  # --resume starts after the warm start
     remaining = config.timesteps - model.num_timesteps
     try:
         if remaining > 0:
@@ -225,6 +234,11 @@ def train(
         "switching": config.env.switching,
         "adas_penalty": config.env.adas_penalty,
         "seed": config.seed,
+        "warm_start": (
+            json.loads((run / "warm_start.json").read_text(encoding="utf-8"))
+            if (run / "warm_start.json").is_file()
+            else None
+        ),
         "training": {
             "collisions": int(t["collisions"]),
             "collision_episodes": int(t["collision_episodes"]),

@@ -1,0 +1,144 @@
+"""Warm start: behaviour cloning of the planner into the PPO actor before PPO begins (ours).
+
+PPO from a random initialisation lands, on this task, in one of two basins: always yield
+(safe, comfortable, slow) or cut and lean on the Safety controller (README, Training). The
+planner (:mod:`safeswitch.evaluation.planner`) shows what a throttle-only controller can do
+under the paper logic, so the actor first learns to imitate it:
+
+1. the planner drives ``episodes`` scenarios under the run's switching logic; every tick's
+   observation is stored with the planner's action;
+2. ``rounds`` DAgger rounds: the cloned policy drives new scenarios and the planner labels each
+   tick with what it would have done (so the clone learns to recover from its own mistakes).
+   These rounds run under the *certified* switching logic whatever the run uses: an imperfect
+   clone must not collide while it is being taught (training stays collision-free), and the
+   filter's backup keeps its states near the ones it will meet;
+3. after each round the actor is fitted to all labels so far (mean squared error of the
+   Gaussian's mean, ``epochs`` passes, Adam).
+
+The observation statistics of ``VecNormalize`` are set from the demonstrations, so the clone
+sees exactly the inputs PPO will give it. The scenarios come from the run's seed on
+environment ids no training environment uses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from stable_baselines3.common.running_mean_std import RunningMeanStd
+from stable_baselines3.common.vec_env import VecNormalize
+
+from safeswitch.evaluation.planner import Planner
+from safeswitch.evaluation.rollout import Policy, rollout
+from safeswitch.leftturn.task import LeftTurnTask, TaskState
+from safeswitch.training.config import TrainConfig
+from safeswitch.training.ppo import SwitchPPO
+
+#: Environment ids of the demonstration scenarios: round ``r`` uses ``(r + 1) · this + i``.
+DEMO_ENV_OFFSET = 1_000_000
+
+
+def actor_mean(model: SwitchPPO, obs: torch.Tensor) -> torch.Tensor:
+    """The Gaussian's mean ``[B, 1]`` for normalised observations ``[B, 6]``."""
+    policy = model.policy
+    features = policy.extract_features(obs)
+    assert isinstance(features, torch.Tensor)  # a flat Box observation: one tensor
+    latent = policy.mlp_extractor.forward_actor(features)
+    return policy.action_net(latent)
+
+
+def fit_actor(
+    model: SwitchPPO, obs: NDArray[np.float32], actions: NDArray[np.float32], epochs: int, lr: float
+) -> float:
+    """Fit the actor's mean to ``actions`` ``[N]`` at normalised ``obs`` ``[N, 6]``; returns
+    the last epoch's mean squared error."""
+    x = torch.as_tensor(obs)
+    y = torch.as_tensor(actions).reshape(-1, 1)
+    params = list(model.policy.mlp_extractor.policy_net.parameters())
+    params += list(model.policy.action_net.parameters())
+    optimiser = torch.optim.Adam(params, lr=lr)
+    generator = torch.Generator().manual_seed(int(model.seed or 0))
+    batch = 1024
+    loss_sum = 0.0
+    for _ in range(epochs):
+        order = torch.randperm(x.shape[0], generator=generator)
+        loss_sum = 0.0
+        for start in range(0, x.shape[0], batch):
+            idx = order[start : start + batch]
+            loss = torch.mean((actor_mean(model, x[idx]) - y[idx]) ** 2)
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            loss_sum += float(loss.detach()) * len(idx)
+    return loss_sum / max(x.shape[0], 1)
+
+
+def _labelling_driver(
+    planner: Planner,
+    learner: tuple[SwitchPPO, NDArray[np.float64], NDArray[np.float64]] | None,
+    store: tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]],
+) -> Policy:
+    """A rollout policy that stores every observation with the planner's action and drives
+    with the planner (``learner`` None) or with the clone (``(model, obs mean, obs std)``)."""
+
+    def drive(obs: NDArray[np.float32], state: TaskState, tick: int) -> NDArray[np.float64]:
+        expert = planner(obs, state, tick)
+        store[0].append(obs.copy())
+        store[1].append(expert.astype(np.float32))
+        if learner is None:
+            return expert
+        model, mean, std = learner
+        z = torch.as_tensor(((obs - mean) / std).astype(np.float32))
+        with torch.no_grad():
+            return np.clip(actor_mean(model, z).numpy()[:, 0].astype(np.float64), -1.0, 1.0)
+
+    return drive
+
+
+def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict[str, Any]:
+    """Clone the planner into ``model``'s actor and set ``env``'s observation statistics.
+
+    Returns:
+        What it did: episodes driven, samples, collisions and episodes with a safety action
+        (all rounds), the final fit's mean squared error, wall time.
+    """
+    ws = config.warm_start
+    began = time.perf_counter()
+    task = LeftTurnTask(config.env)
+    planner = Planner(task)
+    learner_task = LeftTurnTask(dataclasses.replace(config.env, switching="certified"))
+    store: tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]] = ([], [])
+    observations, labels = store
+    collisions = safety_episodes = 0
+    mse = float("nan")
+    mean = np.zeros(6)
+    std = np.ones(6)
+    for round_ in range(ws.rounds + 1):
+        ids = (round_ + 1) * DEMO_ENV_OFFSET + np.arange(ws.episodes)
+        scenarios = task.draw_scenarios(config.seed, ids, np.zeros(ws.episodes, dtype=np.int64))
+
+        drive = _labelling_driver(planner, None if round_ == 0 else (model, mean, std), store)
+        result = rollout(task if round_ == 0 else learner_task, scenarios, drive)
+        collisions += int(result.collision.sum())
+        safety_episodes += int((result.safety_steps > 0).sum())
+        if round_ == 0:
+            demos = np.concatenate(observations).astype(np.float64)
+            mean, std = demos.mean(axis=0), np.sqrt(demos.var(axis=0) + env.epsilon)
+        x = ((np.concatenate(observations) - mean) / std).astype(np.float32)
+        x = np.clip(x, -env.clip_obs, env.clip_obs)
+        mse = fit_actor(model, x, np.concatenate(labels), ws.epochs, ws.learning_rate)
+    rms = env.obs_rms
+    assert isinstance(rms, RunningMeanStd)  # a Box observation space: one set of statistics
+    rms.mean, rms.var, rms.count = mean.copy(), std**2 - env.epsilon, float(len(demos))
+    return {
+        "episodes": ws.episodes * (ws.rounds + 1),
+        "samples": int(sum(len(o) for o in observations)),
+        "collisions": collisions,
+        "safety_activation_episodes": safety_episodes,
+        "mse": round(mse, 6),
+        "wall_time_s": round(time.perf_counter() - began, 2),
+    }

@@ -1,0 +1,161 @@
+"""Warm start (behaviour cloning of the planner) and the actor's own learning-rate schedule."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.vec_env import VecNormalize
+
+from safeswitch.core.config import ConfigError, from_dict
+from safeswitch.evaluation.evaluate import scenario_set
+from safeswitch.evaluation.planner import Planner
+from safeswitch.evaluation.policies import load_policy
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training.callbacks import TrainingMonitor
+from safeswitch.training.config import TrainConfig
+from safeswitch.training.run import build_model, train
+
+BASE = {
+    "timesteps": 2048,
+    "n_envs": 8,
+    "seed": 5,
+    "checkpoint_every": 1024,
+    "eval_episodes": 0,
+    "torch_threads": 1,
+    "env": {"switching": "paper", "episode": {"learned_scope": "episode", "horizon_s": 4.0}},
+}
+
+
+def config(**sections):
+    data = dict(BASE)
+    for key, value in sections.items():
+        data[key] = value
+    return from_dict(TrainConfig, data)
+
+
+def actor_state(model):
+    return [p.detach().clone() for p in model.policy.mlp_extractor.policy_net.parameters()]
+
+
+def imitation_error(policy, task, planner, seed):
+    """Mean squared difference between the policy's and the planner's actions on the states
+    the planner visits."""
+    scenarios, _ = scenario_set(task, "random", 40, seed)
+    errors = []
+
+    def drive(obs, state, tick):
+        expert = planner(obs, state, tick)
+        errors.append(np.mean((policy.act(obs) - expert) ** 2))
+        return expert
+
+    rollout(task, scenarios, drive)
+    return float(np.mean(errors))
+
+
+@pytest.fixture(scope="module")
+def cloned(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("runs")
+    warm = config(
+        warm_start={"episodes": 40, "rounds": 1, "epochs": 4},
+        ppo={"actor_learning_rate": 1e-4, "actor_frozen_steps": 10**6, "learn_log_std": False},
+    )
+    cold = config()
+    train(warm, folder / "warm", progress_bar=False)
+    train(cold, folder / "cold", progress_bar=False)
+    return warm, folder
+
+
+def test_the_warm_started_actor_imitates_the_planner_far_better_than_a_fresh_one(cloned):
+    warm, folder = cloned
+    task = LeftTurnTask(warm.env)
+    planner = Planner(task)
+    seed = 12345  # scenarios neither run trained on
+    cloned_error = imitation_error(load_policy(folder / "warm"), task, planner, seed)
+    fresh_error = imitation_error(load_policy(folder / "cold"), task, planner, seed)
+    assert cloned_error < 0.25 * fresh_error
+    record = json.loads((folder / "warm" / "warm_start.json").read_text())
+    assert record["episodes"] == 80 and record["samples"] == 80 * 200
+    assert record["collisions"] == 0  # the clone drove under the certified logic
+    metrics = json.loads((folder / "warm" / "metrics.json").read_text())
+    assert metrics["warm_start"] == record
+    assert json.loads((folder / "cold" / "metrics.json").read_text())["warm_start"] is None
+
+
+def test_a_frozen_actor_does_not_move_while_the_value_function_learns(tmp_path, monkeypatch):
+    frozen = config(
+        ppo={"actor_learning_rate": 1e-3, "actor_frozen_steps": 10**6, "learn_log_std": False}
+    )
+    snapshots = {}
+    original = TrainingMonitor._on_training_start
+
+    def remember(self):
+        original(self)
+        snapshots["actor"] = actor_state(self.model)
+        snapshots["critic"] = [p.detach().clone() for p in self.model.policy.value_net.parameters()]
+        snapshots["log_std"] = self.model.policy.log_std.detach().clone()
+
+    monkeypatch.setattr(TrainingMonitor, "_on_training_start", remember)
+    train(frozen, tmp_path / "run", progress_bar=False)
+    model = load_policy(tmp_path / "run").model
+    for before, after in zip(snapshots["actor"], actor_state(model), strict=True):
+        assert torch.equal(before, after)
+    assert torch.equal(snapshots["log_std"], model.policy.log_std)
+    moved = [
+        not torch.equal(b, a)
+        for b, a in zip(snapshots["critic"], model.policy.value_net.parameters(), strict=True)
+    ]
+    assert all(moved)
+
+
+def test_the_actor_rate_is_zero_then_ramps_then_holds(tmp_path):
+    c = config(
+        ppo={"actor_learning_rate": 1e-4, "actor_frozen_steps": 1000, "actor_ramp_steps": 2000}
+    )
+    model = build_model(c, VecNormalize(LeftTurnVecEnv(2, config=c.env, seed=0)), None)
+    assert len(model.policy.optimizer.param_groups) == 2
+    assert model.actor_rate(0) == 0.0 and model.actor_rate(999) == 0.0
+    assert model.actor_rate(2000) == pytest.approx(0.5e-4)
+    assert model.actor_rate(3000) == model.actor_rate(10**7) == pytest.approx(1e-4)
+    plain = build_model(config(), VecNormalize(LeftTurnVecEnv(2, config=c.env, seed=0)), None)
+    assert len(plain.policy.optimizer.param_groups) == 1  # Table II: one rate for everything
+
+
+def test_an_interrupted_warm_started_run_resumes_with_its_parameter_groups(tmp_path, monkeypatch):
+    c = replace(
+        config(
+            warm_start={"episodes": 16, "rounds": 0, "epochs": 1},
+            ppo={"actor_learning_rate": 1e-4, "actor_ramp_steps": 1000},
+        ),
+        timesteps=4096,
+    )
+    original = TrainingMonitor._on_rollout_end
+
+    def interrupt(self):
+        original(self)
+        if self.num_timesteps >= 2048:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        train(c, tmp_path / "run", progress_bar=False)
+    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", original)
+    metrics = train(c, tmp_path / "run", resume=True, progress_bar=False)
+    assert metrics["timesteps"] >= 4096
+    assert metrics["warm_start"]["episodes"] == 16
+    model = load_policy(tmp_path / "run").model
+    assert len(model.policy.optimizer.param_groups) == 2
+
+
+def test_bad_warm_start_and_actor_settings_are_named():
+    with pytest.raises(ConfigError, match="episodes"):
+        config(warm_start={"episodes": -1})
+    with pytest.raises(ConfigError, match="actor_learning_rate"):
+        config(ppo={"actor_learning_rate": 0.0})
+    with pytest.raises(ConfigError, match="actor_frozen_steps"):
+        config(ppo={"actor_frozen_steps": -5})
+    with pytest.raises(ConfigError, match="warm_start"):
+        config(warm_start={"episode": 3})
