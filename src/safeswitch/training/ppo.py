@@ -7,8 +7,8 @@ most rollouts soon after the actor was released at Table II's rate). So the acto
 policy network and its output layer) gets its own Adam parameter group whose learning rate is
 0 for the first ``actor_frozen_steps`` timesteps — the value function learns the cloned
 policy's returns — and then rises linearly to ``actor_learning_rate`` over
-``actor_ramp_steps``. The value function keeps the configured learning rate throughout. With the defaults (no separate rate) this is
-SB3's PPO unchanged.
+``actor_ramp_steps``. The value function keeps the configured learning rate throughout.
+With the defaults (no separate rate) this is SB3's PPO unchanged.
 
 The schedule is saved with the model (SB3 saves the attributes), so ``load`` and ``--resume``
 rebuild the same parameter groups.
