@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
+from safeswitch.leftturn.switching import braking_distance
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.sim.vehicle import steady_state_throttle
 
@@ -165,7 +166,7 @@ class Planner:
 
     def _firing_distance(self, v: FloatArray) -> FloatArray:
         """How far before the zone the paper logic fires at speed ``v`` (Eq. 3 + margins)."""
-        return v * v / (2.0 * self._emergency) + v * self._latency + self._stop_margin
+        return braking_distance(v, self._emergency) + v * self._latency + self._stop_margin
 
     def _yield(
         self, s: FloatArray, v_n: FloatArray, s_n: FloatArray, fast: FloatArray
