@@ -6,7 +6,7 @@ import yaml
 from safeswitch.cli import main
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig, dump_config, load_config
-from safeswitch.training.run import train
+from safeswitch.training.run import RunDirectoryError, train
 
 SMALL = {
     "timesteps": 4096,
@@ -150,3 +150,11 @@ def test_bench_json_reports_positive_throughput(capsys):
         assert figures[key] > 0
     # Batching pays: a 4,096-env step is far cheaper per environment than the single Env's.
     assert figures["vec_env_steps_per_s_4096"] > 50 * figures["env_steps_per_s"]
+
+
+def test_resuming_a_run_interrupted_before_its_first_checkpoint_says_what_to_do(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text(dump_config(TrainConfig()))
+    with pytest.raises(RunDirectoryError, match=r"no complete checkpoint.*delete it"):
+        train(TrainConfig(), run, resume=True, progress_bar=False)

@@ -152,7 +152,10 @@ def train(
         config = load_config(run / "config.yaml")
         checkpoints = complete_checkpoints(run)
         if not checkpoints:
-            raise RunDirectoryError(f"--resume: {run} has no complete checkpoint yet")
+            raise RunDirectoryError(
+                f"--resume: {run} has no complete checkpoint yet (it was interrupted before "
+                "the first one, e.g. during the warm start); delete it and start again"
+            )
         latest = checkpoints[-1]
         state = json.loads((latest / "state.json").read_text(encoding="utf-8"))
         totals, counters = state["totals"], state["episode_counters"]
