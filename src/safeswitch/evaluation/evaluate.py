@@ -65,11 +65,10 @@ def controller_setup(
         scope: LearnedScope = "episode" if controller == "planner" else "never"
         env_config = replace(LeftTurnConfig(), switching="paper")
         env_config = replace(env_config, episode=replace(env_config.episode, learned_scope=scope))
-        policy = {
-            "rule": _rule_policy,
-            "oracle": None,
-            "planner": Planner(LeftTurnTask(replace(env_config, scenario=None))),
-        }[controller]
+        if controller == "planner":
+            policy = Planner(LeftTurnTask(env_config))
+        else:
+            policy = _rule_policy if controller == "rule" else None
     else:
         raise ValueError(
             f"--controller must be 'learned', 'rule', 'planner' or 'oracle', got {controller!r}"
