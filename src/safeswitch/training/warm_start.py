@@ -58,9 +58,8 @@ def fit_actor(
     the last epoch's mean squared error."""
     x = torch.as_tensor(obs)
     y = torch.as_tensor(actions).reshape(-1, 1)
-    params = list(model.policy.mlp_extractor.policy_net.parameters())
-    params += list(model.policy.action_net.parameters())
-    optimiser = torch.optim.Adam(params, lr=lr)
+    # A learned log std gets no gradient from this loss, so Adam leaves it alone.
+    optimiser = torch.optim.Adam(model.actor_parameters(), lr=lr)
     generator = torch.Generator().manual_seed(int(model.seed or 0))
     batch = 1024
     loss_sum = 0.0
