@@ -4,7 +4,6 @@ import pytest
 import yaml
 
 from safeswitch.cli import main
-from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig, dump_config, load_config
 from safeswitch.training.run import RunDirectoryError, train
 
@@ -59,24 +58,14 @@ def test_cli_trains_end_to_end_and_writes_a_complete_run_directory(tmp_path, cap
     assert "collisions during training: 0" in capsys.readouterr().out
 
 
-def test_an_interrupted_run_is_incomplete_and_resumes_to_the_end(tmp_path, monkeypatch):
+def test_an_interrupted_run_is_incomplete_and_resumes_to_the_end(tmp_path, interrupted_training):
     run = tmp_path / "run"
     config = load_config(write_config(tmp_path, SMALL | {"timesteps": 8192}))
-    original = TrainingMonitor._on_rollout_end
-
-    def interrupt_after_4096(self):
-        original(self)
-        if self.num_timesteps >= 4096:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", interrupt_after_4096)
-    with pytest.raises(KeyboardInterrupt):
-        train(config, run, progress_bar=False)
+    interrupted_training(config, run, at=4096)
     assert not (run / "metrics.json").exists()  # never looks complete
     checkpoints = sorted((run / "checkpoints").glob("step_*"))
     assert checkpoints and (checkpoints[-1] / "state.json").is_file()
     episodes_before = json.loads((checkpoints[-1] / "state.json").read_text())["totals"]["episodes"]
-    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", original)
     assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["timesteps"] >= 8192

@@ -124,7 +124,9 @@ def test_the_actor_rate_is_zero_then_ramps_then_holds(tmp_path):
     assert len(plain.policy.optimizer.param_groups) == 1  # Table II: one rate for everything
 
 
-def test_an_interrupted_warm_started_run_resumes_with_its_parameter_groups(tmp_path, monkeypatch):
+def test_an_interrupted_warm_started_run_resumes_with_its_parameter_groups(
+    tmp_path, interrupted_training
+):
     c = replace(
         config(
             warm_start={"episodes": 16, "rounds": 0, "epochs": 1},
@@ -132,17 +134,7 @@ def test_an_interrupted_warm_started_run_resumes_with_its_parameter_groups(tmp_p
         ),
         timesteps=4096,
     )
-    original = TrainingMonitor._on_rollout_end
-
-    def interrupt(self):
-        original(self)
-        if self.num_timesteps >= 2048:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", interrupt)
-    with pytest.raises(KeyboardInterrupt):
-        train(c, tmp_path / "run", progress_bar=False)
-    monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", original)
+    interrupted_training(c, tmp_path / "run", at=2048)
     metrics = train(c, tmp_path / "run", resume=True, progress_bar=False)
     assert metrics["timesteps"] >= 4096
     assert metrics["warm_start"]["episodes"] == 16
