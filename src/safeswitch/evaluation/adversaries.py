@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.evaluation.rollout import Policy
+from safeswitch.leftturn.spaces import speed_tracking_action
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
-from safeswitch.sim.vehicle import steady_state_throttle
 
 FloatArray = NDArray[np.float64]
 
@@ -59,24 +59,16 @@ def enter_then_stop(task: LeftTurnTask, depth: FloatArray) -> Policy:
     return policy
 
 
-def cruise_throttle(task: LeftTurnTask, speed: float) -> float:
-    """The throttle that holds ``speed`` [m/s] on the task's vehicle."""
-    return float(steady_state_throttle(task.config.vehicle, np.asarray(speed)))
-
-
 def creep(task: LeftTurnTask, target_speed: float = 1.5, from_m: float = 15.0) -> Policy:
     """Cruises at the speed limit until ``from_m`` metres before the conflict zone, then creeps
     into and through it at walking pace (P control around the throttle that holds each speed)."""
     limit = task.config.controllers.speed_limit
-    slow, fast = cruise_throttle(task, target_speed), cruise_throttle(task, limit)
     entry = task.conflict.zone_a[0]
 
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
         near = state.world.progress[:, 0] > entry - from_m
         target = np.where(near, target_speed, limit)
-        base = np.where(near, slow, fast)
-        throttle = np.clip(base + 0.5 * (target - obs[:, 2]), 0.0, 1.0)
-        return 2.0 * throttle - 1.0
+        return speed_tracking_action(task.config.vehicle, target, obs[:, 2], 0.5)
 
     return policy
 
@@ -97,12 +89,11 @@ def broken(rng: np.random.Generator, p_invalid: float = 0.3) -> Policy:
 def noisy_cruise(task: LeftTurnTask, rng: np.random.Generator, sigma: float = 0.5) -> Policy:
     """A sensible driver (P control to the speed limit) with Gaussian action noise."""
     target = task.config.controllers.speed_limit
-    base = cruise_throttle(task, target)
 
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        throttle = np.clip(base + 0.5 * (target - obs[:, 2]), 0.0, 1.0)
+        action = speed_tracking_action(task.config.vehicle, target, obs[:, 2], 0.5)
         noise = rng.normal(0.0, sigma, obs.shape[0]) if sigma > 0 else 0.0
-        return np.clip(2.0 * throttle - 1.0 + noise, -1.0, 1.0)
+        return np.clip(action + noise, -1.0, 1.0)
 
     return policy
 

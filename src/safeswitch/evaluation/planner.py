@@ -33,9 +33,9 @@ from numpy.typing import NDArray
 
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
+from safeswitch.leftturn.spaces import speed_tracking_action
 from safeswitch.leftturn.switching import braking_distance
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
-from safeswitch.sim.vehicle import steady_state_throttle
 
 FloatArray = NDArray[np.float64]
 
@@ -183,6 +183,4 @@ class Planner:
         return np.clip(np.maximum(start, c.creep * distance / left), 0.0, fast)
 
     def _track(self, target: FloatArray, speed: FloatArray) -> FloatArray:
-        throttle = steady_state_throttle(self._vehicle, target)
-        throttle = np.clip(throttle + self.config.speed_gain * (target - speed), 0.0, 1.0)
-        return 2.0 * throttle - 1.0
+        return speed_tracking_action(self._vehicle, target, speed, self.config.speed_gain)

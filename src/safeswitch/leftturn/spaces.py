@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from gymnasium import spaces
+from numpy.typing import NDArray
 
 from safeswitch.leftturn.task import OBSERVATION_HIGH, OBSERVATION_LOW
+from safeswitch.sim.geometry import FloatArray
+from safeswitch.sim.vehicle import VehicleParams, steady_state_throttle
 
 
 def observation_space() -> spaces.Box:
@@ -16,3 +21,20 @@ def observation_space() -> spaces.Box:
 def action_space() -> spaces.Box:
     """One number in [-1, 1]; throttle = (a + 1) / 2."""
     return spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+
+
+def speed_tracking_action(
+    vehicle: VehicleParams,
+    target: FloatArray | float,
+    speed: NDArray[Any],
+    gain: float,
+) -> NDArray[Any]:
+    """The action whose throttle tracks ``target`` [m/s]: the throttle that holds it on a level
+    road plus ``gain`` per m/s of error, within [0, 1] (how the scripted learned controllers —
+    the planner, the adversaries' cruises — drive). A scalar target is used as a Python float,
+    so a float32 ``speed`` (an observation) keeps float32 arithmetic."""
+    goal: Any = float(target) if np.ndim(target) == 0 else target
+    held = steady_state_throttle(vehicle, np.asarray(goal, dtype=np.float64))
+    base: Any = float(held) if np.ndim(target) == 0 else held
+    throttle = np.clip(base + gain * (goal - speed), 0.0, 1.0)
+    return np.asarray(2.0 * throttle - 1.0)
