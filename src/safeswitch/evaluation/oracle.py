@@ -152,30 +152,41 @@ class Oracle:
         """``V(s)²``: the squared speed limit at arc lengths ``s`` (linear between waypoints)."""
         return np.interp(s, self._grid, self._v_sq)
 
-    def _max_accel(self, speed: FloatArray) -> FloatArray:
+    def max_accel(self, speed: FloatArray) -> FloatArray:
+        """``a_max(v)``: the engine's full-throttle acceleration net of driving resistance,
+        capped at the longitudinal comfort limit [m/s²]."""
         p = self.task.config.vehicle
         engine = (available_drive_force(p, speed) - driving_resistance(p, speed)) / p.mass
         return np.minimum(engine, self.limits.accel_lon)
 
     def north_progress(self, scenarios: Scenarios) -> tuple[FloatArray, FloatArray]:
-        """The north car's arc length on every tick ``[B, H + 1]`` (simulated on the plant; the
-        ego's actions cannot change it), and the ego's start ``(s0, v0)`` as ``[B, 2]``."""
+        """The north car's arc length on every tick ``[B, H + 1]`` and the ego's start
+        ``(s0, v0)`` ``[B, 2]`` (see :meth:`north_trajectory`)."""
+        progress, _, start = self.north_trajectory(scenarios)
+        return progress, start
+
+    def north_trajectory(self, scenarios: Scenarios) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The north car's arc length and speed on every tick, each ``[B, H + 1]`` (simulated
+        on the plant; the ego's actions cannot change them), and the ego's start ``(s0, v0)``
+        as ``[B, 2]``."""
         task = self.task
         state = task.initial(scenarios)
         start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], axis=1)
-        out = [state.world.progress[:, 1].copy()]
+        progress = [state.world.progress[:, 1].copy()]
+        speed = [state.world.vehicles.speed[:, 1].copy()]
         hold = np.zeros(state.batch_size)
         for _ in range(task.config.episode.horizon_ticks):
             state, _ = task.step(state, hold)
-            out.append(state.world.progress[:, 1].copy())
-        return np.stack(out, axis=1), start
+            progress.append(state.world.progress[:, 1].copy())
+            speed.append(state.world.vehicles.speed[:, 1].copy())
+        return np.stack(progress, axis=1), np.stack(speed, axis=1), start
 
     def _fastest(self, s: FloatArray, v: FloatArray) -> FloatArray:
         """The fastest allowed acceleration: as hard as the engine and comfort allow, lowered
         until the next speed is within W at the next position (a fixed point, reached in a step
         or two), never below ``-d``."""
         dt = self.task.config.episode.dt
-        a = self._max_accel(v)
+        a = self.max_accel(v)
         for _ in range(3):
             s_next = s + v * dt + 0.5 * a * dt * dt
             w = np.sqrt(np.maximum(np.interp(s_next, self._grid, self._w_sq), 0.0))
@@ -197,7 +208,7 @@ class Oracle:
         s, v = start[:, 0].copy(), start[:, 1].copy()
         s_out, v_out = [s.copy()], [v.copy()]
         for k in range(self.task.config.episode.horizon_ticks if ticks is None else ticks):
-            a = np.clip(control(k, s, v), -d, self._max_accel(v))
+            a = np.clip(control(k, s, v), -d, self.max_accel(v))
             stops = v + a * dt < 0.0  # braking to rest within the tick
             with np.errstate(divide="ignore", invalid="ignore"):
                 s = np.where(stops, s + v * v / (2.0 * d), s + v * dt + 0.5 * a * dt * dt)

@@ -9,7 +9,7 @@ needed to draw them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -67,6 +67,10 @@ class Scenarios:
     ego_speed: FloatArray
     north_speed: FloatArray
     arrival_offset: FloatArray
+
+    def take(self, rows: NDArray[Any]) -> Scenarios:
+        """The scenarios at ``rows`` (indices or a mask; repeats allowed), as a new batch."""
+        return Scenarios(*(np.asarray(getattr(self, f.name))[rows] for f in fields(self)))
 
     def north_start_distance(self, speed_limit: float) -> FloatArray:
         """North's path distance to the conflict point at the start [m]: it arrives

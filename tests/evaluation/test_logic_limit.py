@@ -1,0 +1,108 @@
+"""The logic-aware limit: a lower bound on the time to clear of every controller that never
+triggers the paper switching logic."""
+
+import numpy as np
+import pytest
+
+from safeswitch.core.config import ConfigError
+from safeswitch.evaluation.evaluate import controller_setup, scenario_set
+from safeswitch.evaluation.logic_limit import PaperLogicLimit
+from safeswitch.evaluation.oracle import Oracle
+from safeswitch.evaluation.planner import Planner, PlannerConfig
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn.spaces import speed_tracking_action
+from safeswitch.leftturn.task import LeftTurnTask
+
+EPISODES = 40
+
+
+@pytest.fixture(scope="module")
+def setup():
+    config, _ = controller_setup("planner", None, None)  # the paper logic, learned throughout
+    task = LeftTurnTask(config)
+    scenarios, _ = scenario_set(task, "random", EPISODES, 57)
+    return task, scenarios, Oracle(task).plan(scenarios).time_to_clear
+
+
+@pytest.fixture(scope="module")
+def bounds(setup):
+    task, scenarios, _ = setup
+    return {
+        (braking, logic): PaperLogicLimit(task, braking=braking, logic=logic).times(scenarios)
+        for braking, logic in (("comfort", False), ("comfort", True), ("throttle", True))
+    }
+
+
+def test_without_the_logic_it_is_the_oracle_up_to_the_grid(setup, bounds):
+    _, _, oracle = setup
+    free = bounds["comfort", False]
+    assert np.isfinite(free).all()
+    assert np.all(free <= oracle + 1e-9)  # a relaxation: never slower than the exact plan
+    assert np.mean(oracle - free) < 0.05  # and a tight one
+
+
+def test_the_logic_costs_time_and_a_closed_throttle_more(setup, bounds):
+    _, _, oracle = setup
+    free, paper, throttle = (
+        bounds["comfort", False],
+        bounds["comfort", True],
+        bounds["throttle", True],
+    )
+    assert np.all(paper >= free) and np.all(throttle >= paper)
+    # the logic fires on most of the oracle's plans (benchmarks/planner_gap.py): it must bite
+    assert np.mean(paper - oracle) > 0.3
+    assert np.sum(paper > oracle + 0.5) > EPISODES // 4
+
+
+def test_no_controller_that_never_triggers_the_logic_clears_sooner(setup, bounds):
+    """Three planners and speed trackers (targets below the turn's comfort speed) on the same
+    scenarios: every episode without a safety action, comfort violation or speeding clears no
+    sooner than the bound — and some come close to it, so the bound is not vacuous."""
+    task, scenarios, _ = setup
+    limit = PaperLogicLimit(task, braking="throttle")
+    v_max = limit.oracle.limits.max_speed
+    assert v_max <= limit.top_speed < v_max + 0.01
+    planners = [
+        PlannerConfig(),
+        PlannerConfig(top_speed_kmh=27.0, curve_decel=1.5),
+        PlannerConfig(top_speed_kmh=25.0, accel_lat=2.5, yield_accel=1.0),
+    ]
+    rng = np.random.default_rng(3)
+    targets = rng.uniform(1.5, 5.7, 2 * EPISODES)
+    vehicle = task.config.vehicle
+    drivers = [Planner(task, c) for c in planners]
+    drivers.append(
+        lambda obs, state, tick: speed_tracking_action(
+            vehicle, targets, state.world.vehicles.speed[:, 0], 1.0
+        )
+    )
+    times, clean, bound = [], [], []
+    for driver in drivers:
+        rows = np.arange(EPISODES) if driver is not drivers[-1] else np.tile(np.arange(EPISODES), 2)
+        top = np.zeros(rows.size)
+
+        def watch(state, record, tick, top=top):
+            np.maximum(top, state.world.vehicles.speed[:, 0], out=top)
+
+        result = rollout(task, scenarios.take(rows), driver, on_tick=watch)
+        times.append(result.time_to_clear)
+        bound.append(bounds["throttle", True][rows])
+        clean.append(
+            (result.safety_steps == 0)
+            & (result.comfort_violation_steps == 0)
+            & (top <= limit.top_speed)
+            & np.isfinite(result.time_to_clear)
+        )
+    assert clean[0].all()  # the default planner never needs the Safety controller
+    time, ok, low = np.concatenate(times), np.concatenate(clean), np.concatenate(bound)
+    assert ok.sum() > 3 * EPISODES
+    assert np.all(time[ok] >= low[ok] - 1e-9)
+    assert np.min(time[ok] - low[ok]) < 0.3
+
+
+def test_bad_settings_are_named(setup):
+    task, _, _ = setup
+    with pytest.raises(ConfigError, match="braking"):
+        PaperLogicLimit(task, braking="hard")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="speed_step"):
+        PaperLogicLimit(task, speed_step=0.0)
