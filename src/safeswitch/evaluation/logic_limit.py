@@ -37,6 +37,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import jit
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.leftturn.scenarios import Scenarios
@@ -165,7 +166,7 @@ def _crossing(grid: FloatArray, cap: FloatArray, i: int, j: int, target: float) 
     return float(grid[i] + t * (grid[j] - grid[i]))
 
 
-@numba.njit(cache=True)
+@jit
 def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: float,
             cut_hi: float) -> int:  # fmt: skip
     """Remove the open interval ``(cut_lo, cut_hi)`` from the ``n`` intervals ``[lo, hi]`` in
@@ -195,7 +196,7 @@ def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: fl
     return k
 
 
-@numba.njit(cache=True)
+@jit
 def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: NDArray[np.float64],
                 accel: NDArray[np.float64], decel: NDArray[np.float64], curve: NDArray[np.float64],
                 c: NDArray[np.float64]) -> int:  # fmt: skip
