@@ -151,3 +151,28 @@ def test_bad_warm_start_and_actor_settings_are_named():
         config(ppo={"actor_frozen_steps": -5})
     with pytest.raises(ConfigError, match="warm_start"):
         config(warm_start={"episode": 3})
+    with pytest.raises(ConfigError, match=r"warm_start\.planner"):
+        config(warm_start={"planner": {"lateral": 2.5}})
+    with pytest.raises(ConfigError, match="accel_lat"):
+        config(warm_start={"planner": {"accel_lat": -1.0}})
+
+
+def test_the_warm_start_demonstrates_with_its_configured_planner(tmp_path, monkeypatch):
+    import safeswitch.training.warm_start as ws
+
+    seen = []
+
+    class Recording(Planner):
+        def __init__(self, task, planner_config=None):
+            seen.append(planner_config)
+            super().__init__(task, planner_config)
+
+    monkeypatch.setattr(ws, "Planner", Recording)
+    run = config(
+        warm_start={"episodes": 4, "rounds": 0, "epochs": 1, "planner": {"accel_lat": 2.6}}
+    )
+    assert run.warm_start.planner.accel_lat == 2.6
+    train(replace(run, timesteps=1024), tmp_path / "run", progress_bar=False)
+    assert [c.accel_lat for c in seen] == [2.6]
+    saved = (tmp_path / "run" / "config.yaml").read_text()
+    assert "accel_lat: 2.6" in saved

@@ -15,6 +15,7 @@ from typing import Literal
 import yaml
 
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
+from safeswitch.evaluation.planner import PlannerConfig
 from safeswitch.leftturn.config import LeftTurnConfig
 
 
@@ -117,12 +118,16 @@ class WarmStartConfig:
             the certified switching logic, and the planner labels).
         epochs: Passes over all labels so far after each round.
         learning_rate: Adam step size of the cloning.
+        planner: Tuning of the planner that demonstrates and labels (default: the evaluation
+            baseline's). A lower ``accel_lat`` leaves the clone, which tracks the planner's
+            turn speed only approximately, a margin below the lateral comfort limit.
     """
 
     episodes: int = 0
     rounds: int = 2
     epochs: int = 8
     learning_rate: float = 1e-3
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
 
     def __post_init__(self) -> None:
         o = "warm_start"

@@ -108,7 +108,7 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
     ws = config.warm_start
     began = time.perf_counter()
     task = LeftTurnTask(config.env)
-    planner = Planner(task)
+    planner = Planner(task, ws.planner)
     learner_task = LeftTurnTask(dataclasses.replace(config.env, switching="certified"))
     store: tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]] = ([], [])
     observations, labels = store
