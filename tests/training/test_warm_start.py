@@ -1,6 +1,7 @@
 """Warm start (behaviour cloning of the planner) and the actor's own learning-rate schedule."""
 
 import json
+import pickle
 from dataclasses import replace
 
 import numpy as np
@@ -17,7 +18,8 @@ from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig
-from safeswitch.training.run import build_model, train
+from safeswitch.training.run import build_model, complete_checkpoints, train
+from safeswitch.training.warm_start import FrozenRunningMeanStd
 
 BASE = {
     "timesteps": 2048,
@@ -83,6 +85,34 @@ def test_the_warm_started_actor_imitates_the_planner_far_better_than_a_fresh_one
     metrics = json.loads((folder / "warm" / "metrics.json").read_text())
     assert metrics["warm_start"] == record
     assert json.loads((folder / "cold" / "metrics.json").read_text())["warm_start"] is None
+
+
+def checkpoints(run):
+    kept = complete_checkpoints(run)
+    assert len(kept) == 2
+    return kept
+
+
+def observation_statistics(path):
+    with open(path, "rb") as handle:
+        return pickle.load(handle).obs_rms
+
+
+def test_the_observation_statistics_stay_those_of_the_demonstrations(cloned, tmp_path):
+    """Between the two checkpoints a run keeps (1,024 PPO steps apart) the statistics do not
+    move after a warm start; left running (the control) they do."""
+    _, folder = cloned
+    frozen = [observation_statistics(p / "vecnormalize.pkl") for p in checkpoints(folder / "warm")]
+    assert all(isinstance(s, FrozenRunningMeanStd) for s in frozen)
+    np.testing.assert_array_equal(frozen[0].mean, frozen[1].mean)
+    np.testing.assert_array_equal(frozen[0].var, frozen[1].var)
+    thawed = config(warm_start={"episodes": 8, "rounds": 0, "epochs": 1, "freeze_obs_stats": False})
+    train(thawed, tmp_path / "thawed", progress_bar=False)
+    running = [
+        observation_statistics(p / "vecnormalize.pkl") for p in checkpoints(tmp_path / "thawed")
+    ]
+    assert not isinstance(running[1], FrozenRunningMeanStd)
+    assert np.abs(running[1].mean - running[0].mean).max() > 1e-3
 
 
 def test_a_frozen_actor_does_not_move_while_the_value_function_learns(tmp_path, monkeypatch):

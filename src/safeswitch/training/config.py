@@ -121,6 +121,11 @@ class WarmStartConfig:
         planner: Tuning of the planner that demonstrates and labels (default: the evaluation
             baseline's). A lower ``accel_lat`` leaves the clone, which tracks the planner's
             turn speed only approximately, a margin below the lateral comfort limit.
+        freeze_obs_stats: Keep ``VecNormalize``'s observation statistics at the
+            demonstrations' for the rest of the run. The clone was fitted to inputs normalised
+            with exactly these; left running, they drift with PPO's state distribution and
+            move the clone's cut/yield decisions (measured: the clone with the statistics of a
+            1.2 M-step run went from 21 to 205 episodes with a safety action).
     """
 
     episodes: int = 0
@@ -128,6 +133,7 @@ class WarmStartConfig:
     epochs: int = 8
     learning_rate: float = 1e-3
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    freeze_obs_stats: bool = True
 
     def __post_init__(self) -> None:
         o = "warm_start"

@@ -16,7 +16,8 @@ under the paper logic, so the actor first learns to imitate it:
    Gaussian's mean, ``epochs`` passes, Adam).
 
 The observation statistics of ``VecNormalize`` are set from the demonstrations, so the clone
-sees exactly the inputs PPO will give it. The scenarios come from the run's seed on
+sees exactly the inputs PPO will give it, and by default stay so for the whole run
+(``freeze_obs_stats``). The scenarios come from the run's seed on
 environment ids no training environment uses.
 """
 
@@ -40,6 +41,15 @@ from safeswitch.training.ppo import SwitchPPO
 
 #: Environment ids of the demonstration scenarios: round ``r`` uses ``(r + 1) · this + i``.
 DEMO_ENV_OFFSET = 1_000_000
+
+
+class FrozenRunningMeanStd(RunningMeanStd):
+    """Running statistics that no longer update: ``VecNormalize``'s observation statistics
+    after a warm start with ``freeze_obs_stats`` (pickled with it, so a resumed run and a
+    loaded policy keep them)."""
+
+    def update(self, arr: NDArray[np.float64]) -> None:
+        """Leave the statistics as they are."""
 
 
 def actor_mean(model: SwitchPPO, obs: torch.Tensor) -> torch.Tensor:
@@ -130,9 +140,10 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
         x = ((np.concatenate(observations) - mean) / std).astype(np.float32)
         x = np.clip(x, -env.clip_obs, env.clip_obs)
         mse = fit_actor(model, x, np.concatenate(labels), ws.epochs, ws.learning_rate)
-    rms = env.obs_rms
-    assert isinstance(rms, RunningMeanStd)  # a Box observation space: one set of statistics
+    assert isinstance(env.obs_rms, RunningMeanStd)  # a Box observation space: one set
+    rms = FrozenRunningMeanStd(shape=mean.shape) if ws.freeze_obs_stats else env.obs_rms
     rms.mean, rms.var, rms.count = mean.copy(), std**2 - env.epsilon, float(len(demos))
+    env.obs_rms = rms
     return {
         "episodes": ws.episodes * (ws.rounds + 1),
         "samples": int(sum(len(o) for o in observations)),
