@@ -41,6 +41,7 @@ from safeswitch.core.arrays import jit
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.switching import PaperSwitching, firing_distance, time_to_reach
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import closed_throttle_drag, driving_resistance
@@ -48,8 +49,10 @@ from safeswitch.sim.vehicle import closed_throttle_drag, driving_resistance
 Braking = Literal["comfort", "throttle"]
 
 # Layout of the scalar constants passed to the compiled kernel.
+# The paper logic's own constants travel separately (PaperSwitching.constants).
 _DT, _ZONE_A0, _ZONE_A1, _ZONE_B0, _ZONE_B1, _POINT_A, _POINT_B, _APPROACH = range(8)
-_THRESHOLD, _MIN_SPEED, _EMERGENCY, _LATENCY, _MARGIN, _STEP, _LOGIC = range(8, 15)
+_STEP, _LOGIC = range(8, 10)
+_THRESHOLD, _MIN_SPEED = 0, 1  # in PaperSwitching.constants
 
 
 class PaperLogicLimit:
@@ -108,11 +111,11 @@ class PaperLogicLimit:
         self._constants = np.array(
             [
                 config.episode.dt, geo.zone_a[0], geo.zone_a[1], geo.zone_b[0], geo.zone_b[1],
-                geo.s_point_a, geo.s_point_b, task.approach_distance, paper.ttr_threshold_s,
-                paper.min_speed, config.controllers.emergency_decel, paper.latency_s,
-                paper.stop_margin_m, speed_step, float(logic),
+                geo.s_point_a, geo.s_point_b, config.episode.approach_distance_m, speed_step,
+                float(logic),
             ]
         )  # fmt: skip
+        self._paper = PaperSwitching(paper, config.controllers.emergency_decel).constants
 
     def _curvature_bands(self, speeds: FloatArray) -> FloatArray:
         """``[bins, R, 2]``: for each speed, the arc-length intervals on which even that speed
@@ -150,8 +153,9 @@ class PaperLogicLimit:
         horizon without triggering the logic)."""
         north, north_speed, start = self.oracle.north_trajectory(scenarios)
         ticks = _reachable(
-            start, north, north_speed, self._accel, self._decel, self._curve, self._constants
-        )
+            start, north, north_speed, self._accel, self._decel, self._curve, self._constants,
+            self._paper,
+        )  # fmt: skip
         return np.where(ticks >= 0, ticks * self.task.config.episode.dt, np.nan)
 
 
@@ -199,7 +203,7 @@ def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: fl
 @jit
 def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: NDArray[np.float64],
                 accel: NDArray[np.float64], decel: NDArray[np.float64], curve: NDArray[np.float64],
-                c: NDArray[np.float64]) -> int:  # fmt: skip
+                c: NDArray[np.float64], paper: NDArray[np.float64]) -> int:  # fmt: skip
     """First tick on which the ego can be past its conflict zone, or -1 (see the class)."""
     dt, dv = c[_DT], c[_STEP]
     bins = accel.shape[0]
@@ -216,7 +220,7 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
         s_n, v_n = north[k + 1], north_speed[k + 1]
         north_in = c[_ZONE_B0] <= s_n <= c[_ZONE_B1]
         window = (c[_POINT_B] - s_n <= c[_APPROACH]) and (s_n <= c[_ZONE_B1])
-        ttr_n = (c[_POINT_B] - s_n) / max(v_n, c[_MIN_SPEED])
+        ttr_n = time_to_reach(c[_POINT_B] - s_n, v_n, paper[_MIN_SPEED])
         new_lo[:] = np.inf
         new_hi[:] = -np.inf
         for j in range(bins):
@@ -237,14 +241,12 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
                 if c[_LOGIC] > 0 and window and n > 0:
                     # Fires for every true speed in (v2 - dv, v2] from the slowest one's braking
                     # point on, up to where the fastest one's TTR would leave a gap.
-                    slow = max(v2 - dv, 0.0)
-                    reach = slow * slow / (2 * c[_EMERGENCY]) + slow * c[_LATENCY] + c[_MARGIN]
+                    reach = firing_distance(max(v2 - dv, 0.0), paper)
                     fire_lo = max(c[_ZONE_A0] - reach, c[_POINT_A] - c[_APPROACH])
                     fire_hi = c[_ZONE_A1]
-                    if ttr_n >= c[_THRESHOLD]:
-                        fire_hi = min(
-                            fire_hi, c[_POINT_A] - (ttr_n - c[_THRESHOLD]) * max(v2, c[_MIN_SPEED])
-                        )
+                    gap = ttr_n - paper[_THRESHOLD]
+                    if gap >= 0:
+                        fire_hi = min(fire_hi, c[_POINT_A] - gap * max(v2, paper[_MIN_SPEED]))
                     n = _remove(piece_lo, piece_hi, n, fire_lo + tol, fire_hi)
                 for i in range(n):
                     new_lo[j2] = min(new_lo[j2], piece_lo[i])
@@ -260,10 +262,10 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
 @numba.njit(cache=True, parallel=True)
 def _reachable(start: NDArray[np.float64], north: NDArray[np.float64],
                north_speed: NDArray[np.float64], accel: NDArray[np.float64],
-               decel: NDArray[np.float64], curve: NDArray[np.float64],
-               c: NDArray[np.float64]) -> NDArray[np.int64]:  # fmt: skip
+               decel: NDArray[np.float64], curve: NDArray[np.float64], c: NDArray[np.float64],
+               paper: NDArray[np.float64]) -> NDArray[np.int64]:  # fmt: skip
     out = np.empty(start.shape[0], dtype=np.int64)
     for b in numba.prange(start.shape[0]):
         out[b] = _clear_tick(start[b, 0], start[b, 1], north[b], north_speed[b], accel, decel,
-                             curve, c)  # fmt: skip
+                             curve, c, paper)  # fmt: skip
     return out

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.leftturn.spaces import speed_tracking_action
-from safeswitch.leftturn.switching import braking_distance
+from safeswitch.leftturn.switching import PaperSwitching, firing_distance
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 
 FloatArray = NDArray[np.float64]
@@ -120,9 +120,10 @@ class Planner:
         self._zone_entry, self._zone_exit = geo.zone_a[0], geo.zone_a[1]
         self._north_exit = geo.zone_b[1]
         paper = tc.paper
-        self._emergency = tc.controllers.emergency_decel
-        self._latency = paper.latency_s
-        self._stop_margin = paper.stop_margin_m + c.stop_extra_m
+        yield_paper = dataclasses.replace(paper, stop_margin_m=paper.stop_margin_m + c.stop_extra_m)
+        self._yield_constants = PaperSwitching(
+            yield_paper, tc.controllers.emergency_decel
+        ).constants
         self._vehicle = tc.vehicle
         self._horizon = tc.episode.horizon_ticks
         check_paper = dataclasses.replace(
@@ -174,8 +175,9 @@ class Planner:
         return np.sqrt(np.maximum(np.interp(ahead, self._grid, self._cap_sq), 0.0))
 
     def _firing_distance(self, v: FloatArray) -> FloatArray:
-        """How far before the zone the paper logic fires at speed ``v`` (Eq. 3 + margins)."""
-        return braking_distance(v, self._emergency) + v * self._latency + self._stop_margin
+        """How far before the zone the paper logic fires at speed ``v`` (Eq. 3 + latency +
+        margin, plus ``stop_extra_m``)."""
+        return firing_distance(v, self._yield_constants)
 
     def _yield(
         self, s: FloatArray, v_n: FloatArray, s_n: FloatArray, fast: FloatArray

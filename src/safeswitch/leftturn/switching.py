@@ -85,6 +85,13 @@ def braking_distance(speed: Values, deceleration: float) -> Values:
 
 
 @jit
+def firing_distance(speed: Values, c: FloatArray) -> Values:
+    """``d_safe + v·latency + margin`` [m]: how far before its stopping point Algorithm 1 fires
+    at ``speed`` (arrays or scalars; ``c`` as in :func:`paper_switches`)."""
+    return braking_distance(speed, c[2]) + speed * c[3] + c[4]
+
+
+@jit
 def paper_switches(
     ego_to_conflict: float,
     ego_to_stop: float,
@@ -104,8 +111,7 @@ def paper_switches(
     ttr_n = time_to_reach(north_to_conflict, north_speed, c[1])
     if not ttr_n - ttr_e < c[0]:
         return False
-    reach = braking_distance(ego_speed, c[2]) + ego_speed * c[3] + c[4]
-    return ego_to_stop <= reach
+    return ego_to_stop <= firing_distance(ego_speed, c)
 
 
 @jit

@@ -306,12 +306,6 @@ class LeftTurnTask:
             out[:, j] = getattr(v, field)[:, slot]
         return out
 
-    @property
-    def approach_distance(self) -> float:
-        """Path distance before its conflict point from which a car is "at the intersection"
-        (Algorithm 1's While condition) [m]."""
-        return float(self._geometry[5])
-
     def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
         return at_intersection(ego_progress, north_progress, self._geometry)
