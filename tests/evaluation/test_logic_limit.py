@@ -65,7 +65,7 @@ def test_no_controller_that_never_triggers_the_logic_clears_sooner(setup, bounds
     planners = [
         PlannerConfig(),
         PlannerConfig(top_speed_kmh=27.0, curve_decel=1.5),
-        PlannerConfig(top_speed_kmh=25.0, accel_lat=2.5, yield_accel=1.0),
+        PlannerConfig(top_speed_kmh=25.0, accel_lat=2.5, yield_speed=5.5),
     ]
     rng = np.random.default_rng(3)
     targets = rng.uniform(1.5, 5.7, 2 * EPISODES)

@@ -91,8 +91,55 @@ def test_without_its_pass_first_margin_the_check_is_what_keeps_it_safe(setup):
     assert (reckless.safety_steps > 0).sum() > 0.1 * EPISODES
 
 
+def test_arriving_slowly_at_the_firing_point_clears_sooner(setup):
+    """The firing distance grows with v²: a yield that reaches it at 4 m/s waits closer to the
+    zone than one arriving at the turn's speed (~6.8 m/s) and clears it sooner."""
+    task, planner = setup
+    scenarios, _ = scenario_set(task, "random", EPISODES, 31)
+    slow = rollout(task, scenarios, planner)
+    fast = rollout(task, scenarios, Planner(task, replace(planner.config, yield_speed=6.8)))
+    yields = OUTCOMES.index("yield")
+    both = (slow.outcome == yields) & (fast.outcome == yields)
+    assert both.sum() > 0.3 * EPISODES
+    assert fast.safety_steps.sum() == 0
+    gain = fast.time_to_clear[both] - slow.time_to_clear[both]
+    assert gain.mean() > 0.1
+    assert np.mean(gain > 0) > 0.9
+
+
+def test_once_in_its_conflict_zone_it_drives_on(setup):
+    """A yield can only be planned before the zone: a car that is already in it (a cloned
+    policy after a hesitation) is told to leave it at speed, not to brake there."""
+    task, planner = setup
+    scenarios, _ = scenario_set(task, "random", 50, 31)
+
+    class NeverFirst(Planner):
+        def passes_first(self, state):
+            return np.zeros(state.batch_size, dtype=bool)
+
+    never = NeverFirst(task, planner.config)
+    entry, north_exit = task.conflict.zone_a[0], task.conflict.zone_b[1]
+    inside, before = [], []
+
+    def full_throttle(obs, state, tick):
+        w = state.world
+        s, s_n, v = w.progress[:, 0], w.progress[:, 1], w.vehicles.speed[:, 0]
+        target, fast = never.target_speed(state, tick), never._fast(s, v)
+        waiting = s_n <= north_exit
+        inside.append((target - fast)[waiting & (s > entry)])
+        before.append((target - fast)[waiting & (s < entry - 5.0)])
+        return np.ones(state.batch_size)
+
+    rollout(task, scenarios, full_throttle)
+    inside_gap, before_gap = np.concatenate(inside), np.concatenate(before)
+    assert inside_gap.size > 100 and np.all(inside_gap == 0.0)
+    assert np.mean(before_gap < -0.5) > 0.5  # before the zone it does yield
+
+
 def test_a_bad_planner_setting_is_named():
     with pytest.raises(ConfigError, match="accel_lat"):
         PlannerConfig(accel_lat=-1.0)
     with pytest.raises(ConfigError, match="recheck_ticks"):
         replace(PlannerConfig(), recheck_ticks=0)
+    with pytest.raises(ConfigError, match="yield_speed"):
+        PlannerConfig(yield_speed=float("nan"))
