@@ -82,3 +82,24 @@ def test_yield2_needs_the_ego_to_wait_longer_than_yield1():
             "time_to_clear"
         ]
     assert clear["yield2"] > clear["yield1"] + 0.5
+
+
+def test_a_subset_of_episodes_steps_exactly_as_it_does_in_the_full_batch():
+    task = LeftTurnTask(LeftTurnConfig(switching="paper"))
+    n = 64
+    state = task.initial(task.draw_scenarios(5, np.arange(n), np.zeros(n, dtype=np.int64)))
+    rows = np.array([3, 17, 40, 63])
+    part = state.take(rows)
+    assert part.batch_size == len(rows)
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        actions = rng.uniform(-1.0, 1.0, n)
+        state, record = task.step(state, actions)
+        part, part_record = task.step(part, actions[rows])
+        np.testing.assert_array_equal(part.world.progress, state.world.progress[rows])
+        np.testing.assert_array_equal(part_record.safety_active, record.safety_active[rows])
+    assert np.ptp(state.world.progress[rows, 0]) > 1.0  # the episodes differ
+    # a copy: stepping it leaves the original alone
+    before = state.world.progress.copy()
+    task.step(state.take(rows), actions[rows])
+    np.testing.assert_array_equal(state.world.progress, before)

@@ -101,6 +101,11 @@ class TaskState:
         (auto-reset of the episodes that ended)."""
         _replace_arrays(self, index, other)
 
+    def take(self, index: NDArray[np.intp]) -> TaskState:
+        """A copy of episodes ``index`` (steps exactly as they would in the full batch: every
+        episode is simulated on its own)."""
+        return _take_arrays(self, index)
+
 
 def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> None:
     """``target.f[index] = source.f`` for every array field, recursing into dataclasses."""
@@ -110,6 +115,16 @@ def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> 
             mine[index] = theirs
         else:
             _replace_arrays(mine, index, theirs)
+
+
+def _take_arrays(source: Any, index: NDArray[np.intp]) -> Any:
+    """A copy of ``source`` with every array field ``f[index]``, recursing into dataclasses."""
+    values = {}
+    for f in fields(source):
+        value = getattr(source, f.name)
+        array = isinstance(value, np.ndarray)
+        values[f.name] = value[index] if array else _take_arrays(value, index)
+    return type(source)(**values)
 
 
 @dataclass
