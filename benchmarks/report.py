@@ -25,7 +25,7 @@ def main() -> None:
     torch.set_num_threads(1)
     reproduce(args.out, quick=True, episodes=1000)
     DOCS.mkdir(exist_ok=True)
-    for stem in ("comparison", "ppo-paper_yield1", "ppo-no-adas_yield1"):
+    for stem in ("comparison", "ppo-paper_cut", "ppo-paper_yield1", "ppo-no-adas_yield1"):
         shutil.copyfile(Path(args.out) / "figures" / f"{stem}.png", DOCS / f"{stem}.png")
     print(f"figures copied to {DOCS}/")
 

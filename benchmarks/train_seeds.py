@@ -1,7 +1,8 @@
 """How much a 1.2 M-step training run depends on its seed (and what a configuration gives).
 
-Trains a configuration (default ``configs/paper.yaml``) once per seed — about 3 minutes each on
-this machine, plus the warm start if the configuration has one — and prints each run's
+Trains a configuration (default ``configs/paper.yaml``, the shipped paper policy's) once per
+seed — about 3 minutes each on this machine, plus the warm start if the configuration has one
+(about 7 minutes for ``configs/paper.yaml``) — and prints each run's
 collisions during training (warm start included) and its evaluation on the fixed unseen
 scenario set (seed 1000003). Usage:
 ``python benchmarks/train_seeds.py [--config PATH] [seed ...]`` (default seeds: 1 2).

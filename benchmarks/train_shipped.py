@@ -1,7 +1,7 @@
 """Reproduce the shipped policies: train each from its configuration and copy the run's
 artefacts into ``src/safeswitch/policies/<name>/`` with a README of how it was made.
 
-Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all four).
+Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all five).
 Training is the same as ``safeswitch train --config configs/<name>.yaml --out runs/<name>``;
 ``--from-runs`` only copies already finished runs from ``runs/``.
 """
@@ -17,12 +17,19 @@ from safeswitch.training.config import load_config
 from safeswitch.training.run import train
 
 ROOT = Path(__file__).resolve().parent.parent
-NAMES = ("paper", "no_adas", "certified", "none")
+NAMES = ("paper", "paper_scratch", "no_adas", "certified", "none")
 ARTEFACTS = ("model.zip", "vecnormalize.pkl", "config.yaml", "metrics.json", "training_curves.png")
 
 
 def policy_readme(name: str, metrics: dict) -> str:
-    t, e = metrics["training"], metrics["evaluation"]
+    t, e, warm = metrics["training"], metrics["evaluation"], metrics.get("warm_start")
+    warm_note = ""
+    if warm:
+        warm_note = (
+            f"\n\nIt is warm-started: before PPO, {warm['episodes']:,} scenarios were driven by "
+            f"the\nplanner or its clone ({warm['collisions']} collisions; "
+            f"{warm['wall_time_s']:.0f} s of the wall time above)."
+        )
     return f"""# Shipped policy `{name}`
 
 Made with
@@ -32,7 +39,7 @@ Made with
 (seed {metrics["seed"]}, {metrics["timesteps"]:,} steps, {metrics["n_envs"]} environments,
 {metrics["torch_threads"]} torch thread(s); {metrics["wall_time_s"]:.0f} s on the project's
 two-core machine). Re-running the command reproduces it up to the non-determinism of CPU
-floating point across machines.
+floating point across machines.{warm_note}
 
 During training: {t["collisions"]} collisions, a safety action in {t["safety_activation_episodes"]}
 of {t["episodes"]} episodes.

@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--model",
         help="run directory, or a shipped policy: shipped (the paper "
-        "policy), paper, no-adas, certified, none",
+        "policy), paper, paper-scratch, no-adas, certified, none",
     )
     ev.add_argument(
         "--controller",

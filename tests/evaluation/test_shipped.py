@@ -1,5 +1,5 @@
 """The policies that ship with the package: safe training, and the paper policy's quality on
-scenarios it never saw (issue targets; see the README for the one it misses)."""
+scenarios it never saw (the issue targets)."""
 
 import json
 
@@ -13,6 +13,7 @@ from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
 from safeswitch.training.config import load_config
 
 EVAL = {"scenarios": "random", "episodes": 1000, "seed": 424242, "out": None}
+NAMES = ("paper", "paper_scratch", "no_adas", "certified", "none")
 
 
 def metrics(name):
@@ -31,23 +32,27 @@ def rule():
 
 def test_every_shipped_policy_loads_with_its_config_and_acts_in_bounds():
     obs = np.array([[1.75, -30.0, 6.9, -1.75, 40.0, 8.0]], dtype=np.float32)
-    for name in ("paper", "no_adas", "certified", "none"):
+    for name in NAMES:
         policy = load_policy(SHIPPED_DIR / name)
         config = load_config(SHIPPED_DIR / name / "config.yaml")
         assert config.timesteps == 1_200_000
         action = policy.act(obs)
         assert action.shape == (1,) and -1.0 <= action[0] <= 1.0
     assert resolve_model_dir("shipped") == SHIPPED_DIR / "paper"
+    assert resolve_model_dir("paper-scratch") == SHIPPED_DIR / "paper_scratch"
     with pytest.raises(FileNotFoundError, match="no trained policy"):
         resolve_model_dir("nonexistent-run")
 
 
 def test_training_with_a_safety_net_was_collision_free_and_without_one_was_not():
-    assert metrics("paper")["training"]["collisions"] == 0
-    assert metrics("certified")["training"]["collisions"] == 0
+    for name in ("paper", "paper_scratch", "certified"):
+        assert metrics(name)["training"]["collisions"] == 0
     assert metrics("none")["training"]["collisions"] > 0
-    for name in ("paper", "no_adas", "certified", "none"):
+    for name in NAMES:
         assert metrics(name)["timesteps"] >= 1_200_000
+    # the paper policy's warm start (the planner and its clone driving) did not collide either
+    warm = metrics("paper")["warm_start"]
+    assert warm["collisions"] == 0 and warm["episodes"] >= 1000
 
 
 def test_paper_policy_is_safe_and_comfortable_on_unseen_scenarios(paper):
@@ -61,6 +66,9 @@ def test_paper_policy_is_safe_and_comfortable_on_unseen_scenarios(paper):
 def test_the_ablation_needs_the_safety_controller_more_than_the_paper_policy(paper):
     ablation = evaluate("learned", "no-adas", switching=None, **EVAL)
     assert ablation["safety_activation_episodes"] > paper["safety_activation_episodes"]
+    # and more than the paper's recipe from scratch, which the ablation differs from only by R_ADAS
+    scratch = evaluate("learned", "paper-scratch", switching=None, **EVAL)
+    assert ablation["safety_activation_episodes"] > scratch["safety_activation_episodes"]
 
 
 def test_the_rule_baseline_is_safe_but_leans_on_the_safety_controller(rule, paper):
@@ -92,9 +100,6 @@ def paper_runs():
     return paper_scenarios("shipped")
 
 
-@pytest.mark.xfail(
-    strict=True, reason="the shipped paper policy yields in `cut` too (README, Training)"
-)
 def test_in_cut_the_paper_policy_passes_first_without_the_safety_controller(paper_runs):
     assert paper_runs["cut"]["outcome"] == "cut"
     assert paper_runs["cut"]["safety_steps"] == 0
@@ -119,16 +124,9 @@ def test_the_ablation_policy_triggers_the_safety_controller_in_a_yield_scenario(
     assert not any(run["collision"] for run in runs.values())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the shipped paper policy reaches 0.60 of the oracle's speed, target 0.85 (README)",
-)
 def test_the_paper_policy_is_within_85_percent_of_the_oracle(paper):
     assert paper["mean_efficiency"] >= 0.85
 
 
-@pytest.mark.xfail(
-    strict=True, reason="the shipped paper policy always yields: 9.9 s against 7.8 s (README)"
-)
 def test_the_paper_policy_clears_the_zone_no_later_than_the_rule_on_average(paper, rule):
     assert paper["mean_time_to_clear_s"] <= rule["mean_time_to_clear_s"]

@@ -62,7 +62,7 @@ def imitation_error(policy, task, planner, seed):
 def cloned(tmp_path_factory):
     folder = tmp_path_factory.mktemp("runs")
     warm = config(
-        warm_start={"episodes": 40, "rounds": 1, "epochs": 4},
+        warm_start={"episodes": 40, "rounds": 1, "epochs": 12},
         ppo={"actor_learning_rate": 1e-4, "actor_frozen_steps": 10**6, "learn_log_std": False},
     )
     cold = config()

@@ -16,7 +16,7 @@ plant's model, and replans on every tick:
   than a closed throttle can still slow down from). Arriving slower lets the car wait closer
   to the zone, because the firing distance shrinks with ``v²``: from 4 m/s the fast drive
   clears the zone ~0.4 s sooner than from the 6.8 m/s the turn would allow (point-mass
-  estimate; measured over all scenarios, 0.13 s on average).
+  estimate; over the README's scenarios 0.15 s on average).
 - **Once in its conflict zone** (or once the north car has left its own) the car drives fast:
   slowing down there can only make things worse. This never binds for the planner itself, but
   labels the states a cloned policy reaches after a hesitation (``training.warm_start``).

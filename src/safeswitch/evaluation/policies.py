@@ -18,6 +18,7 @@ SHIPPED_DIR = Path(__file__).resolve().parent.parent / "policies"
 SHIPPED = {
     "shipped": "paper",
     "paper": "paper",
+    "paper-scratch": "paper_scratch",
     "no-adas": "no_adas",
     "certified": "certified",
     "none": "none",
@@ -62,7 +63,7 @@ class TrainedPolicy:
 
 def resolve_model_dir(model: str | Path) -> Path:
     """A run directory, or the folder of a shipped policy named ``shipped``, ``paper``,
-    ``no-adas``, ``certified`` or ``none``."""
+    ``paper-scratch``, ``no-adas``, ``certified`` or ``none``."""
     path = SHIPPED_DIR / SHIPPED[str(model)] if str(model) in SHIPPED else Path(model)
     if not (path / "model.zip").is_file():
         known = ", ".join(sorted(SHIPPED))

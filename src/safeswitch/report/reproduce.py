@@ -1,10 +1,11 @@
 """``safeswitch reproduce``: the paper's Section VI experiments and our comparisons, end to end.
 
-Every controller (the oracle, the rule-based system, and the PPO policies trained with the
-``paper`` switching logic, without ``R_ADAS``, with the ``certified`` logic and with none) is
-evaluated on the paper's three scenarios (traced tick by tick: the figures) and on random
-scenarios (the comparison table). ``--quick`` uses the shipped policies; without it, the four
-policies are first trained from scratch with the shipped configurations.
+Every controller (the oracle, the rule-based system, the planner, and the PPO policies trained
+with the ``paper`` switching logic — warm-started from the planner, and from scratch — without
+``R_ADAS``, with the ``certified`` logic and with none) is evaluated on the paper's three
+scenarios (traced tick by tick: the figures) and on random scenarios (the comparison table).
+``--quick`` uses the shipped policies; without it, the five policies are first trained with the
+shipped configurations.
 
 The report folder holds ``report.html`` (self-contained: figures, animations and tables embedded),
 ``report.md`` (the same, with the pictures beside it), ``summary.json`` and the per-episode CSVs
@@ -70,7 +71,18 @@ ENTRIES: tuple[Entry, ...] = (
     Entry(
         "planner", "planner", None, "Planner (ours): throttle only, plans around the paper logic"
     ),
-    Entry("ppo-paper", "learned", "paper", "PPO, paper switching, R_ADAS on (the paper)"),
+    Entry(
+        "ppo-paper",
+        "learned",
+        "paper",
+        "PPO, paper switching, R_ADAS on, warm-started from the planner (shipped)",
+    ),
+    Entry(
+        "ppo-paper-scratch",
+        "learned",
+        "paper_scratch",
+        "PPO, paper switching, R_ADAS on, from scratch (the paper's recipe)",
+    ),
     Entry("ppo-no-adas", "learned", "no_adas", "PPO, paper switching, R_ADAS off (ablation)"),
     Entry("ppo-certified", "learned", "certified", "PPO, certified switching"),
     Entry("ppo-unshielded", "learned", "none", "PPO trained and run without switching logic"),
@@ -91,7 +103,7 @@ TABLE = (
 
 
 def train_policies(out: Path, timesteps: int | None) -> dict[str, Path]:
-    """Train the four policies from scratch with their shipped configurations, into
+    """Train the five policies with their shipped configurations, into
     ``out/runs/``; a finished run is reused and an interrupted one resumed."""
     from safeswitch.training.run import complete_checkpoints, train
 
