@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import fields
 from typing import Any, TypeVar, cast
 
 import numba
@@ -50,3 +51,14 @@ def flat(values: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
     if array.ndim == 0:
         return np.full(math.prod(shape), array)
     return np.ascontiguousarray(np.broadcast_to(array, shape)).reshape(-1)
+
+
+def take_rows(batch: Any, rows: NDArray[Any]) -> Any:
+    """A copy of a batch dataclass with every array field ``f[rows]`` (indices or a mask;
+    repeats allowed), recursing into dataclass fields."""
+    values = {}
+    for f in fields(batch):
+        value = getattr(batch, f.name)
+        array = isinstance(value, np.ndarray)
+        values[f.name] = value[rows] if array else take_rows(value, rows)
+    return type(batch)(**values)

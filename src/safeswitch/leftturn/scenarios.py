@@ -9,12 +9,13 @@ needed to draw them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import take_rows
 from safeswitch.leftturn.config import SCENARIO_NAMES, ScenarioConfig
 from safeswitch.sim.geometry import FloatArray
 
@@ -70,7 +71,7 @@ class Scenarios:
 
     def take(self, rows: NDArray[Any]) -> Scenarios:
         """The scenarios at ``rows`` (indices or a mask; repeats allowed), as a new batch."""
-        return Scenarios(*(np.asarray(getattr(self, f.name))[rows] for f in fields(self)))
+        return cast(Scenarios, take_rows(self, rows))
 
     def north_start_distance(self, speed_limit: float) -> FloatArray:
         """North's path distance to the conflict point at the start [m]: it arrives

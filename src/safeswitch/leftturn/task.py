@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import columns, jit
+from safeswitch.core.arrays import columns, jit, take_rows
 from safeswitch.core.pid import PIDState, pid_tick
 from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names
 from safeswitch.leftturn.certified import CertifiedSwitching, certify_one
@@ -104,7 +104,7 @@ class TaskState:
     def take(self, index: NDArray[np.intp]) -> TaskState:
         """A copy of episodes ``index`` (steps exactly as they would in the full batch: every
         episode is simulated on its own)."""
-        return _take_arrays(self, index)
+        return cast(TaskState, take_rows(self, index))
 
 
 def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> None:
@@ -115,16 +115,6 @@ def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> 
             mine[index] = theirs
         else:
             _replace_arrays(mine, index, theirs)
-
-
-def _take_arrays(source: Any, index: NDArray[np.intp]) -> Any:
-    """A copy of ``source`` with every array field ``f[index]``, recursing into dataclasses."""
-    values = {}
-    for f in fields(source):
-        value = getattr(source, f.name)
-        array = isinstance(value, np.ndarray)
-        values[f.name] = value[index] if array else _take_arrays(value, index)
-    return type(source)(**values)
 
 
 @dataclass
