@@ -24,11 +24,11 @@ import numpy as np
 
 import _common
 from safeswitch.evaluation.adversaries import catalogue, noisy_cruise
-from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.scenarios import Scenarios, scenario_grid
 from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.training.policies import load_policy
 
 SWITCHINGS = ("certified", "paper", "none")
 RESULTS = Path(__file__).parent / "results" / "safety.json"
@@ -48,11 +48,14 @@ def adversarial_table(random_count: int) -> list[dict[str, object]]:
             resolve_config({"episode": {"learned_scope": "episode"}}, switching=switching)
         )
         random = task.draw_scenarios(2024, np.arange(random_count), np.zeros(random_count, int))
-        for name in catalogue(task, 1, 0):
+        trained = load_policy("shipped").act
+        for name in catalogue(task, 1, 0, trained):
             row: dict[str, object] = {"switching": switching, "adversary": name}
             for label, scenarios in (("random", random), ("grid", cells)):
                 batch = scenarios.ego_speed.shape[0]
-                result = rollout(task, scenarios, catalogue(task, batch, seed=7)[name]())
+                result = rollout(
+                    task, scenarios, catalogue(task, batch, seed=7, trained=trained)[name]()
+                )
                 row[f"{label}_episodes"] = batch
                 row[f"{label}_collisions"] = int(result.collision.sum())
                 row[f"{label}_intervention_episodes"] = int((result.safety_steps > 0).sum())

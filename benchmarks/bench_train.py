@@ -23,8 +23,8 @@ import numpy as np
 import torch
 
 import _common
-from safeswitch.evaluation.policies import load_policy
 from safeswitch.training.config import load_config
+from safeswitch.training.policies import load_policy
 from safeswitch.training.run import train
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,10 +15,10 @@ import sys
 import numpy as np
 
 import _common
+from safeswitch.app.reproduce import EVAL_SEED
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.task import LeftTurnTask
-from safeswitch.report.reproduce import EVAL_SEED
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,13 +22,14 @@ import sys
 import numpy as np
 
 import _common
-from safeswitch.evaluation.evaluate import controller_setup, run_controller, scenario_set
+from safeswitch.app.evaluate import controller_setup
+from safeswitch.app.reproduce import EVAL_SEED
+from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.logic_limit import PaperLogicLimit
 from safeswitch.evaluation.oracle import Oracle, efficiency
 from safeswitch.evaluation.planner import Planner, PlannerConfig
 from safeswitch.leftturn.switching import ConflictState
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
-from safeswitch.report.reproduce import EVAL_SEED
 
 
 def rule_fires_on_plans(task: LeftTurnTask, oracle: Oracle, scenarios) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 import torch
 
 import _common  # noqa: F401  (pins the numeric libraries to one thread)
-from safeswitch.report.reproduce import reproduce
+from safeswitch.app.reproduce import reproduce
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
 

@@ -1,14 +1,71 @@
 """safeswitch: safe reinforcement learning with a rule-based Safety controller, a learned
 controller and a switching logic between them (Aksjonov & Kyrki), on an embedded simulator.
 
-Importing the package registers the Gymnasium id ``safeswitch/LeftTurn-v0``.
+Importing the package registers the Gymnasium id ``safeswitch/LeftTurn-v0``. The framework's
+public names (:class:`SafeSwitch`, :class:`SafeSwitchVecEnv`, :class:`SwitchingLogic`,
+:class:`Decision`, :func:`register_logic`, …) are imported on first use, so ``import
+safeswitch`` stays light.
 """
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as _gym
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 ENV_ID = "safeswitch/LeftTurn-v0"
 
 if ENV_ID not in _gym.registry:
     _gym.register(id=ENV_ID, entry_point="safeswitch.leftturn.env:LeftTurnEnv")
+
+#: Public name → the module that defines it.
+_EXPORTS = {
+    "SafeSwitch": "safeswitch.core.wrappers",
+    "SafeSwitchVecEnv": "safeswitch.core.wrappers",
+    "SwitchingLogic": "safeswitch.core.switching",
+    "Decision": "safeswitch.core.switching",
+    "NeverSwitch": "safeswitch.core.switching",
+    "SwitchingError": "safeswitch.core.switching",
+    "supervise": "safeswitch.core.switching",
+    "register_logic": "safeswitch.core.registry",
+    "make_logic": "safeswitch.core.registry",
+    "logic_names": "safeswitch.core.registry",
+}
+
+__all__ = [
+    "ENV_ID",
+    "Decision",
+    "NeverSwitch",
+    "SafeSwitch",
+    "SafeSwitchVecEnv",
+    "SwitchingError",
+    "SwitchingLogic",
+    "__version__",
+    "logic_names",
+    "make_logic",
+    "register_logic",
+    "supervise",
+]
+
+if TYPE_CHECKING:
+    from safeswitch.core.registry import logic_names, make_logic, register_logic
+    from safeswitch.core.switching import (
+        Decision,
+        NeverSwitch,
+        SwitchingError,
+        SwitchingLogic,
+        supervise,
+    )
+    from safeswitch.core.wrappers import SafeSwitch, SafeSwitchVecEnv
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'safeswitch' has no attribute {name!r}")
+    value = getattr(import_module(module), name)
+    globals()[name] = value
+    return value

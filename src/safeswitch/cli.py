@@ -9,9 +9,10 @@ from dataclasses import replace
 
 
 def _train(args: argparse.Namespace) -> int:
+    from safeswitch.app.train import train_and_plot
     from safeswitch.core.config import ConfigError
     from safeswitch.training.config import TrainConfig, load_config
-    from safeswitch.training.run import RunDirectoryError, train
+    from safeswitch.training.run import RunDirectoryError
 
     try:
         config = load_config(args.config) if args.config else TrainConfig()
@@ -31,7 +32,9 @@ def _train(args: argparse.Namespace) -> int:
         if args.no_adas_penalty:
             env = replace(env, adas_penalty=False)
         config = replace(config, env=env, **overrides)
-        metrics = train(config, args.out, resume=args.resume, progress_bar=not args.no_progress)
+        metrics = train_and_plot(
+            config, args.out, resume=args.resume, progress_bar=not args.no_progress
+        )
     except (ConfigError, RunDirectoryError, FileNotFoundError) as exc:
         print(f"safeswitch train: error: {exc}", file=sys.stderr)
         return 2
@@ -54,8 +57,8 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    from safeswitch.app.evaluate import evaluate
     from safeswitch.core.config import ConfigError
-    from safeswitch.evaluation.evaluate import evaluate
 
     try:
         summary = evaluate(
@@ -92,7 +95,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _reproduce(args: argparse.Namespace) -> int:
-    from safeswitch.report.reproduce import reproduce
+    from safeswitch.app.reproduce import reproduce
 
     if args.episodes < 1:
         print(

@@ -4,8 +4,9 @@ triggers the paper switching logic."""
 import numpy as np
 import pytest
 
+from safeswitch.app.evaluate import controller_setup
 from safeswitch.core.config import ConfigError
-from safeswitch.evaluation.evaluate import controller_setup, scenario_set
+from safeswitch.evaluation.evaluate import scenario_set
 from safeswitch.evaluation.logic_limit import PaperLogicLimit
 from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.planner import Planner, PlannerConfig

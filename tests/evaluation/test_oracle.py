@@ -10,11 +10,11 @@ from hypothesis import strategies as st
 from safeswitch.evaluation.evaluate import scenario_set
 from safeswitch.evaluation.oracle import Oracle, efficiency
 from safeswitch.evaluation.planner import Planner
-from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.scenarios import named_scenarios
 from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.training.policies import load_policy
 from tests.leftturn.conftest import cruise_action
 
 EPISODES = 300

@@ -5,8 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from safeswitch.app.evaluate import controller_setup
 from safeswitch.core.config import ConfigError
-from safeswitch.evaluation.evaluate import controller_setup, run_controller, scenario_set
+from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.planner import Planner, PlannerConfig
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask

@@ -7,9 +7,9 @@ import re
 import pytest
 from PIL import Image
 
+from safeswitch.app.reproduce import ENTRIES, TABLE, _figure_list
 from safeswitch.cli import main
 from safeswitch.leftturn.config import SCENARIO_NAMES
-from safeswitch.report.reproduce import ENTRIES, TABLE, _figure_list
 
 EPISODES = 24
 

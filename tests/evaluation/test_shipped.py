@@ -6,11 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from safeswitch.evaluation.evaluate import controller_setup, evaluate, run_controller, scenario_set
+from safeswitch.app.evaluate import controller_setup, evaluate
+from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.metrics import STOP_SPEED
-from safeswitch.evaluation.policies import SHIPPED_DIR, load_policy, resolve_model_dir
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
 from safeswitch.training.config import load_config
+from safeswitch.training.policies import SHIPPED_DIR, load_policy, resolve_model_dir
 
 EVAL = {"scenarios": "random", "episodes": 1000, "seed": 424242, "out": None}
 NAMES = ("paper", "paper_scratch", "no_adas", "certified", "none")

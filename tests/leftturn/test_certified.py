@@ -13,6 +13,7 @@ from safeswitch.leftturn.scenarios import scenario_grid
 from safeswitch.leftturn.switching import ConflictState
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.sim.vehicle import VehicleState, vehicle_step
+from safeswitch.training.policies import load_policy
 
 ADVERSARIES = (
     "uniform",
@@ -25,6 +26,11 @@ ADVERSARIES = (
     "noisy_cruise",
     "noisy_trained",
 )
+
+
+@pytest.fixture(scope="module")
+def shipped_act():
+    return load_policy("shipped").act
 
 
 @pytest.fixture(scope="module")
@@ -48,10 +54,11 @@ def scenarios_for(task, random_count=1000):
 
 
 @pytest.mark.parametrize("adversary", ADVERSARIES)
-def test_no_adversary_makes_certified_collide(certified_task, adversary):
+def test_no_adversary_makes_certified_collide(certified_task, shipped_act, adversary):
     random, grid = scenarios_for(certified_task)
     for scenarios in (random, grid):
-        make = catalogue(certified_task, scenarios.ego_speed.shape[0], seed=1)[adversary]
+        batch = scenarios.ego_speed.shape[0]
+        make = catalogue(certified_task, batch, seed=1, trained=shipped_act)[adversary]
         result = rollout(certified_task, scenarios, make())
         assert result.collision.sum() == 0
         assert result.min_separation.min() > 0.0

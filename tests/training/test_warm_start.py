@@ -12,12 +12,12 @@ from stable_baselines3.common.vec_env import VecNormalize
 from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.evaluation.evaluate import scenario_set
 from safeswitch.evaluation.planner import Planner
-from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig
+from safeswitch.training.policies import load_policy
 from safeswitch.training.run import build_model, complete_checkpoints, train
 from safeswitch.training.warm_start import FrozenRunningMeanStd
 

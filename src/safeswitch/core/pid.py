@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,14 +56,22 @@ class PIDGains:
             )
 
     @functools.cached_property
-    def vector(self) -> FloatArray:
-        """``(kp, ki, kd, out_min, out_max, derivative_filter_s)`` (what the compiled loop
-        reads)."""
-        vector = np.array(
-            [self.kp, self.ki, self.kd, self.out_min, self.out_max, self.derivative_filter_s]
+    def kernel(self) -> PIDKernel:
+        """These gains as the compiled :func:`pid_tick` reads them."""
+        return PIDKernel(
+            self.kp, self.ki, self.kd, self.out_min, self.out_max, self.derivative_filter_s
         )
-        vector.flags.writeable = False
-        return vector
+
+
+class PIDKernel(NamedTuple):
+    """:class:`PIDGains` as compiled code reads them (field for field)."""
+
+    kp: float
+    ki: float
+    kd: float
+    out_min: float
+    out_max: float
+    derivative_filter_s: float
 
 
 @dataclass
@@ -117,7 +126,7 @@ def pid_step(
     error = flat(error, shape)
     out, integral, derivative = np.empty(shape), np.empty(shape), np.empty(shape)
     _pid_loop(
-        gains.vector,
+        gains.kernel,
         dt,
         error,
         flat(state.integral, shape),
@@ -132,7 +141,7 @@ def pid_step(
 
 @jit
 def _pid_loop(
-    gains: FloatArray,
+    gains: PIDKernel,
     dt: float,
     error: FloatArray,
     integral: FloatArray,
@@ -151,17 +160,17 @@ def _pid_loop(
 
 @jit
 def pid_tick(
-    gains: FloatArray,
+    gains: PIDKernel,
     dt: float,
     error: float,
     integral: float,
     prev_error: float,
     derivative: float,
 ) -> tuple[float, float, float]:
-    """One PID (see :func:`pid_step`) for one element; ``gains`` is :attr:`PIDGains.vector`.
+    """One PID (see :func:`pid_step`) for one element; ``gains`` is :attr:`PIDGains.kernel`.
     Returns the clamped output, the new integral and the new (filtered) derivative."""
-    kp, ki, kd = gains[0], gains[1], gains[2]
-    out_min, out_max, filter_s = gains[3], gains[4], gains[5]
+    kp, ki, kd = gains.kp, gains.ki, gains.kd
+    out_min, out_max, filter_s = gains.out_min, gains.out_max, gains.derivative_filter_s
     raw = 0.0 if math.isnan(prev_error) else (error - prev_error) / dt
     d = raw
     if filter_s > 0:

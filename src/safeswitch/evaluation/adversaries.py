@@ -98,23 +98,29 @@ def noisy_cruise(task: LeftTurnTask, rng: np.random.Generator, sigma: float = 0.
     return policy
 
 
-def noisy_trained(rng: np.random.Generator, model: str = "shipped", sigma: float = 0.5) -> Policy:
-    """The shipped paper policy with large Gaussian noise on every action."""
-    from safeswitch.evaluation.policies import load_policy
-
-    trained = load_policy(model)
+def noisy_trained(
+    act: Callable[[NDArray[np.float32]], FloatArray], rng: np.random.Generator, sigma: float = 0.5
+) -> Policy:
+    """A trained policy (``act``: observations ``[B, 6]`` → actions ``[B]``) with large
+    Gaussian noise on every action."""
 
     def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
         noise = rng.normal(0.0, sigma, obs.shape[0])
-        return np.clip(trained.act(obs) + noise, -1.0, 1.0)
+        return np.clip(act(obs) + noise, -1.0, 1.0)
 
     return policy
 
 
-def catalogue(task: LeftTurnTask, batch: int, seed: int) -> dict[str, Callable[[], Policy]]:
-    """Every adversary, by name, as a zero-argument factory (fresh state and generator)."""
+def catalogue(
+    task: LeftTurnTask,
+    batch: int,
+    seed: int,
+    trained: Callable[[NDArray[np.float32]], FloatArray] | None = None,
+) -> dict[str, Callable[[], Policy]]:
+    """Every adversary, by name, as a zero-argument factory (fresh state and generator);
+    ``noisy_trained`` only when a trained policy's ``act`` is given."""
     depth = np.linspace(-3.0, 10.0, batch)  # the sweep of "stop inside" timings
-    return {
+    found: dict[str, Callable[[], Policy]] = {
         "uniform": lambda: uniform(np.random.default_rng(seed)),
         "bang_bang": lambda: bang_bang(np.random.default_rng(seed + 1), dt=task.config.episode.dt),
         "full_throttle": lambda: constant(1.0),
@@ -123,5 +129,7 @@ def catalogue(task: LeftTurnTask, batch: int, seed: int) -> dict[str, Callable[[
         "creep": lambda: creep(task),
         "nan_inf": lambda: broken(np.random.default_rng(seed + 2)),
         "noisy_cruise": lambda: noisy_cruise(task, np.random.default_rng(seed + 3)),
-        "noisy_trained": lambda: noisy_trained(np.random.default_rng(seed + 4)),
     }
+    if trained is not None:
+        found["noisy_trained"] = lambda: noisy_trained(trained, np.random.default_rng(seed + 4))
+    return found

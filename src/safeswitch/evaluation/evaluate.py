@@ -1,13 +1,16 @@
-"""``safeswitch evaluate``: any controller × any switching logic × a set of scenarios."""
+"""Evaluation building blocks: scenario sets, the rule-based baselines and the oracle, one
+episode per scenario, summaries against the oracle and the per-episode CSV.
+
+``safeswitch evaluate`` (:mod:`safeswitch.app.evaluate`) puts them together with trained
+policies.
+"""
 
 from __future__ import annotations
 
 import csv
 import io
-import json
 from collections.abc import Callable
 from dataclasses import fields, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,14 +18,14 @@ import numpy as np
 from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import Oracle, OraclePlan, efficiency
 from safeswitch.evaluation.planner import Planner
-from safeswitch.evaluation.policies import load_policy
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.leftturn.config import SCENARIO_NAMES, LearnedScope, LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask, StepRecord, TaskState
 from safeswitch.sim.geometry import FloatArray
-from safeswitch.training.config import load_config
-from safeswitch.training.run import write_atomic
+
+#: The rule-based controllers and the oracle (``safeswitch evaluate --controller``).
+BASELINES: tuple[str, ...] = ("rule", "planner", "oracle")
 
 
 def _rule_policy(obs: Any, state: Any, tick: int) -> Any:
@@ -47,34 +50,23 @@ def scenario_set(
     return scenarios, [f"random-{i}" for i in range(episodes)]
 
 
-def controller_setup(
-    controller: str, model: str | None, switching: str | None
+def baseline_setup(
+    controller: str, switching: str | None = None
 ) -> tuple[LeftTurnConfig, Policy | None]:
-    """The task configuration and policy of a controller (``None`` for the oracle, which
-    plans instead of acting)."""
-    policy: Policy | None
-    if controller == "learned":
-        if model is None:
-            raise ValueError("--controller learned needs --model (a run directory or 'shipped')")
-        trained = load_policy(model)
-        env_config = load_config(trained.path / "config.yaml").env
-        policy = trained.as_policy()
-    elif controller in ("rule", "oracle", "planner"):
-        # The rule's PID_th proposes throughout; the planner drives with the learned
-        # controller's throttle throughout.
-        scope: LearnedScope = "episode" if controller == "planner" else "never"
-        env_config = replace(LeftTurnConfig(), switching="paper")
-        env_config = replace(env_config, episode=replace(env_config.episode, learned_scope=scope))
-        if controller == "planner":
-            policy = Planner(LeftTurnTask(env_config))
-        else:
-            policy = _rule_policy if controller == "rule" else None
-    else:
-        raise ValueError(
-            f"--controller must be 'learned', 'rule', 'planner' or 'oracle', got {controller!r}"
-        )
-    if switching is not None:
-        env_config = replace(env_config, switching=switching)  # type: ignore[arg-type]
+    """The task configuration and policy of a rule-based controller: ``rule`` (``PID_th``
+    proposes throughout), ``planner`` (drives with the learned controller's throttle
+    throughout) or ``oracle`` (plans instead of acting: the policy is ``None``), under the
+    ``paper`` logic unless ``switching`` names another."""
+    if controller not in BASELINES:
+        raise ValueError(f"controller {controller!r} is not one of {', '.join(BASELINES)}")
+    scope: LearnedScope = "episode" if controller == "planner" else "never"
+    env_config = replace(LeftTurnConfig(), switching=switching or "paper")
+    env_config = replace(env_config, episode=replace(env_config.episode, learned_scope=scope))
+    policy: Policy | None = None
+    if controller == "planner":
+        policy = Planner(LeftTurnTask(env_config))
+    elif controller == "rule":
+        policy = _rule_policy
     return replace(env_config, scenario=None), policy
 
 
@@ -107,40 +99,6 @@ def summary_against_oracle(
         "mean_oracle_time_to_clear_s": float(np.nanmean(plan.time_to_clear)),
         "mean_efficiency": float(np.nanmean(ratio)),
     }
-
-
-def evaluate(
-    controller: str,
-    model: str | None,
-    scenarios: str,
-    episodes: int,
-    seed: int,
-    switching: str | None,
-    out: str | Path | None,
-) -> dict[str, Any]:
-    """Run the evaluation, write ``episodes.csv`` and ``summary.json`` into ``out``, and return
-    the summary (see :mod:`safeswitch.evaluation.metrics` for its fields; ``mean_efficiency``
-    is the mean over scenarios of the oracle's time to clear divided by the controller's)."""
-    env_config, policy = controller_setup(controller, model, switching)
-    task = LeftTurnTask(env_config)
-    batch, names = scenario_set(task, scenarios, episodes, seed)
-    result, plan = run_controller(task, policy, batch)
-    summary = {
-        "controller": controller,
-        "model": str(model) if model else None,
-        "switching": env_config.switching if policy is not None else None,
-        "scenarios": scenarios,
-        "seed": seed,
-        **summary_against_oracle(result, plan, env_config.episode.horizon_s),
-    }
-    if out is not None:
-        folder = Path(out)
-        folder.mkdir(parents=True, exist_ok=True)
-        write_atomic(
-            folder / "episodes.csv", episodes_csv(names, batch, result, plan.time_to_clear)
-        )
-        write_atomic(folder / "summary.json", json.dumps(summary, indent=2))
-    return summary
 
 
 def episodes_csv(

@@ -31,7 +31,7 @@ driving resistance: the learned controller's means, which has no brake pedal).
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numba
 import numpy as np
@@ -41,18 +41,46 @@ from safeswitch.core.arrays import jit
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.switching import PaperSwitching, firing_distance, time_to_reach
+from safeswitch.leftturn.switching import (
+    PaperConstants,
+    PaperSwitching,
+    firing_distance,
+    time_to_reach,
+)
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import closed_throttle_drag, driving_resistance
 
 Braking = Literal["comfort", "throttle"]
 
-# Layout of the scalar constants passed to the compiled kernel.
-# The paper logic's own constants travel separately (PaperSwitching.constants).
-_DT, _ZONE_A0, _ZONE_A1, _ZONE_B0, _ZONE_B1, _POINT_A, _POINT_B, _APPROACH = range(8)
-_STEP, _LOGIC = range(8, 10)
-_THRESHOLD, _MIN_SPEED = 0, 1  # in PaperSwitching.constants
+
+class LimitLayout(NamedTuple):
+    """The scalars the compiled reachability kernel reads (the paper logic's own constants
+    travel separately, as :attr:`PaperSwitching.constants`).
+
+    Attributes:
+        dt: Tick [s].
+        ego_zone_entry: Ego's conflict-zone entry on its route [m].
+        ego_zone_exit: Ego's conflict-zone exit [m].
+        north_zone_entry: North car's conflict-zone entry on its route [m].
+        north_zone_exit: North car's conflict-zone exit [m].
+        ego_conflict_point: Conflict point on the ego's route [m].
+        north_conflict_point: Conflict point on the north car's route [m].
+        approach_distance: Algorithm 1's "at the intersection" distance [m].
+        speed_step: Step of the speed grid [m/s].
+        logic: Whether the paper logic's constraint applies.
+    """
+
+    dt: float
+    ego_zone_entry: float
+    ego_zone_exit: float
+    north_zone_entry: float
+    north_zone_exit: float
+    ego_conflict_point: float
+    north_conflict_point: float
+    approach_distance: float
+    speed_step: float
+    logic: bool
 
 
 class PaperLogicLimit:
@@ -108,12 +136,10 @@ class PaperLogicLimit:
             self._decel = np.minimum(drag / p.mass, lim.accel_lon)
         self._curve = self._curvature_bands(speeds - speed_step)
         geo, paper = task.conflict, config.paper
-        self._constants = np.array(
-            [
-                config.episode.dt, geo.zone_a[0], geo.zone_a[1], geo.zone_b[0], geo.zone_b[1],
-                geo.s_point_a, geo.s_point_b, config.episode.approach_distance_m, speed_step,
-                float(logic),
-            ]
+        self._constants = LimitLayout(
+            config.episode.dt, geo.zone_a[0], geo.zone_a[1], geo.zone_b[0], geo.zone_b[1],
+            geo.s_point_a, geo.s_point_b, config.episode.approach_distance_m, speed_step,
+            bool(logic),
         )  # fmt: skip
         self._paper = PaperSwitching(paper, config.controllers.emergency_decel).constants
 
@@ -203,9 +229,9 @@ def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: fl
 @jit
 def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: NDArray[np.float64],
                 accel: NDArray[np.float64], decel: NDArray[np.float64], curve: NDArray[np.float64],
-                c: NDArray[np.float64], paper: NDArray[np.float64]) -> int:  # fmt: skip
+                c: LimitLayout, paper: PaperConstants) -> int:  # fmt: skip
     """First tick on which the ego can be past its conflict zone, or -1 (see the class)."""
-    dt, dv = c[_DT], c[_STEP]
+    dt, dv = c.dt, c.speed_step
     bins = accel.shape[0]
     lo = np.full(bins, np.inf)
     hi = np.full(bins, -np.inf)
@@ -218,9 +244,11 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
     for k in range(north.shape[0] - 1):
         tol = (k + 1) * dv * dt  # how far grid positions may run ahead of the true ones
         s_n, v_n = north[k + 1], north_speed[k + 1]
-        north_in = c[_ZONE_B0] <= s_n <= c[_ZONE_B1]
-        window = (c[_POINT_B] - s_n <= c[_APPROACH]) and (s_n <= c[_ZONE_B1])
-        ttr_n = time_to_reach(c[_POINT_B] - s_n, v_n, paper[_MIN_SPEED])
+        north_in = c.north_zone_entry <= s_n <= c.north_zone_exit
+        window = (c.north_conflict_point - s_n <= c.approach_distance) and (
+            s_n <= c.north_zone_exit
+        )
+        ttr_n = time_to_reach(c.north_conflict_point - s_n, v_n, paper.min_speed)
         new_lo[:] = np.inf
         new_hi[:] = -np.inf
         for j in range(bins):
@@ -237,16 +265,20 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
                 for r in range(curve.shape[1]):
                     n = _remove(piece_lo, piece_hi, n, curve[j2, r, 0] + tol, curve[j2, r, 1])
                 if north_in:
-                    n = _remove(piece_lo, piece_hi, n, c[_ZONE_A0] + tol, c[_ZONE_A1])
-                if c[_LOGIC] > 0 and window and n > 0:
+                    n = _remove(piece_lo, piece_hi, n, c.ego_zone_entry + tol, c.ego_zone_exit)
+                if c.logic and window and n > 0:
                     # Fires for every true speed in (v2 - dv, v2] from the slowest one's braking
                     # point on, up to where the fastest one's TTR would leave a gap.
                     reach = firing_distance(max(v2 - dv, 0.0), paper)
-                    fire_lo = max(c[_ZONE_A0] - reach, c[_POINT_A] - c[_APPROACH])
-                    fire_hi = c[_ZONE_A1]
-                    gap = ttr_n - paper[_THRESHOLD]
+                    fire_lo = max(
+                        c.ego_zone_entry - reach, c.ego_conflict_point - c.approach_distance
+                    )
+                    fire_hi = c.ego_zone_exit
+                    gap = ttr_n - paper.ttr_threshold_s
                     if gap >= 0:
-                        fire_hi = min(fire_hi, c[_POINT_A] - gap * max(v2, paper[_MIN_SPEED]))
+                        fire_hi = min(
+                            fire_hi, c.ego_conflict_point - gap * max(v2, paper.min_speed)
+                        )
                     n = _remove(piece_lo, piece_hi, n, fire_lo + tol, fire_hi)
                 for i in range(n):
                     new_lo[j2] = min(new_lo[j2], piece_lo[i])
@@ -254,7 +286,7 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
         lo[:] = new_lo
         hi[:] = new_hi
         for j in range(bins):
-            if lo[j] <= hi[j] and hi[j] > c[_ZONE_A1]:
+            if lo[j] <= hi[j] and hi[j] > c.ego_zone_exit:
                 return k + 1
     return -1
 
@@ -262,8 +294,8 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
 @numba.njit(cache=True, parallel=True)
 def _reachable(start: NDArray[np.float64], north: NDArray[np.float64],
                north_speed: NDArray[np.float64], accel: NDArray[np.float64],
-               decel: NDArray[np.float64], curve: NDArray[np.float64], c: NDArray[np.float64],
-               paper: NDArray[np.float64]) -> NDArray[np.int64]:  # fmt: skip
+               decel: NDArray[np.float64], curve: NDArray[np.float64], c: LimitLayout,
+               paper: PaperConstants) -> NDArray[np.int64]:  # fmt: skip
     out = np.empty(start.shape[0], dtype=np.int64)
     for b in numba.prange(start.shape[0]):
         out[b] = _clear_tick(start[b, 0], start[b, 1], north[b], north_speed[b], accel, decel,

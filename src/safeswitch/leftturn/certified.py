@@ -42,19 +42,20 @@ about it. The numpy-facing methods (:meth:`CertifiedSwitching.stop_distance`,
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import broadcast_flat, jit
+from safeswitch.core.registry import LogicContextError
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import CertifiedConfig
 from safeswitch.leftturn.switching import ConflictState
+from safeswitch.sim.conflict import conflict_geometry
 from safeswitch.sim.vehicle import (
     GRAVITY,
-    K_ALPHA_BRAKE,
-    K_ALPHA_THROTTLE,
+    VehicleConstants,
     VehicleParams,
     drive_force,
     longitudinal_tick,
@@ -62,55 +63,92 @@ from safeswitch.sim.vehicle import (
     vehicle_constants,
 )
 
+if TYPE_CHECKING:
+    from safeswitch.leftturn.task import LeftTurnTask
+
 #: Reason codes of the backups (indices into ``CertifiedSwitching.reasons``).
 STOP, CLEAR, NO_BACKUP_BRAKE, NO_BACKUP_CLEAR = 1, 2, 3, 4
 
-# Slots of the constants vector the compiled functions read (see CertifiedSwitching.__init__).
-(
-    _DT,
-    _MASS,
-    _BRAKE_MAX,
-    _DRIVE_MAX,
-    _DRIVE_AT_CAP,
-    _RESIST_AT_CAP,
-    _ENGINE_BRAKE_MAX,
-    _CAP,
-    _LAG_TIME,
-    _ACCEL_MAX,
-    _DECEL_TAIL_WORST,
-    _EGO_ENTER,
-    _EGO_EXIT,
-    _NORTH_ENTER,
-    _NORTH_EXIT,
-    _NORTH_ACCEL,
-    _NORTH_TOP,
-    _PROGRESS_FACTOR,
-    _TIME_MARGIN,
-    _LAG_TICKS,
-    _SUM_K,
-    _GT_LAST,
-    _GB_LAST,
-    _GT_SUM,
-    _GB_SUM,
-) = range(25)
+
+class CertifiedConstants(NamedTuple):
+    """The scalars the compiled filter reads (built by :class:`CertifiedSwitching`).
+
+    Attributes:
+        dt: Tick [s].
+        mass: Ego mass [kg].
+        brake_max: Largest brake force the tyres transmit [N].
+        drive_max: Largest drive force the driven axle transmits [N].
+        drive_at_cap: Drive force at the clearing speed cap [N].
+        resist_at_cap: Driving resistance at the cap [N].
+        engine_brake_max: Largest closed-throttle drag [N].
+        cap: Clearing speed cap [m/s].
+        lag_time: Length of the lag phase the bounds follow tick by tick [s].
+        accel_max: Largest acceleration the plant can give [m/s²].
+        decel_tail_worst: Weakest deceleration after the lag phase from the worst pedals [m/s²].
+        ego_enter: Ego's certified conflict-zone entry [m].
+        ego_exit: Ego's certified conflict-zone exit [m].
+        north_enter: North car's certified conflict-zone entry [m].
+        north_exit: North car's certified conflict-zone exit [m].
+        north_accel: Assumed largest acceleration of the north car [m/s²].
+        north_top: Assumed top speed of the north car [m/s].
+        progress_factor: Bound on progress along the route per distance driven.
+        time_margin: Margin between the ego leaving and the north car entering [s].
+        lag_ticks: Ticks of the lag phase (a float: it enters the closed forms).
+        sum_k: ``Σ k`` over the lag phase.
+        gt_last: Last partial sum of ``ρ_t^k``.
+        gb_last: Last partial sum of ``ρ_b^k``.
+        gt_sum: Sum of the partial sums of ``ρ_t^k``.
+        gb_sum: Sum of the partial sums of ``ρ_b^k``.
+    """
+
+    dt: float
+    mass: float
+    brake_max: float
+    drive_max: float
+    drive_at_cap: float
+    resist_at_cap: float
+    engine_brake_max: float
+    cap: float
+    lag_time: float
+    accel_max: float
+    decel_tail_worst: float
+    ego_enter: float
+    ego_exit: float
+    north_enter: float
+    north_exit: float
+    north_accel: float
+    north_top: float
+    progress_factor: float
+    time_margin: float
+    lag_ticks: float
+    sum_k: float
+    gt_last: float
+    gb_last: float
+    gt_sum: float
+    gb_sum: float
 
 
 @jit
 def _stop_distance(
-    speed: float, throttle: float, brake: float, c: FloatArray, rho_t: FloatArray, rho_b: FloatArray
+    speed: float,
+    throttle: float,
+    brake: float,
+    c: CertifiedConstants,
+    rho_t: FloatArray,
+    rho_b: FloatArray,
 ) -> float:
     """Upper bound on the full-brake stopping distance [m]: on lag tick ``k`` the deceleration
     is at least ``A − B·ρ_b^k − C·ρ_t^k`` (the brake force built up, minus the largest drive
     force of the decaying throttle; resistances ignored); after the lag phase, its last value.
     Closed form while the car still moves at the end of the lag phase, else tick by tick."""
-    dt, kk = c[_DT], c[_LAG_TICKS]
-    a = c[_BRAKE_MAX] / c[_MASS]
+    dt, kk = c.dt, c.lag_ticks
+    a = c.brake_max / c.mass
     b = a * (1.0 - brake)
-    cc = c[_DRIVE_MAX] / c[_MASS] * throttle
-    v_end = speed - dt * (kk * a - b * c[_GB_LAST] - cc * c[_GT_LAST])
+    cc = c.drive_max / c.mass * throttle
+    v_end = speed - dt * (kk * a - b * c.gb_last - cc * c.gt_last)
     last = rho_t.shape[0] - 1
     if v_end > 0.0:
-        v_sum = kk * speed - dt * (c[_SUM_K] * a - b * c[_GB_SUM] - cc * c[_GT_SUM])
+        v_sum = kk * speed - dt * (c.sum_k * a - b * c.gb_sum - cc * c.gt_sum)
         decel_end = a - b * rho_b[last] - cc * rho_t[last]
         return dt * (v_sum + 0.5 * (speed - v_end)) + v_end * v_end / (2.0 * decel_end)
     v, total, decel = speed, 0.0, 0.0
@@ -123,12 +161,12 @@ def _stop_distance(
 
 
 @jit
-def _quick_stop_distance(speed: float, c: FloatArray) -> float:
+def _quick_stop_distance(speed: float, c: CertifiedConstants) -> float:
     """A looser stopping bound for any pedal positions: the largest drive force for the whole
     lag phase, then the lag phase's weakest deceleration [m]."""
-    t, a = c[_LAG_TIME], c[_ACCEL_MAX]
+    t, a = c.lag_time, c.accel_max
     top = speed + a * t
-    return (speed + 0.5 * a * t) * t + top * top / (2.0 * c[_DECEL_TAIL_WORST])
+    return (speed + 0.5 * a * t) * t + top * top / (2.0 * c.decel_tail_worst)
 
 
 @jit
@@ -151,7 +189,7 @@ def _clear_time(
     speed: float,
     throttle: float,
     brake: float,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
 ) -> float:
@@ -160,21 +198,21 @@ def _clear_time(
     the clearing speed cap minus full engine braking of its closed part, the releasing brake and
     the resistances at the cap). Closed form when no clamp of the speed bound (at 0 or at the
     cap) can act and the distance is not covered within the lag phase, else tick by tick."""
-    dt, cap, mass, kk = c[_DT], c[_CAP], c[_MASS], c[_LAG_TICKS]
-    a = (c[_DRIVE_AT_CAP] - c[_RESIST_AT_CAP]) / mass
-    q_t = (1.0 - throttle) * (c[_DRIVE_AT_CAP] + c[_ENGINE_BRAKE_MAX]) / mass
-    q_b = brake * c[_BRAKE_MAX] / mass
+    dt, cap, mass, kk = c.dt, c.cap, c.mass, c.lag_ticks
+    a = (c.drive_at_cap - c.resist_at_cap) / mass
+    q_t = (1.0 - throttle) * (c.drive_at_cap + c.engine_brake_max) / mass
+    q_b = brake * c.brake_max / mass
     last = rho_t.shape[0] - 1
     first = a - q_t * rho_t[0] - q_b * rho_b[0]
-    v_end = speed + dt * (kk * a - q_t * c[_GT_LAST] - q_b * c[_GB_LAST])
-    v_sum = kk * speed + dt * (c[_SUM_K] * a - q_t * c[_GT_SUM] - q_b * c[_GB_SUM])
+    v_end = speed + dt * (kk * a - q_t * c.gt_last - q_b * c.gb_last)
+    v_sum = kk * speed + dt * (c.sum_k * a - q_t * c.gt_sum - q_b * c.gb_sum)
     covered = dt * (v_sum + 0.5 * (speed - v_end))
     # The bound's acceleration only grows with k, so the speed bound is valley-shaped: it cannot
     # reach 0 if even K ticks at the first (lowest) acceleration would not, and its largest
     # value is at an end of the lag phase.
     if speed + kk * dt * min(first, 0.0) >= 0.0 and max(speed, v_end) <= cap and covered < distance:
         a_end = a - q_t * rho_t[last] - q_b * rho_b[last]
-        return c[_LAG_TIME] + _tail_time(distance - covered, v_end, a_end, cap)
+        return c.lag_time + _tail_time(distance - covered, v_end, a_end, cap)
     raw, v, accel, speeds = speed, speed, 0.0, 0.0
     for k in range(last + 1):
         accel = a - q_t * rho_t[k] - q_b * rho_b[k]
@@ -184,18 +222,18 @@ def _clear_time(
         covered = dt * (speeds + 0.5 * (speed - v))
         if covered >= distance:
             return (k + 1) * dt
-    return c[_LAG_TIME] + _tail_time(max(distance - covered, 0.0), v, accel, cap)
+    return c.lag_time + _tail_time(max(distance - covered, 0.0), v, accel, cap)
 
 
 @jit
-def _north_arrival(progress: float, speed: float, c: FloatArray) -> float:
+def _north_arrival(progress: float, speed: float, c: CertifiedConstants) -> float:
     """Earliest time the north car can enter its zone within the assumptions [s] (0 inside,
     ``inf`` once it has left)."""
-    if progress > c[_NORTH_EXIT]:
+    if progress > c.north_exit:
         return math.inf
-    a = c[_NORTH_ACCEL]
-    top = max(c[_NORTH_TOP], speed)  # best effort if already faster
-    distance = max(c[_NORTH_ENTER] - progress, 0.0)
+    a = c.north_accel
+    top = max(c.north_top, speed)  # best effort if already faster
+    distance = max(c.north_enter - progress, 0.0)
     to_top = (top * top - speed * speed) / (2.0 * a)
     if distance <= to_top:
         return (math.sqrt(speed * speed + 2.0 * a * distance) - speed) / a
@@ -208,12 +246,12 @@ def _stop_ok(
     speed: float,
     throttle: float,
     brake: float,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
 ) -> bool:
     """Full braking ends before the ego's zone entry (the quick bound first)."""
-    room = (c[_EGO_ENTER] - progress) / c[_PROGRESS_FACTOR]
+    room = (c.ego_enter - progress) / c.progress_factor
     if _quick_stop_distance(speed, c) <= room:
         return True
     if room < 0.0:
@@ -228,13 +266,13 @@ def _clear_ok(
     throttle: float,
     brake: float,
     arrival: float,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
 ) -> bool:
     """Full throttle leaves the ego's zone ``time_margin_s`` before the north car can enter."""
-    distance = c[_PROGRESS_FACTOR] * max(c[_EGO_EXIT] - progress, 0.0)
-    deadline = arrival - c[_TIME_MARGIN]
+    distance = c.progress_factor * max(c.ego_exit - progress, 0.0)
+    deadline = arrival - c.time_margin
     return _clear_time(distance, speed, throttle, brake, c, rho_t, rho_b) <= deadline
 
 
@@ -246,13 +284,13 @@ def _certified(
     throttle: float,
     brake: float,
     arrival: float,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
 ) -> bool:
     """The certificate with the ego's progress known within ``[low, high]``: the stop backup
     judged at the highest progress, the clear backup at the lowest."""
-    if math.isinf(arrival) or low > c[_EGO_EXIT]:
+    if math.isinf(arrival) or low > c.ego_exit:
         return True
     if _stop_ok(high, speed, throttle, brake, c, rho_t, rho_b):
         return True
@@ -260,14 +298,14 @@ def _certified(
 
 
 @jit
-def _settled(progress: float, speed: float, north_progress: float, c: FloatArray) -> bool:
+def _settled(progress: float, speed: float, north_progress: float, c: CertifiedConstants) -> bool:
     """No learned action can matter: the conflict is over, or even after a tick of the hardest
     acceleration the plant can give, a full brake (quick bound) still stops before the zone."""
-    if north_progress > c[_NORTH_EXIT] or progress > c[_EGO_EXIT]:
+    if north_progress > c.north_exit or progress > c.ego_exit:
         return True
-    dt, f = c[_DT], c[_PROGRESS_FACTOR]
-    top = speed + c[_ACCEL_MAX] * dt
-    room = (c[_EGO_ENTER] - (progress + top * dt * f)) / f
+    dt, f = c.dt, c.progress_factor
+    top = speed + c.accel_max * dt
+    room = (c.ego_enter - (progress + top * dt * f)) / f
     return _quick_stop_distance(top, c) <= room
 
 
@@ -279,8 +317,8 @@ def _predict(
     brake: float,
     throttle_cmd: float,
     brake_cmd: float,
-    c: FloatArray,
-    k: FloatArray,
+    c: CertifiedConstants,
+    k: VehicleConstants,
 ) -> tuple[float, float, float, float, float]:
     """The ego one tick ahead under the given pedals, on the plant's own longitudinal model
     (:func:`~safeswitch.sim.vehicle.longitudinal_tick`): progress bounds (low, high) — the path
@@ -289,8 +327,8 @@ def _predict(
     next_throttle, next_brake, next_speed = longitudinal_tick(
         speed, throttle, brake, throttle_cmd, brake_cmd, k
     )
-    step = 0.5 * (speed + next_speed) * c[_DT]
-    f = c[_PROGRESS_FACTOR]
+    step = 0.5 * (speed + next_speed) * c.dt
+    f = c.progress_factor
     return progress + step / f, progress + step * f, next_speed, next_throttle, next_brake
 
 
@@ -303,10 +341,10 @@ def _decide(
     north_progress: FloatArray,
     north_speed: FloatArray,
     learned: FloatArray,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
-    k: FloatArray,
+    k: VehicleConstants,
     use: BoolArray,
     reason: NDArray[np.int8],
     pedals: FloatArray,
@@ -327,8 +365,8 @@ def _decide(
 @jit
 def certify_one(
     progress: float, speed: float, throttle: float, brake: float, north_progress: float,
-    north_speed: float, throttle_cmd: float, brake_cmd: float, c: FloatArray, rho_t: FloatArray,
-    rho_b: FloatArray, k: FloatArray,
+    north_speed: float, throttle_cmd: float, brake_cmd: float, c: CertifiedConstants,
+    rho_t: FloatArray, rho_b: FloatArray, k: VehicleConstants,
 ) -> tuple[bool, int, bool]:  # fmt: skip
     """The filter for one episode and learned pedals: a state the screen settles keeps them; else
     the certificate of the state after one learned tick, and where it fails the backup. Returns
@@ -341,7 +379,7 @@ def certify_one(
     arrival = _north_arrival(north_progress, north_speed, c)
     # The north car may arrive one tick sooner after the learned tick.
     if _certified(
-        low, high, next_speed, next_throttle, next_brake, arrival - c[_DT], c, rho_t, rho_b
+        low, high, next_speed, next_throttle, next_brake, arrival - c.dt, c, rho_t, rho_b
     ):
         return False, 0, False
     # Stop where it can; else clear; else best effort: brake before the zone, go inside it.
@@ -349,7 +387,7 @@ def certify_one(
         return True, STOP, False
     if _clear_ok(progress, speed, throttle, brake, arrival, c, rho_t, rho_b):
         return True, CLEAR, True
-    if progress < c[_EGO_ENTER]:
+    if progress < c.ego_enter:
         return True, NO_BACKUP_BRAKE, False
     return True, NO_BACKUP_CLEAR, True
 
@@ -361,8 +399,8 @@ def _map_predict(
     throttle: FloatArray,
     brake: FloatArray,
     pedals: FloatArray,
-    c: FloatArray,
-    k: FloatArray,
+    c: CertifiedConstants,
+    k: VehicleConstants,
     out: FloatArray,
 ) -> None:
     for i in range(progress.shape[0]):
@@ -376,7 +414,7 @@ def _map_stop_distance(
     speed: FloatArray,
     throttle: FloatArray,
     brake: FloatArray,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
     out: NDArray[Any],
@@ -391,7 +429,7 @@ def _map_clear_time(
     speed: FloatArray,
     throttle: FloatArray,
     brake: FloatArray,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
     out: NDArray[Any],
@@ -401,14 +439,14 @@ def _map_clear_time(
 
 
 @jit
-def _map_quick_stop_distance(speed: FloatArray, c: FloatArray, out: NDArray[Any]) -> None:
+def _map_quick_stop_distance(speed: FloatArray, c: CertifiedConstants, out: NDArray[Any]) -> None:
     for i in range(speed.shape[0]):
         out[i] = _quick_stop_distance(speed[i], c)
 
 
 @jit
 def _map_north_arrival(
-    progress: FloatArray, speed: FloatArray, c: FloatArray, out: NDArray[Any]
+    progress: FloatArray, speed: FloatArray, c: CertifiedConstants, out: NDArray[Any]
 ) -> None:
     for i in range(progress.shape[0]):
         out[i] = _north_arrival(progress[i], speed[i], c)
@@ -422,7 +460,7 @@ def _map_certified(
     throttle: FloatArray,
     brake: FloatArray,
     arrival: FloatArray,
-    c: FloatArray,
+    c: CertifiedConstants,
     rho_t: FloatArray,
     rho_b: FloatArray,
     out: NDArray[Any],
@@ -438,7 +476,7 @@ def _map_settled(
     progress: FloatArray,
     speed: FloatArray,
     north_progress: FloatArray,
-    c: FloatArray,
+    c: CertifiedConstants,
     out: NDArray[Any],
 ) -> None:
     for i in range(progress.shape[0]):
@@ -490,52 +528,56 @@ class CertifiedSwitching:
         #: The plant's longitudinal model the learned tick is predicted with.
         self._plant = plant = vehicle_constants(vehicle, dt)
         k = np.arange(1, config.lag_ticks + 1, dtype=np.float64)
-        throttle_decay = (1.0 - plant[K_ALPHA_THROTTLE]) ** k  # ρ_t^k, [K]
-        brake_decay = (1.0 - plant[K_ALPHA_BRAKE]) ** k  # ρ_b^k, [K]
-        # The constants the compiled functions read, by slot.
-        c = np.zeros(25)
-        c[_DT], c[_MASS] = dt, p.mass
+        throttle_decay = (1.0 - plant.alpha_throttle) ** k  # ρ_t^k, [K]
+        brake_decay = (1.0 - plant.alpha_brake) ** k  # ρ_b^k, [K]
         # Forces that bound the backups [N].
-        c[_DRIVE_MAX] = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
-        c[_BRAKE_MAX] = min(p.max_brake_force, grip)
-        c[_CAP] = cap = config.clear_speed_cap
-        c[_DRIVE_AT_CAP] = drive_force(cap, plant)
-        c[_RESIST_AT_CAP] = resistance(cap, plant)
-        c[_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
+        drive_max = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
+        brake_max = min(p.max_brake_force, grip)
+        cap = config.clear_speed_cap
         # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
         # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
         # whole lag phase, then brake at the lag phase's last (weakest) deceleration.
-        c[_LAG_TIME] = config.lag_ticks * dt
-        c[_ACCEL_MAX] = c[_DRIVE_MAX] / p.mass
-        c[_DECEL_TAIL_WORST] = (
-            c[_BRAKE_MAX] * (1.0 - brake_decay[-1]) - c[_DRIVE_MAX] * throttle_decay[-1]
-        ) / p.mass
-        if c[_DECEL_TAIL_WORST] <= 0:
+        decel_tail_worst = float(
+            (brake_max * (1.0 - brake_decay[-1]) - drive_max * throttle_decay[-1]) / p.mass
+        )
+        if decel_tail_worst <= 0:
             raise ValueError(
                 f"certified.lag_ticks={config.lag_ticks} is too short: after it the brake "
                 "cannot yet overcome a fully open throttle; increase it"
             )
-        c[_EGO_ENTER], c[_EGO_EXIT] = ego_zone
-        c[_NORTH_ENTER], c[_NORTH_EXIT] = north_zone
-        c[_NORTH_ACCEL] = config.north_max_accel
-        c[_NORTH_TOP] = config.north_max_speed_kmh / 3.6
-        c[_PROGRESS_FACTOR] = config.progress_factor
-        c[_TIME_MARGIN] = config.time_margin_s
         # Sums for the closed forms: Σk, and the last value and sum of the partial sums of ρ^k.
         kk = config.lag_ticks
         gt, gb = np.cumsum(throttle_decay), np.cumsum(brake_decay)
-        c[_LAG_TICKS], c[_SUM_K] = kk, kk * (kk + 1) / 2.0
-        c[_GT_LAST], c[_GB_LAST] = gt[-1], gb[-1]
-        c[_GT_SUM], c[_GB_SUM] = gt.sum(), gb.sum()
+        c = CertifiedConstants(
+            dt=dt,
+            mass=p.mass,
+            brake_max=brake_max,
+            drive_max=drive_max,
+            drive_at_cap=drive_force(cap, plant),
+            resist_at_cap=resistance(cap, plant),
+            engine_brake_max=p.max_engine_brake_force,
+            cap=cap,
+            lag_time=kk * dt,
+            accel_max=drive_max / p.mass,
+            decel_tail_worst=decel_tail_worst,
+            ego_enter=ego_zone[0],
+            ego_exit=ego_zone[1],
+            north_enter=north_zone[0],
+            north_exit=north_zone[1],
+            north_accel=config.north_max_accel,
+            north_top=config.north_max_speed_kmh / 3.6,
+            progress_factor=config.progress_factor,
+            time_margin=config.time_margin_s,
+            lag_ticks=float(kk),
+            sum_k=kk * (kk + 1) / 2.0,
+            gt_last=float(gt[-1]),
+            gb_last=float(gb[-1]),
+            gt_sum=float(gt.sum()),
+            gb_sum=float(gb.sum()),
+        )
         self._c = c
         #: Everything the compiled bounds read: constants, ρ_t^k and ρ_b^k.
         self._tables = (c, throttle_decay, brake_decay)
-
-    @property
-    def kernel_tables(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """What :func:`certify_one` reads after the per-episode values: constants, ρ_t^k,
-        ρ_b^k and the plant's longitudinal constants."""
-        return (*self._tables, self._plant)
 
     # -- bounds (each element through the compiled scalar functions) ------------------------
 
@@ -638,3 +680,21 @@ class CertifiedSwitching:
             s.north_speed, learned, *self._tables, self._plant, use, reason, action,
         )  # fmt: skip
         return Decision(use, reason, action)
+
+
+def certified_logic(task: LeftTurnTask) -> CertifiedSwitching:
+    """Factory of the ``certified`` logic (registered under that name) for a left-turn task:
+    the conflict zones recomputed with the certificate's own margin."""
+    config = getattr(task, "config", None)
+    if not isinstance(getattr(config, "certified", None), CertifiedConfig):
+        raise LogicContextError(
+            "the 'certified' switching logic supervises the left-turn task, not "
+            f"{type(task).__name__}"
+        )
+    c = task.config
+    footprint = (c.vehicle.length, c.vehicle.width)
+    ego_route, north_route = task.world.routes
+    zones = conflict_geometry(
+        ego_route, north_route, footprint, footprint, margin=c.certified.zone_margin_m
+    )
+    return CertifiedSwitching(c.certified, c.vehicle, c.episode.dt, zones.zone_a, zones.zone_b)

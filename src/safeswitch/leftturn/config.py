@@ -13,14 +13,13 @@ from typing import Any, Literal
 
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
 from safeswitch.core.pid import PIDGains
+from safeswitch.core.registry import logic_names
 from safeswitch.sim.road import IntersectionGeometry
 from safeswitch.sim.vehicle import VehicleParams
 
-Switching = Literal["paper", "certified", "none"]
 LearnedScope = Literal["window", "episode", "never"]
 ScenarioName = Literal["cut", "yield1", "yield2"]
 
-SWITCHING_VALUES: tuple[str, ...] = ("paper", "certified", "none")
 SCENARIO_NAMES: tuple[str, ...] = ("cut", "yield1", "yield2")
 
 
@@ -432,8 +431,9 @@ class LeftTurnConfig:
     """Everything that defines the left-turn environment.
 
     Attributes:
-        switching: Switching logic: ``"paper"`` (Algorithm 1), ``"certified"`` (safety filter)
-            or ``"none"`` (the learned action always).
+        switching: Name of a registered switching logic (:mod:`safeswitch.core.registry`):
+            ``"paper"`` (Algorithm 1), ``"certified"`` (safety filter), ``"none"`` (the learned
+            action always), or a plugin's.
         adas_penalty: Whether ``R_ADAS`` is part of the reward (off: the paper's ablation).
         scenario: ``None`` for the random distribution, or a named scenario of Section VI.
         episode: Timing and scope of the learned controller.
@@ -446,7 +446,7 @@ class LeftTurnConfig:
         vehicle: Vehicle parameters (both cars).
     """
 
-    switching: Switching = "paper"
+    switching: str = "paper"
     adas_penalty: bool = True
     scenario: ScenarioName | None = None
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
@@ -459,9 +459,10 @@ class LeftTurnConfig:
     vehicle: VehicleParams = field(default_factory=VehicleParams)
 
     def __post_init__(self) -> None:
-        if self.switching not in SWITCHING_VALUES:
+        if not isinstance(self.switching, str) or self.switching not in logic_names():
             raise ConfigError(
-                f"switching={self.switching!r} is not one of {list(SWITCHING_VALUES)}"
+                f"switching={self.switching!r} is not a registered switching logic "
+                f"(known: {', '.join(logic_names())})"
             )
         if self.scenario is not None and self.scenario not in SCENARIO_NAMES:
             raise ConfigError(

@@ -27,13 +27,17 @@ stop it before the zone). The ``certified`` logic closes that gap.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import TYPE_CHECKING, NamedTuple, TypeVar
 
 import numpy as np
 
 from safeswitch.core.arrays import jit
+from safeswitch.core.registry import LogicContextError
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import PaperSwitchingConfig
+
+if TYPE_CHECKING:
+    from safeswitch.leftturn.task import LeftTurnTask
 
 
 @dataclass
@@ -70,6 +74,24 @@ class ConflictState:
 Values = TypeVar("Values", FloatArray, float)
 
 
+class PaperConstants(NamedTuple):
+    """What the compiled Algorithm 1 reads (see :class:`PaperSwitchingConfig`).
+
+    Attributes:
+        ttr_threshold_s: Smallest ``TTR_n − TTR_e`` at which cutting in front counts [s].
+        min_speed: Speed floor of Eq. 2 [m/s].
+        emergency_decel: ``a_max_lon`` of Eq. 3 [m/s²].
+        latency_s: Time before full braking takes hold [s].
+        stop_margin_m: Distance added to ``d_safe`` [m].
+    """
+
+    ttr_threshold_s: float
+    min_speed: float
+    emergency_decel: float
+    latency_s: float
+    stop_margin_m: float
+
+
 @jit
 def time_to_reach(distance: Values, speed: Values, min_speed: float) -> Values:
     """``TTR = d_c / v`` (Eq. 2) [s], with ``v`` floored at ``min_speed`` [m/s] (arrays or
@@ -85,10 +107,10 @@ def braking_distance(speed: Values, deceleration: float) -> Values:
 
 
 @jit
-def firing_distance(speed: Values, c: FloatArray) -> Values:
+def firing_distance(speed: Values, c: PaperConstants) -> Values:
     """``d_safe + v·latency + margin`` [m]: how far before its stopping point Algorithm 1 fires
-    at ``speed`` (arrays or scalars; ``c`` as in :func:`paper_switches`)."""
-    return braking_distance(speed, c[2]) + speed * c[3] + c[4]
+    at ``speed`` (arrays or scalars)."""
+    return braking_distance(speed, c.emergency_decel) + speed * c.latency_s + c.stop_margin_m
 
 
 @jit
@@ -99,17 +121,16 @@ def paper_switches(
     north_to_conflict: float,
     north_speed: float,
     both_at_intersection: bool,
-    c: FloatArray,
+    c: PaperConstants,
 ) -> bool:
     """Algorithm 1 for one episode: both cars at the intersection, ``TTR_n − TTR_e <
     threshold`` (no gap to cut in front) and ``d_stop ≤ d_safe + v·latency + margin`` (the last
-    moment to stop before the zone). ``c`` = (threshold, min speed, emergency deceleration,
-    latency, stop margin), see :attr:`PaperSwitching.constants`."""
+    moment to stop before the zone)."""
     if not both_at_intersection:
         return False
-    ttr_e = time_to_reach(max(ego_to_conflict, 0.0), ego_speed, c[1])
-    ttr_n = time_to_reach(north_to_conflict, north_speed, c[1])
-    if not ttr_n - ttr_e < c[0]:
+    ttr_e = time_to_reach(max(ego_to_conflict, 0.0), ego_speed, c.min_speed)
+    ttr_n = time_to_reach(north_to_conflict, north_speed, c.min_speed)
+    if not ttr_n - ttr_e < c.ttr_threshold_s:
         return False
     return ego_to_stop <= firing_distance(ego_speed, c)
 
@@ -117,7 +138,7 @@ def paper_switches(
 @jit
 def _map_paper_switches(
     ego_to_conflict: FloatArray, ego_to_stop: FloatArray, ego_speed: FloatArray,
-    north_to_conflict: FloatArray, north_speed: FloatArray, both: BoolArray, c: FloatArray,
+    north_to_conflict: FloatArray, north_speed: FloatArray, both: BoolArray, c: PaperConstants,
     out: BoolArray,
 ) -> None:  # fmt: skip
     for i in range(out.shape[0]):
@@ -140,14 +161,10 @@ class PaperSwitching:
     def __init__(self, config: PaperSwitchingConfig, emergency_decel: float) -> None:
         self.config = config
         self.emergency_decel = emergency_decel
-
-    @property
-    def constants(self) -> FloatArray:
-        """(threshold, min speed, emergency deceleration, latency, stop margin) for
-        :func:`paper_switches`."""
-        c = self.config
-        return np.array(
-            [c.ttr_threshold_s, c.min_speed, self.emergency_decel, c.latency_s, c.stop_margin_m]
+        c = config
+        #: What :func:`paper_switches` reads.
+        self.constants = PaperConstants(
+            c.ttr_threshold_s, c.min_speed, emergency_decel, c.latency_s, c.stop_margin_m
         )
 
     def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
@@ -158,3 +175,14 @@ class PaperSwitching:
             np.asarray(s.both_at_intersection, dtype=np.bool_), self.constants, use,
         )  # fmt: skip
         return Decision(use, use.astype(np.int8), safe)
+
+
+def paper_logic(task: LeftTurnTask) -> PaperSwitching:
+    """Factory of the ``paper`` logic (registered under that name) for a left-turn task."""
+    config = getattr(task, "config", None)
+    paper = getattr(config, "paper", None)
+    if not isinstance(paper, PaperSwitchingConfig):
+        raise LogicContextError(
+            f"the 'paper' switching logic supervises the left-turn task, not {type(task).__name__}"
+        )
+    return PaperSwitching(paper, task.config.controllers.emergency_decel)

@@ -10,31 +10,31 @@ One tick (paper Fig. 3 and Algorithm 1):
    car's autopilot, and the learned action ``a ∈ [-1, 1]`` → throttle ``(a + 1) / 2``.
 2. Who proposes the ego's pedals: the learned controller while both cars are at the
    intersection (or always, with ``learned_scope="episode"``), ``PID_th`` otherwise.
-3. The switching logic, composed as :func:`safeswitch.core.switching.supervise` composes it,
-   executes the proposal or the safety action; a NaN/inf learned action is never executed.
+3. The switching logic — the registered logic named by ``config.switching`` — decides through
+   the framework's one supervision step, :func:`safeswitch.core.switching.supervise`: a NaN/inf
+   learned action is never executed (``PID_th``'s throttle is proposed in its place), and the
+   proposal or the safety action reaches the plant.
 4. The plant advances 20 ms; the five reward terms are computed from the new state.
 
-Each step is one loop compiled with numba over the episodes (:func:`_controllers`,
-:func:`_switch`, the world's tick, :func:`_after_plant`), built from the same scalar functions
-the numpy-facing API runs (``pid_tick``, ``paper_switches``, ``certify_one``, ``vehicle_tick``,
-``tick_terms``, …): a tick costs a few dozen Python calls whatever the batch size, so the
-Gymnasium ``Env`` is fast too. ``tests/leftturn/test_switching.py`` checks that the compiled
-step 2–3 decides exactly as ``supervise`` with the logic object does.
+Steps 1, 4 and the bookkeeping are loops compiled with numba over the episodes
+(:func:`_controllers`, the world's tick, :func:`_after_plant`), built from the same scalar
+functions the numpy-facing API runs (``pid_tick``, ``vehicle_tick``, ``tick_terms``, …); the
+logics' ``decide`` runs its own compiled loop. A tick costs a few dozen Python calls whatever
+the batch size, so the Gymnasium ``Env`` is fast too.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import columns, jit, take_rows
-from safeswitch.core.pid import PIDState, pid_tick
-from safeswitch.core.switching import NeverSwitch, SwitchingLogic, reason_names
-from safeswitch.leftturn.certified import CertifiedSwitching, certify_one
+from safeswitch.core.pid import PIDKernel, PIDState, pid_tick
+from safeswitch.core.registry import make_logic
+from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.config import LeftTurnConfig, resolve_config
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
@@ -43,12 +43,12 @@ from safeswitch.leftturn.scenarios import (
     named_scenarios,
     sample_scenarios,
 )
-from safeswitch.leftturn.switching import ConflictState, PaperSwitching, paper_switches
+from safeswitch.leftturn.switching import ConflictState
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
-from safeswitch.sim.geometry import FloatArray, IntArray, Route, preview
+from safeswitch.sim.geometry import FloatArray, IntArray, preview
 from safeswitch.sim.road import Intersection
 from safeswitch.sim.traffic import AutopilotParams, autopilot_tick
-from safeswitch.sim.vehicle import steady_state_throttle
+from safeswitch.sim.vehicle import VehicleConstants, steady_state_throttle
 from safeswitch.sim.world import World, WorldState
 
 BoolArray = NDArray[np.bool_]
@@ -170,23 +170,6 @@ class StepRecord:
     ego_cleared: BoolArray
 
 
-def make_switching(
-    config: LeftTurnConfig, ego_route: Route, north_route: Route
-) -> SwitchingLogic[ConflictState]:
-    """The switching logic named by ``config.switching``."""
-    if config.switching == "paper":
-        return PaperSwitching(config.paper, config.controllers.emergency_decel)
-    if config.switching == "certified":
-        footprint = (config.vehicle.length, config.vehicle.width)
-        zones = conflict_geometry(
-            ego_route, north_route, footprint, footprint, margin=config.certified.zone_margin_m
-        )
-        return CertifiedSwitching(
-            config.certified, config.vehicle, config.episode.dt, zones.zone_a, zones.zone_b
-        )
-    return NeverSwitch()
-
-
 class LeftTurnTask:
     """The unprotected left turn as batched functions over :class:`TaskState`.
 
@@ -210,43 +193,31 @@ class LeftTurnTask:
             footprint,
             margin=config.episode.conflict_margin_m,
         )
-        self.switching = make_switching(config, *self.world.routes)
+        #: The switching logic: the registered logic named by ``config.switching``.
+        self.switching: SwitchingLogic[ConflictState] = make_logic(config.switching, self)
         self.reasons = reason_names(self.switching)
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
         ctrl = config.controllers
-        #: What the compiled controllers read: the gain vectors of PID_th, PID_b, PID_lka and
-        #: the north car's speed controller, and the plant's constants (for its feed-forward).
-        self._gains = np.stack(
-            [
-                ctrl.throttle_pid.vector,
-                ctrl.brake_pid.vector,
-                ctrl.lane_pid.vector,
-                self.autopilot.speed_gains.vector,
-            ]
+        #: What the compiled controllers read: PID_th, PID_b, PID_lka and the north car's speed
+        #: controller, and the plant's constants (for its feed-forward).
+        self._gains = ControllerGains(
+            ctrl.throttle_pid.kernel,
+            ctrl.brake_pid.kernel,
+            ctrl.lane_pid.kernel,
+            self.autopilot.speed_gains.kernel,
         )
         self._plant = self.world.vehicle_constants
         r, geo = config.rewards, self.conflict
         self._reward_tables = reward_tables(r)
-        # What the compiled switching step reads (see _switch).
         ep = config.episode
-        self._switch_code = SWITCHING_CODES[config.switching]
-        self._scope_code = ("window", "episode", "never").index(ep.learned_scope)
-        self._geometry = np.array(
-            [geo.s_point_a, geo.s_point_b, *geo.zone_a, geo.zone_b[1], ep.approach_distance_m]
-        )
-        logic = self.switching
-        self._switch_constants = (
-            logic.constants if isinstance(logic, PaperSwitching) else np.zeros(5)
-        )
-        self._certified_tables = (
-            logic.kernel_tables
-            if isinstance(logic, CertifiedSwitching)
-            else (np.zeros(25), np.zeros(1), np.zeros(1), np.zeros(18))
-        )
-        #: Horizon [ticks], the ego's route end [m], the exits of both conflict zones [m].
-        self._limits = np.array(
-            [config.episode.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1]]
+        self._scope_code = LEARNED_SCOPES.index(ep.learned_scope)
+        self._layout = ConflictLayout(
+            geo.s_point_a, geo.s_point_b, geo.zone_a[0], geo.zone_a[1], geo.zone_b[1],
+            ep.approach_distance_m,
+        )  # fmt: skip
+        self._limits = EpisodeLimits(
+            ep.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1]
         )
 
     # -- pure functions -------------------------------------------------------------------
@@ -313,7 +284,7 @@ class LeftTurnTask:
 
     def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
-        return at_intersection(ego_progress, north_progress, self._geometry)
+        return at_intersection(ego_progress, north_progress, self._layout)
 
     def conflict_state(self, state: TaskState) -> ConflictState:
         """Distances and speeds relative to the conflict point, for the switching logics."""
@@ -351,39 +322,53 @@ class LeftTurnTask:
         world = state.world
         batch = state.batch_size
 
-        # 1. Every controller, side by side (one compiled loop, see _controllers).
+        # 1. Every controller side by side, who proposes the ego's pedals, and what the
+        # switching logic sees (one compiled loop, see _controllers).
+        learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
         pids = (state.pid_throttle, state.pid_brake, state.pid_north)
-        one = [np.empty(batch) for _ in range(13)]
-        two = [np.empty((batch, 2)) for _ in range(4)]
+        one = [np.empty(batch) for _ in range(16)]
+        two = [np.empty((batch, 2)) for _ in range(7)]
+        flags = (np.empty(batch, dtype=np.bool_), np.empty(batch, dtype=np.bool_))
         v, routes = world.vehicles, self.world.route_set
         _controllers(
             self._gains, dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
             self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
+            self._layout, self._scope_code, learned_throttle,
             v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress, state.accel_lon,
             state.scenarios.north_speed,
             tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
             (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
-            tuple(one), tuple(two),
+            tuple(one), tuple(two), flags,
         )  # fmt: skip
-        rule_throttle, safety_brake, north_throttle, north_brake = one[:4]
+        safety_brake, north_throttle, north_brake = one[1:4]
         pid_throttle, pid_brake, pid_north = (
             PIDState(*one[4 + 3 * j : 7 + 3 * j]) for j in range(3)
         )
+        ego_to_conflict, ego_to_stop, north_to_conflict = one[13:16]
         steer = two[0]
-        pid_lane = PIDState(*two[1:])
-        # 2.-3. Who proposes the ego's pedals, and the switching logic decides (one compiled
-        # loop; the same as supervise() with self.switching, see _switch).
-        learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
-        throttle, brake = np.empty(batch), np.empty(batch)
-        safety_active, both = np.empty(batch, dtype=np.bool_), np.empty(batch, dtype=np.bool_)
-        reason, controller = np.empty(batch, dtype=np.int8), np.empty(batch, dtype=np.int8)
-        _switch(
-            self._switch_code, len(self.switching.reasons), self._scope_code, self._geometry,
-            self._switch_constants,
-            self._certified_tables, world.progress, v.speed, v.throttle, v.brake,
-            learned_throttle, rule_throttle, safety_brake,
-            throttle, brake, safety_active, reason, controller, both,
-        )  # fmt: skip
+        pid_lane = PIDState(*two[1:4])
+        proposed, safe, fallback = two[4:7]
+        both, in_charge = flags
+        # 2. The switching logic decides through the framework's one supervision step: the
+        # proposal (learned while in charge, else PID_th), PID_b's brake as the safety action,
+        # and PID_th's throttle in place of an invalid learned action.
+        conflict = ConflictState(
+            ego_to_conflict=ego_to_conflict,
+            ego_to_stop=ego_to_stop,
+            ego_speed=v.speed[:, 0],
+            north_to_conflict=north_to_conflict,
+            north_speed=v.speed[:, 1],
+            both_at_intersection=both,
+            ego_progress=world.progress[:, 0],
+            north_progress=world.progress[:, 1],
+            ego_throttle=v.throttle[:, 0],
+            ego_brake=v.brake[:, 0],
+        )
+        sup = supervise(self.switching, conflict, proposed, safe, 0.0, 1.0, fallback)
+        throttle, brake = sup.executed[:, 0], sup.executed[:, 1]
+        controller = np.where(
+            sup.use_safety, np.int8(2), np.where(in_charge & sup.valid, np.int8(0), np.int8(1))
+        ).astype(np.int8)
 
         # 4. The plant.
         new_world, outputs, separation = self.world.step(
@@ -392,19 +377,19 @@ class LeftTurnTask:
         speed = new_world.vehicles.speed
         terms_out = tuple(np.empty(batch) for _ in REWARD_TERMS)
         reward, tick = np.empty(batch), np.empty(batch, dtype=np.int64)
-        flags = tuple(np.empty(batch, dtype=np.bool_) for _ in range(4))
+        ends = tuple(np.empty(batch, dtype=np.bool_) for _ in range(4))
         outcome = np.empty(batch, dtype=np.int8)
         observation = np.empty((batch, 6), dtype=np.float32)
         nv = new_world.vehicles
         _after_plant(
             self._reward_tables, c.rewards.adas_penalty if c.adas_penalty else 0.0,
-            c.rewards.collision_penalty, self._limits, safety_active, separation,
+            c.rewards.collision_penalty, self._limits, sup.safety_active, separation,
             nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
             outputs.accel_lat, state.tick, state.outcome,
-            terms_out, reward, tick, flags, outcome, observation,
+            terms_out, reward, tick, ends, outcome, observation,
         )  # fmt: skip
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
-        collision, terminated, truncated, ego_cleared = flags
+        collision, terminated, truncated, ego_cleared = ends
 
         new_state = TaskState(
             new_world,
@@ -424,8 +409,8 @@ class LeftTurnTask:
             terminated=terminated,
             truncated=truncated,
             collision=collision,
-            safety_active=safety_active,
-            reason=reason,
+            safety_active=sup.safety_active,
+            reason=sup.reason,
             controller=controller,
             both_at_intersection=both,
             learned_throttle=learned_throttle,
@@ -454,42 +439,104 @@ def build_task(
     return LeftTurnTask(resolve_config(config, **overrides))
 
 
+class ControllerGains(NamedTuple):
+    """The PID gains the compiled controllers read."""
+
+    throttle: PIDKernel
+    brake: PIDKernel
+    lane: PIDKernel
+    north_speed: PIDKernel
+
+
+class ConflictLayout(NamedTuple):
+    """Arc lengths of the conflict geometry [m], as the compiled tick reads them.
+
+    Attributes:
+        ego_point: Conflict point on the ego's route.
+        north_point: Conflict point on the north car's route.
+        ego_zone_entry: Entry of the ego's conflict zone (its stopping point).
+        ego_zone_exit: Exit of the ego's conflict zone.
+        north_zone_exit: Exit of the north car's conflict zone.
+        approach_distance: A car is "at the intersection" from this far before its conflict
+            point.
+    """
+
+    ego_point: float
+    north_point: float
+    ego_zone_entry: float
+    ego_zone_exit: float
+    north_zone_exit: float
+    approach_distance: float
+
+
+class EpisodeLimits(NamedTuple):
+    """When an episode ends and when a car has left its zone, as the compiled tick reads them.
+
+    Attributes:
+        horizon_ticks: Episode length [ticks].
+        ego_route_end: Progress at which the ego's route ends [m].
+        ego_zone_exit: Exit of the ego's conflict zone [m].
+        north_zone_exit: Exit of the north car's conflict zone [m].
+    """
+
+    horizon_ticks: int
+    ego_route_end: float
+    ego_zone_exit: float
+    north_zone_exit: float
+
+
+#: Values of ``EpisodeConfig.learned_scope``, in the order of the compiled tick's codes.
+LEARNED_SCOPES: tuple[str, ...] = ("window", "episode", "never")
+
+
 @jit
 def _controllers(
-    gains: FloatArray, dt: float, speed_limit: float, emergency_decel: float, lookahead: float,
-    plant: FloatArray, tables: FloatArray, spacing: float, k_max: int, base: IntArray,
+    gains: ControllerGains, dt: float, speed_limit: float, emergency_decel: float,
+    lookahead: float, plant: VehicleConstants, tables: FloatArray, spacing: float, k_max: int,
+    base: IntArray, layout: ConflictLayout, scope: int, learned_throttle: FloatArray,
     x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, speed: FloatArray,
     progress: FloatArray, accel_lon: FloatArray, north_target: FloatArray,
     pids: tuple[FloatArray, ...], lane: tuple[FloatArray, ...],
-    one: tuple[FloatArray, ...], two: tuple[FloatArray, ...],
+    one: tuple[FloatArray, ...], two: tuple[FloatArray, ...], flags: tuple[BoolArray, ...],
 ) -> None:  # fmt: skip
     """Step 1 of the tick for every episode: ``PID_th`` on ``v_lim − v``, ``PID_b`` on
-    ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, and the
-    north car's autopilot (feed-forward throttle for its target speed plus a speed PID).
+    ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, the
+    north car's autopilot (feed-forward throttle for its target speed plus a speed PID); then
+    who proposes the ego's pedals (``scope`` codes :data:`LEARNED_SCOPES`: the learned throttle
+    while in charge, else ``PID_th``'s) and the distances the switching logic reads.
 
     ``pids`` holds (integral, previous error, derivative) of PID_th, PID_b and the autopilot's
     PID, ``[B]`` each; ``lane`` those of PID_lka, ``[B, 2]``. Written: ``one`` = rule throttle,
-    safety brake, north throttle, north brake, then the new (integral, error, derivative) of the
-    three ``[B]`` PIDs; ``two`` = steering of both cars, then PID_lka's new state.
+    safety brake, north throttle, north brake, the new (integral, error, derivative) of the
+    three ``[B]`` PIDs, then the ego's distance to the conflict point and to its stopping point
+    and the north car's distance to the conflict point; ``two`` = steering of both cars,
+    PID_lka's new state, then the proposed, safety and fallback pedals (throttle, brake);
+    ``flags`` = both cars at the intersection, the learned controller in charge.
     """
     for b in range(x.shape[0]):
         pid = pids
         error = speed_limit - speed[b, 0]
-        out, integral, derivative = pid_tick(gains[0], dt, error, pid[0][b], pid[1][b], pid[2][b])
+        out, integral, derivative = pid_tick(
+            gains.throttle, dt, error, pid[0][b], pid[1][b], pid[2][b]
+        )
+        rule = out
         one[0][b], one[4][b], one[5][b], one[6][b] = out, integral, error, derivative
         error = emergency_decel + accel_lon[b]
-        out, integral, derivative = pid_tick(gains[1], dt, error, pid[3][b], pid[4][b], pid[5][b])
+        out, integral, derivative = pid_tick(
+            gains.brake, dt, error, pid[3][b], pid[4][b], pid[5][b]
+        )
         one[1][b], one[7][b], one[8][b], one[9][b] = out, integral, error, derivative
         one[2][b], one[3][b], one[10][b], one[11][b], one[12][b] = autopilot_tick(
-            gains[3], dt, plant, speed[b, 1], north_target[b], pid[6][b], pid[7][b], pid[8][b]
-        )
+            gains.north_speed, dt, plant, speed[b, 1], north_target[b], pid[6][b], pid[7][b],
+            pid[8][b],
+        )  # fmt: skip
         for j in range(2):
             error = preview(
                 tables, spacing, k_max, base[j], progress[b, j], x[b, j], y[b, j],
                 cos_yaw[b, j], sin_yaw[b, j], lookahead,
             )  # fmt: skip
             out, integral, derivative = pid_tick(
-                gains[2], dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
+                gains.lane, dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
             two[0][b, j], two[1][b, j], two[2][b, j], two[3][b, j] = (
                 out,
@@ -497,12 +544,22 @@ def _controllers(
                 error,
                 derivative,
             )
+        s_e, s_n = progress[b, 0], progress[b, 1]
+        one[13][b] = layout.ego_point - s_e
+        one[14][b] = layout.ego_zone_entry - s_e
+        one[15][b] = layout.north_point - s_n
+        at = at_intersection(s_e, s_n, layout)
+        in_charge = at if scope == 0 else scope == 1
+        flags[0][b], flags[1][b] = at, in_charge
+        two[4][b, 0], two[4][b, 1] = (learned_throttle[b] if in_charge else rule), 0.0
+        two[5][b, 0], two[5][b, 1] = 0.0, one[1][b]
+        two[6][b, 0], two[6][b, 1] = rule, 0.0
 
 
 @jit
 def _after_plant(
     tables: tuple[FloatArray, ...], adas_penalty: float, collision_penalty: float,
-    limits: FloatArray,
+    limits: EpisodeLimits,
     safety_active: BoolArray, separation: FloatArray, x: FloatArray, y: FloatArray,
     speed: FloatArray, progress: FloatArray, lateral: FloatArray, accel_lon: FloatArray,
     accel_lat: FloatArray, tick: NDArray[np.int64], outcome: NDArray[np.int8],
@@ -529,14 +586,16 @@ def _after_plant(
         new_tick[b] = t
         flags[0][b] = collision
         flags[1][b] = collision
-        flags[2][b] = (not collision) and (t >= limits[0] or progress[b, 0] >= limits[1])
-        cleared = progress[b, 0] > limits[2]
+        flags[2][b] = (not collision) and (
+            t >= limits.horizon_ticks or progress[b, 0] >= limits.ego_route_end
+        )
+        cleared = progress[b, 0] > limits.ego_zone_exit
         flags[3][b] = cleared
         if outcome[b] != 0:
             new_outcome[b] = outcome[b]
         elif cleared:
             new_outcome[b] = 1
-        elif progress[b, 1] > limits[3]:
+        elif progress[b, 1] > limits.north_zone_exit:
             new_outcome[b] = 2
         else:
             new_outcome[b] = 0
@@ -548,73 +607,14 @@ def _after_plant(
 
 @jit
 def at_intersection(
-    ego_progress: FloatArray | float, north_progress: FloatArray | float, geometry: FloatArray
+    ego_progress: FloatArray | float, north_progress: FloatArray | float, layout: ConflictLayout
 ) -> Any:
     """Algorithm 1's While condition: both cars within the approach distance of their conflict
-    point and not yet out of their conflict zone; a bool array for arrays, a bool for scalars
-    (``geometry`` as in :func:`_switch`)."""
+    point and not yet out of their conflict zone; a bool array for arrays, a bool for
+    scalars."""
     return (
-        (geometry[0] - ego_progress <= geometry[5])
-        & (ego_progress <= geometry[3])
-        & (geometry[1] - north_progress <= geometry[5])
-        & (north_progress <= geometry[4])
+        (layout.ego_point - ego_progress <= layout.approach_distance)
+        & (ego_progress <= layout.ego_zone_exit)
+        & (layout.north_point - north_progress <= layout.approach_distance)
+        & (north_progress <= layout.north_zone_exit)
     )
-
-
-#: Codes of the switching logics in the compiled step.
-SWITCHING_CODES = {"none": 0, "paper": 1, "certified": 2}
-
-
-@jit
-def _switch(
-    switching: int, invalid: int, scope: int, geometry: FloatArray, paper: FloatArray,
-    certified: tuple[FloatArray, FloatArray, FloatArray, FloatArray], progress: FloatArray,
-    speed: FloatArray, actual_throttle: FloatArray, actual_brake: FloatArray,
-    learned_throttle: FloatArray, rule_throttle: FloatArray, safety_brake: FloatArray,
-    throttle: FloatArray, brake: FloatArray, safety_active: BoolArray, reason: NDArray[np.int8],
-    controller: NDArray[np.int8], both: BoolArray,
-) -> None:  # fmt: skip
-    """Steps 2 and 3 of the tick for every episode, exactly as
-    :func:`~safeswitch.core.switching.supervise` composes them with :attr:`LeftTurnTask.switching`
-    (``tests/leftturn/test_switching.py`` checks it against that composition): the proposal (the
-    learned throttle while the learned controller is in charge, else ``PID_th``'s), its validity
-    (a NaN/inf proposal is replaced by the Safety controller's action and recorded with the
-    invalid-action reason), clipping, the logic's decision and the executed pedals.
-
-    ``geometry`` = (conflict point on the ego's route, on the north car's, ego zone entry and
-    exit, north zone exit, approach distance); ``paper`` = :attr:`PaperSwitching.constants`;
-    ``certified`` = :attr:`CertifiedSwitching.kernel_tables` (unused by the other logics).
-    """
-    c, rho_t, rho_b, k = certified
-    for b in range(progress.shape[0]):
-        s_e, s_n = progress[b, 0], progress[b, 1]
-        ego_to_conflict, north_to_conflict = geometry[0] - s_e, geometry[1] - s_n
-        at = at_intersection(s_e, s_n, geometry)
-        both[b] = at
-        in_charge = at if scope == 0 else scope == 1
-        proposed = learned_throttle[b] if in_charge else rule_throttle[b]
-        valid = math.isfinite(proposed)
-        candidate_throttle = min(max(proposed if valid else 0.0, 0.0), 1.0)
-        candidate_brake = min(max(0.0 if valid else safety_brake[b], 0.0), 1.0)
-        use, code = False, 0
-        backup_throttle, backup_brake = 0.0, safety_brake[b]
-        if switching == 1:
-            use = paper_switches(
-                ego_to_conflict, geometry[2] - s_e, speed[b, 0], north_to_conflict, speed[b, 1],
-                at, paper,
-            )  # fmt: skip
-            code = 1 if use else 0
-        elif switching == 2:
-            use, code, go = certify_one(
-                s_e, speed[b, 0], actual_throttle[b, 0], actual_brake[b, 0], s_n, speed[b, 1],
-                candidate_throttle, candidate_brake, c, rho_t, rho_b, k,
-            )  # fmt: skip
-            backup_throttle, backup_brake = (1.0, 0.0) if go else (0.0, 1.0)
-        if use:
-            throttle[b] = min(max(backup_throttle, 0.0), 1.0)
-            brake[b] = min(max(backup_brake, 0.0), 1.0)
-        else:
-            throttle[b], brake[b] = candidate_throttle, candidate_brake
-        safety_active[b] = use or not valid
-        reason[b] = code if valid else invalid
-        controller[b] = 2 if safety_active[b] else (0 if in_charge else 1)

@@ -11,9 +11,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from safeswitch.core.arrays import flat, jit
-from safeswitch.core.pid import PIDGains, PIDState, pid_tick
+from safeswitch.core.pid import PIDGains, PIDKernel, PIDState, pid_tick
 from safeswitch.sim.geometry import FloatArray
-from safeswitch.sim.vehicle import VehicleParams, steady_throttle, vehicle_constants
+from safeswitch.sim.vehicle import (
+    VehicleConstants,
+    VehicleParams,
+    steady_throttle,
+    vehicle_constants,
+)
 
 
 @dataclass(frozen=True)
@@ -49,7 +54,7 @@ def autopilot_pedals(
     throttle, brake = np.empty(shape), np.empty(shape)
     integral, error, derivative = np.empty(shape), np.empty(shape), np.empty(shape)
     _map_autopilot(
-        params.speed_gains.vector, dt, vehicle_constants(vehicle, dt), flat(speed, shape),
+        params.speed_gains.kernel, dt, vehicle_constants(vehicle, dt), flat(speed, shape),
         flat(target_speed, shape), flat(pid.integral, shape), flat(pid.prev_error, shape),
         flat(pid.derivative, shape),
         (throttle.reshape(-1), brake.reshape(-1), integral.reshape(-1), error.reshape(-1),
@@ -60,11 +65,11 @@ def autopilot_pedals(
 
 @jit
 def autopilot_tick(
-    gains: FloatArray, dt: float, plant: FloatArray, speed: float, target: float,
+    gains: PIDKernel, dt: float, plant: VehicleConstants, speed: float, target: float,
     integral: float, prev_error: float, derivative: float,
 ) -> tuple[float, float, float, float, float]:  # fmt: skip
     """:func:`autopilot_pedals` for one car (``gains``: the speed PID's
-    :attr:`~safeswitch.core.pid.PIDGains.vector`, ``plant``: its vehicle constants). Returns
+    :attr:`~safeswitch.core.pid.PIDGains.kernel`, ``plant``: its vehicle constants). Returns
     throttle, brake and the PID's new integral, error and derivative."""
     error = target - speed
     correction, integral, derivative = pid_tick(gains, dt, error, integral, prev_error, derivative)
@@ -74,7 +79,7 @@ def autopilot_tick(
 
 @jit
 def _map_autopilot(
-    gains: FloatArray, dt: float, plant: FloatArray, speed: FloatArray, target: FloatArray,
+    gains: PIDKernel, dt: float, plant: VehicleConstants, speed: FloatArray, target: FloatArray,
     integral: FloatArray, prev_error: FloatArray, derivative: FloatArray,
     out: tuple[FloatArray, ...],
 ) -> None:  # fmt: skip

@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -210,90 +211,113 @@ def lag_factor(time_constant: float, dt: float) -> float:
     return 1.0 - math.exp(-dt / time_constant)
 
 
-# Slots of the vehicle model's constants vector (see vehicle_constants).
-(
-    K_DT,
-    K_MASS,
-    K_ALPHA_THROTTLE,
-    K_ALPHA_BRAKE,
-    K_DRIVE_MAX,
-    K_POWER,
-    K_TRACTION,
-    K_ENGINE_BRAKE_BASE,
-    K_ENGINE_BRAKE_SLOPE,
-    K_ENGINE_BRAKE_MAX,
-    K_BRAKE_FORCE,
-    K_ROLLING,
-    K_AERO,
-    K_GRIP,
-    K_ALPHA_STEER,
-    K_MAX_STEER,
-    K_REAR_RATIO,
-    K_WHEELBASE,
-) = range(18)
+class VehicleConstants(NamedTuple):
+    """What the compiled vehicle model reads, derived once per parameter set and tick (see
+    :func:`vehicle_constants`).
+
+    Attributes:
+        dt: Tick length [s].
+        mass: Mass [kg].
+        alpha_throttle: Fraction of the throttle command's gap closed per tick.
+        alpha_brake: Fraction of the brake command's gap closed per tick.
+        drive_max: Largest drive force [N].
+        power: Peak power [W].
+        traction: Largest force the driven axle transmits, ``μ·m·g·f_driven`` [N].
+        engine_brake_base: Closed-throttle drag at 1 m/s and above, before the speed term [N].
+        engine_brake_slope: Further closed-throttle drag per unit speed [N·s/m].
+        engine_brake_max: Upper bound of the closed-throttle drag [N].
+        brake_force: Brake force at full brake [N].
+        rolling: Rolling resistance ``c_rr·m·g`` [N].
+        aero: ``½·ρ·Cd·A`` [kg/m].
+        grip: Tyre grip ``μ·m·g`` [N].
+        alpha_steer: Fraction of the steering command's gap closed per tick.
+        max_steer: Road-wheel angle at full steering [rad].
+        rear_ratio: ``l_r / L``.
+        wheelbase: ``L`` [m].
+    """
+
+    dt: float
+    mass: float
+    alpha_throttle: float
+    alpha_brake: float
+    drive_max: float
+    power: float
+    traction: float
+    engine_brake_base: float
+    engine_brake_slope: float
+    engine_brake_max: float
+    brake_force: float
+    rolling: float
+    aero: float
+    grip: float
+    alpha_steer: float
+    max_steer: float
+    rear_ratio: float
+    wheelbase: float
 
 
 @functools.lru_cache(maxsize=16)
-def vehicle_constants(params: VehicleParams, dt: float) -> FloatArray:
-    """The constants :func:`vehicle_tick` and the force functions read, by slot ``K_*``
-    (read-only; computed once per parameter set and tick)."""
+def vehicle_constants(params: VehicleParams, dt: float) -> VehicleConstants:
+    """The constants :func:`vehicle_tick` and the force functions read (computed once per
+    parameter set and tick)."""
     p = params
-    k = np.zeros(18)
-    k[K_DT], k[K_MASS] = dt, p.mass
-    k[K_ALPHA_THROTTLE] = lag_factor(p.throttle_time_constant, dt)
-    k[K_ALPHA_BRAKE] = lag_factor(p.brake_time_constant, dt)
-    k[K_DRIVE_MAX], k[K_POWER] = p.max_drive_force, p.max_power
-    k[K_TRACTION] = p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction
-    k[K_ENGINE_BRAKE_BASE] = p.engine_brake_base_force
-    k[K_ENGINE_BRAKE_SLOPE] = p.engine_brake_coefficient
-    k[K_ENGINE_BRAKE_MAX] = p.max_engine_brake_force
-    k[K_BRAKE_FORCE] = p.max_brake_force
-    k[K_ROLLING] = p.rolling_resistance * p.mass * GRAVITY
-    k[K_AERO] = 0.5 * AIR_DENSITY * p.drag_area
-    k[K_GRIP] = p.friction_coefficient * p.mass * GRAVITY
-    k[K_ALPHA_STEER] = lag_factor(p.steer_time_constant, dt)
-    k[K_MAX_STEER] = p.max_steer_angle
-    k[K_REAR_RATIO] = p.cg_to_rear_axle / p.wheelbase
-    k[K_WHEELBASE] = p.wheelbase
-    k.flags.writeable = False
-    return k
+    return VehicleConstants(
+        dt=dt,
+        mass=p.mass,
+        alpha_throttle=lag_factor(p.throttle_time_constant, dt),
+        alpha_brake=lag_factor(p.brake_time_constant, dt),
+        drive_max=p.max_drive_force,
+        power=p.max_power,
+        traction=p.friction_coefficient * p.mass * GRAVITY * p.driven_axle_load_fraction,
+        engine_brake_base=p.engine_brake_base_force,
+        engine_brake_slope=p.engine_brake_coefficient,
+        engine_brake_max=p.max_engine_brake_force,
+        brake_force=p.max_brake_force,
+        rolling=p.rolling_resistance * p.mass * GRAVITY,
+        aero=0.5 * AIR_DENSITY * p.drag_area,
+        grip=p.friction_coefficient * p.mass * GRAVITY,
+        alpha_steer=lag_factor(p.steer_time_constant, dt),
+        max_steer=p.max_steer_angle,
+        rear_ratio=p.cg_to_rear_axle / p.wheelbase,
+        wheelbase=p.wheelbase,
+    )
 
 
 @jit
-def drive_force(speed: float, k: FloatArray) -> float:
+def drive_force(speed: float, k: VehicleConstants) -> float:
     """Drive force at full throttle [N]: ``min(F_max, P/v, μ·m·g·f_driven)``."""
-    return min(min(k[K_DRIVE_MAX], k[K_POWER] / max(speed, 0.1)), k[K_TRACTION])
+    return min(min(k.drive_max, k.power / max(speed, 0.1)), k.traction)
 
 
 @jit
-def engine_drag(speed: float, k: FloatArray) -> float:
+def engine_drag(speed: float, k: VehicleConstants) -> float:
     """Engine braking at closed throttle [N]: ``min(F_0·min(v, 1) + c·v, F_max)``."""
-    base = k[K_ENGINE_BRAKE_BASE] * min(speed, 1.0) + k[K_ENGINE_BRAKE_SLOPE] * speed
-    return min(base, k[K_ENGINE_BRAKE_MAX])
+    base = k.engine_brake_base * min(speed, 1.0) + k.engine_brake_slope * speed
+    return min(base, k.engine_brake_max)
 
 
 @jit
-def resistance(speed: float, k: FloatArray) -> float:
+def resistance(speed: float, k: VehicleConstants) -> float:
     """Rolling resistance plus aerodynamic drag [N] (for speed > 0)."""
-    return k[K_ROLLING] + k[K_AERO] * speed * speed
+    return k.rolling + k.aero * speed * speed
 
 
 @jit
-def net_force(speed: float, throttle: float, brake: float, k: FloatArray) -> float:
+def net_force(speed: float, throttle: float, brake: float, k: VehicleConstants) -> float:
     """Net longitudinal force on the car [N] for actual pedal positions, at speed > 0:
     ``throttle · F_drive(v) − (1 − throttle) · F_drag(v) − brake · F_brake − F_res(v)``, bounded
     by the tyres' grip ``μ·m·g``."""
     force = (
         throttle * drive_force(speed, k)
         - (1.0 - throttle) * engine_drag(speed, k)
-        - brake * k[K_BRAKE_FORCE]
+        - brake * k.brake_force
         - resistance(speed, k)
     )
-    return min(max(force, -k[K_GRIP]), k[K_GRIP])
+    return min(max(force, -k.grip), k.grip)
 
 
 @jit
-def steady_throttle(speed: float, k: FloatArray) -> float:
+def steady_throttle(speed: float, k: VehicleConstants) -> float:
     """Throttle position that holds ``speed`` on a level road:
     ``throttle·F_drive − (1 − throttle)·F_drag − F_res = 0``, clipped to [0, 1]."""
     drag = engine_drag(speed, k)
@@ -308,15 +332,15 @@ def longitudinal_tick(
     brake: float,
     throttle_cmd: float,
     brake_cmd: float,
-    k: FloatArray,
+    k: VehicleConstants,
 ) -> tuple[float, float, float]:
     """One tick of the longitudinal model: the commands (clipped to [0, 1]) through the
     actuator lags, then the speed under the net force (never negative). Returns the new
     throttle and brake positions and the new speed."""
-    throttle += k[K_ALPHA_THROTTLE] * (min(max(throttle_cmd, 0.0), 1.0) - throttle)
-    brake += k[K_ALPHA_BRAKE] * (min(max(brake_cmd, 0.0), 1.0) - brake)
-    accel = net_force(speed, throttle, brake, k) / k[K_MASS]
-    return throttle, brake, max(speed + accel * k[K_DT], 0.0)
+    throttle += k.alpha_throttle * (min(max(throttle_cmd, 0.0), 1.0) - throttle)
+    brake += k.alpha_brake * (min(max(brake_cmd, 0.0), 1.0) - brake)
+    accel = net_force(speed, throttle, brake, k) / k.mass
+    return throttle, brake, max(speed + accel * k.dt, 0.0)
 
 
 @jit
@@ -336,20 +360,20 @@ def _rotate(c: float, s: float, angle: float) -> tuple[float, float]:
 def vehicle_tick(
     x: float, y: float, cos_yaw: float, sin_yaw: float, speed0: float, throttle: float,
     brake: float, steer: float, throttle_cmd: float, brake_cmd: float, steer_cmd: float,
-    k: FloatArray,
+    k: VehicleConstants,
 ) -> tuple[float, ...]:  # fmt: skip
     """One tick of one vehicle: its :class:`VehicleState` fields in, the new ones followed by
     its :class:`VehicleOutputs` (``accel_lon``, ``accel_lat``, ``yaw_rate``) out."""
-    dt = k[K_DT]
+    dt = k.dt
     throttle, brake, speed = longitudinal_tick(speed0, throttle, brake, throttle_cmd, brake_cmd, k)
-    steer += k[K_ALPHA_STEER] * (min(max(steer_cmd, -1.0), 1.0) - steer)
+    steer += k.alpha_steer * (min(max(steer_cmd, -1.0), 1.0) - steer)
     mean_speed = 0.5 * (speed0 + speed)
     # Kinematic bicycle about the centre of gravity: slip angle β = atan(l_r/L · tan δ).
-    tan_delta = math.tan(steer * k[K_MAX_STEER])
-    tan_slip = k[K_REAR_RATIO] * tan_delta
+    tan_delta = math.tan(steer * k.max_steer)
+    tan_slip = k.rear_ratio * tan_delta
     cos_slip = 1.0 / math.sqrt(1.0 + tan_slip * tan_slip)
     sin_slip = tan_slip * cos_slip
-    yaw_rate = mean_speed * cos_slip * tan_delta / k[K_WHEELBASE]
+    yaw_rate = mean_speed * cos_slip * tan_delta / k.wheelbase
     # Midpoint heading over the tick, then the course ψ + β, by rotating the heading vector.
     cos_mid, sin_mid = _rotate(cos_yaw, sin_yaw, 0.5 * yaw_rate * dt)
     step = mean_speed * dt
@@ -367,7 +391,7 @@ def vehicle_tick(
 @jit
 def map_vehicle_tick(
     state: tuple[FloatArray, ...], throttle_cmd: FloatArray, brake_cmd: FloatArray,
-    steer_cmd: FloatArray, k: FloatArray, out: tuple[FloatArray, ...],
+    steer_cmd: FloatArray, k: VehicleConstants, out: tuple[FloatArray, ...],
     outputs: tuple[FloatArray, ...],
 ) -> None:  # fmt: skip
     """:func:`vehicle_tick` for every vehicle: ``state`` and ``out`` hold the fields of
@@ -398,7 +422,7 @@ def _map_forces(
     speed: FloatArray,
     throttle: FloatArray,
     brake: FloatArray,
-    k: FloatArray,
+    k: VehicleConstants,
     net: FloatArray,
     drive: FloatArray,
     drag: FloatArray,
@@ -411,7 +435,7 @@ def _map_forces(
         resist[i] = resistance(speed[i], k)
 
 
-def _force_constants(params: VehicleParams) -> FloatArray:
+def _force_constants(params: VehicleParams) -> VehicleConstants:
     """The constants the force functions read; the tick length does not enter the forces, so
     any valid one selects the same values."""
     return vehicle_constants(params, 0.02)
@@ -473,7 +497,7 @@ def steady_state_throttle(params: VehicleParams, speed: FloatArray) -> FloatArra
 
 
 @jit
-def _map_steady_throttle(speed: FloatArray, k: FloatArray, out: FloatArray) -> None:
+def _map_steady_throttle(speed: FloatArray, k: VehicleConstants, out: FloatArray) -> None:
     for i in range(speed.shape[0]):
         out[i] = steady_throttle(speed[i], k)
 

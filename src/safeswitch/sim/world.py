@@ -17,6 +17,7 @@ from safeswitch.core.arrays import flat, jit
 from safeswitch.sim.collision import separation
 from safeswitch.sim.geometry import FloatArray, IntArray, Route, RouteSet, locate, wrap_angle
 from safeswitch.sim.vehicle import (
+    VehicleConstants,
     VehicleOutputs,
     VehicleParams,
     VehicleState,
@@ -156,7 +157,7 @@ def heading_errors(world: World, state: WorldState) -> FloatArray:
 @jit
 def _world_tick(
     state: tuple[FloatArray, ...], throttle: FloatArray, brake: FloatArray, steer: FloatArray,
-    k: FloatArray, tables: FloatArray, spacing: float, k_max: int, walk_steps: int,
+    k: VehicleConstants, tables: FloatArray, spacing: float, k_max: int, walk_steps: int,
     base: IntArray, progress: FloatArray, length: float, width: float,
     out: tuple[FloatArray, ...], outputs: tuple[FloatArray, ...], progress_out: FloatArray,
     lateral_out: FloatArray, separation_out: FloatArray,

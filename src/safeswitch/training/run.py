@@ -10,7 +10,7 @@ Run directory::
     warm_start.json      what the warm start did (if configured; written before PPO starts)
     model.zip            final policy
     vecnormalize.pkl     its observation/reward statistics
-    training_curves.png  the paper's Fig. 5 from progress.csv
+    training_curves.png  the paper's Fig. 5 from progress.csv (drawn by the train command)
     metrics.json         written last: a run is complete exactly when this file exists
 """
 
@@ -28,25 +28,19 @@ import torch
 from stable_baselines3.common.vec_env import VecNormalize
 
 from safeswitch.evaluation.metrics import summarize
-from safeswitch.evaluation.policies import TrainedPolicy
 from safeswitch.evaluation.rollout import rollout
+from safeswitch.io import write_atomic
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig, dump_config, load_config
+from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.warm_start import warm_start
 
 
 class RunDirectoryError(RuntimeError):
     """The run directory cannot be used as asked (exists, incomplete, or has no checkpoint)."""
-
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write a text file so that readers see either nothing or all of it."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def _activation(name: str) -> type[torch.nn.Module]:
@@ -219,8 +213,6 @@ def train(
     env.save(str(run / "vecnormalize.pkl.tmp"))
     os.replace(run / "vecnormalize.pkl.tmp", run / "vecnormalize.pkl")
 
-    from safeswitch.evaluation.policies import load_policy
-
     started = time.perf_counter()
     evaluation = (
         evaluate_trained(load_policy(run), config, config.eval_episodes, config.eval_seed)
@@ -255,16 +247,5 @@ def train(
             "wall_time_s": round(time.perf_counter() - started, 2),
         },
     }
-    try:
-        from safeswitch.report.training import training_curves
-
-        training_curves(
-            run / "progress.csv",
-            run / "training_curves.png",
-            title=f"switching={config.env.switching}, "
-            f"R_ADAS {'on' if config.env.adas_penalty else 'off'}",
-        )
-    except Exception as exc:  # a figure must never cost a finished run
-        print(f"warning: training_curves.png not written: {exc}")
     write_atomic(run / "metrics.json", json.dumps(metrics, indent=2))
     return metrics

@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from safeswitch.app.evaluate import controller_setup
 from safeswitch.evaluation.adversaries import constant
 from safeswitch.evaluation.evaluate import (
-    controller_setup,
     episodes_csv,
     run_controller,
     scenario_set,
@@ -35,13 +35,13 @@ from safeswitch.evaluation.evaluate import (
 )
 from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import OraclePlan, efficiency
-from safeswitch.evaluation.policies import SHIPPED_DIR
 from safeswitch.evaluation.rollout import rollout
+from safeswitch.io import write_atomic
 from safeswitch.leftturn.config import SCENARIO_NAMES, LeftTurnConfig
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
 from safeswitch.report.figures import Trace, comparison_figure, episode_figure, frames_strip
 from safeswitch.training.config import load_config
-from safeswitch.training.run import write_atomic
+from safeswitch.training.policies import SHIPPED_DIR
 
 #: Seed of the random evaluation scenarios (the same as the training runs' final evaluation,
 #: never used in training).
@@ -105,7 +105,8 @@ TABLE = (
 def train_policies(out: Path, timesteps: int | None) -> dict[str, Path]:
     """Train the five policies with their shipped configurations, into
     ``out/runs/``; a finished run is reused and an interrupted one resumed."""
-    from safeswitch.training.run import complete_checkpoints, train
+    from safeswitch.app.train import train_and_plot
+    from safeswitch.training.run import complete_checkpoints
 
     runs = {}
     for entry in ENTRIES:
@@ -120,7 +121,7 @@ def train_policies(out: Path, timesteps: int | None) -> dict[str, Path]:
             print(f"reusing the finished run {run}", flush=True)
             continue
         print(f"training {entry.name} ({config.timesteps:,} steps) into {run}", flush=True)
-        train(config, run, resume=bool(complete_checkpoints(run)), progress_bar=False)
+        train_and_plot(config, run, resume=bool(complete_checkpoints(run)), progress_bar=False)
     return runs
 
 

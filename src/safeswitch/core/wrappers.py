@@ -1,0 +1,270 @@
+"""The framework around any environment: a Safety controller, a switching logic and the
+``R_ADAS`` feedback, as a Gymnasium wrapper and as a Stable-Baselines3 VecEnv wrapper.
+
+Every step, the agent's action is the *learned* action. The wrapper computes the Safety
+controller's action from the plant state, lets the switching logic choose through
+:func:`~safeswitch.core.switching.supervise` (NaN/inf never reach the environment, the executed
+action is inside the action space), steps the environment with the executed action, adds
+``penalty`` to the reward on every step the safety action ran (paper Eq. 4) and records the
+decision in ``info``:
+
+* ``safety_active`` (bool) — the learned action was overridden (the paper's ``s*``);
+* ``reason`` (str) — why, one of the logic's ``reasons`` or ``invalid_learned_action``;
+* ``cost`` (float) — 1.0 on such a step, else 0.0 (the Safety-Gymnasium/OmniSafe convention,
+  so constrained-RL code can use it as is);
+* ``learned_action``, ``executed_action`` (arrays) — what the agent asked for, what ran;
+* ``action_clipped`` (bool) — the learned action lay outside the action space and was clipped.
+
+An SB3 ``Monitor`` placed *outside* the wrapper logs returns with the penalty, one inside
+without it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, MutableMapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+
+from safeswitch.core.registry import resolve_logic
+from safeswitch.core.switching import (
+    FloatArray,
+    Supervision,
+    SwitchingError,
+    SwitchingLogic,
+    reason_names,
+    supervise,
+)
+
+#: ``safety_controller(state) -> actions [B, A]`` in the environment's action space.
+SafetyController = Callable[[Any], Any]
+#: ``state_fn(env) -> state``: what the Safety controller and the logic see.
+StateFn = Callable[[Any], Any]
+
+
+def _box(space: gym.Space[Any], what: str) -> spaces.Box:
+    if not isinstance(space, spaces.Box):
+        raise SwitchingError(
+            f"{what} needs a Box action space (continuous actions), got {space!r}; a discrete "
+            "action space has no 'inside the bounds' to clip to"
+        )
+    return space
+
+
+def _check_penalty(penalty: float) -> float:
+    if isinstance(penalty, bool) or not np.isfinite(penalty):
+        raise SwitchingError(f"penalty must be a finite number, got {penalty!r}")
+    return float(penalty)
+
+
+def _default_state(space: gym.Space[Any], what: str) -> None:
+    if not isinstance(space, spaces.Box):
+        raise SwitchingError(
+            f"{what}: the default state is the last observation, which needs a Box "
+            f"observation space, got {space!r}; pass state_fn"
+        )
+
+
+class _Supervisor:
+    """What both wrappers share: the logic, the Safety controller and one supervised step."""
+
+    def __init__(
+        self,
+        action_space: spaces.Box,
+        safety_controller: SafetyController,
+        logic: SwitchingLogic[Any],
+        penalty: float,
+    ) -> None:
+        if not callable(safety_controller):
+            raise SwitchingError(f"safety_controller must be callable, got {safety_controller!r}")
+        self.space = action_space
+        self.dim = int(np.prod(action_space.shape))
+        self.low = action_space.low.astype(np.float64).reshape(-1)
+        self.high = action_space.high.astype(np.float64).reshape(-1)
+        self.safety_controller = safety_controller
+        self.logic = logic
+        self.reasons = reason_names(logic)
+        self.penalty = penalty
+
+    def learned(self, actions: Any, batch: int) -> FloatArray:
+        if actions is None:
+            raise SwitchingError("the learned action is None; pass an array of the action space")
+        learned = np.asarray(actions, dtype=np.float64)
+        if learned.size != batch * self.dim:
+            raise SwitchingError(
+                f"learned action of shape {learned.shape} does not fit {batch} environment(s) "
+                f"with action space {self.space}"
+            )
+        return learned.reshape(batch, self.dim)
+
+    def step(self, state: Any, actions: Any, batch: int) -> Supervision:
+        learned = self.learned(actions, batch)
+        safe = np.asarray(self.safety_controller(state), dtype=np.float64)
+        if safe.shape != (batch, self.dim):
+            raise SwitchingError(
+                f"the Safety controller returned shape {safe.shape}; expected {(batch, self.dim)}"
+                " (actions [B, A])"
+            )
+        return supervise(self.logic, state, learned, safe, self.low, self.high)
+
+    def executed(self, sup: Supervision) -> NDArray[Any]:
+        """The executed actions in the space's dtype and shape, bounds kept after the cast."""
+        out = sup.executed.astype(self.space.dtype)
+        out = np.clip(out, self.space.low.reshape(-1), self.space.high.reshape(-1))
+        return out.reshape((out.shape[0], *self.space.shape))
+
+    def annotate(self, info: MutableMapping[str, Any], sup: Supervision, i: int) -> None:
+        active = bool(sup.safety_active[i])
+        info["safety_active"] = active
+        info["reason"] = self.reasons[int(sup.reason[i])]
+        info["cost"] = 1.0 if active else 0.0
+        info["learned_action"] = sup.learned[i].copy()
+        info["executed_action"] = sup.executed[i].copy()
+        info["action_clipped"] = bool(sup.clipped[i])
+
+
+class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
+    """The paper's framework around any Gymnasium environment with a ``Box`` action space.
+
+    Args:
+        env: The environment (the plant).
+        safety_controller: ``safety_controller(state) -> actions [1, A]`` in the action space.
+        logic: A :class:`~safeswitch.core.switching.SwitchingLogic` or the name of a registered
+            one (its factory gets ``env``).
+        penalty: Added to the reward on every step the learned action was overridden
+            (``R_ADAS``, paper Eq. 4).
+        state_fn: ``state_fn(env) -> state`` — what the Safety controller and the logic see;
+            by default the last observation as a ``[1, obs_dim]`` float64 array.
+
+    Raises:
+        SwitchingError: A non-Box action space, an unknown or malformed logic, a non-finite
+            penalty, or no ``state_fn`` for a non-Box observation space.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        safety_controller: SafetyController,
+        logic: SwitchingLogic[Any] | str,
+        *,
+        penalty: float = -25.0,
+        state_fn: StateFn | None = None,
+    ) -> None:
+        super().__init__(env)
+        space = _box(env.action_space, "SafeSwitch")
+        if state_fn is None:
+            _default_state(env.observation_space, "SafeSwitch")
+        self.supervisor = _Supervisor(
+            space, safety_controller, resolve_logic(logic, env), _check_penalty(penalty)
+        )
+        self.state_fn = state_fn
+        self._observation: Any = None
+        self.last_supervision: Supervision | None = None
+
+    @property
+    def logic(self) -> SwitchingLogic[Any]:
+        return self.supervisor.logic
+
+    def state(self) -> Any:
+        """What the Safety controller and the logic see now."""
+        if self.state_fn is not None:
+            return self.state_fn(self.env)
+        if self._observation is None:
+            raise RuntimeError("call reset() before step()")
+        return np.asarray(self._observation, dtype=np.float64).reshape(1, -1)
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        observation, info = self.env.reset(**kwargs)
+        self._observation = observation
+        return observation, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        sup = self.supervisor.step(self.state(), action, 1)
+        self.last_supervision = sup
+        observation, reward, terminated, truncated, info = self.env.step(
+            self.supervisor.executed(sup)[0]
+        )
+        self._observation = observation
+        info = dict(info)
+        self.supervisor.annotate(info, sup, 0)
+        reward = float(reward) + (self.supervisor.penalty if sup.safety_active[0] else 0.0)
+        return observation, reward, terminated, truncated, info
+
+
+class SafeSwitchVecEnv(VecEnvWrapper):
+    """:class:`SafeSwitch` for a Stable-Baselines3 ``VecEnv``, batched over its environments:
+    one Safety-controller call and one ``decide`` per step.
+
+    Args:
+        venv: The vectorised environment.
+        safety_controller: ``safety_controller(state) -> actions [N, A]``.
+        logic: A switching logic or the name of a registered one (its factory gets ``venv``).
+        penalty: Added to the reward of every environment whose learned action was overridden.
+        state_fn: ``state_fn(venv) -> state`` for all ``N`` environments; by default the last
+            observations as an ``[N, obs_dim]`` float64 array (after an automatic reset: the
+            new episode's first observation, as SB3 returns it).
+    """
+
+    def __init__(
+        self,
+        venv: VecEnv,
+        safety_controller: SafetyController,
+        logic: SwitchingLogic[Any] | str,
+        *,
+        penalty: float = -25.0,
+        state_fn: StateFn | None = None,
+    ) -> None:
+        super().__init__(venv)
+        space = _box(venv.action_space, "SafeSwitchVecEnv")
+        if state_fn is None:
+            _default_state(venv.observation_space, "SafeSwitchVecEnv")
+        self.supervisor = _Supervisor(
+            space, safety_controller, resolve_logic(logic, venv), _check_penalty(penalty)
+        )
+        self.state_fn = state_fn
+        self._observation: Any = None
+        self._pending: Supervision | None = None
+        self.last_supervision: Supervision | None = None
+
+    @property
+    def logic(self) -> SwitchingLogic[Any]:
+        return self.supervisor.logic
+
+    def state(self) -> Any:
+        """What the Safety controller and the logic see now, for every environment."""
+        if self.state_fn is not None:
+            return self.state_fn(self.venv)
+        if self._observation is None:
+            raise RuntimeError("call reset() before step()")
+        return np.asarray(self._observation, dtype=np.float64).reshape(self.num_envs, -1)
+
+    def reset(self) -> VecEnvObs:
+        observation = self.venv.reset()
+        self._observation = observation
+        return observation
+
+    def step_async(self, actions: np.ndarray) -> None:
+        sup = self.supervisor.step(self.state(), actions, self.num_envs)
+        self._pending = sup
+        self.venv.step_async(self.supervisor.executed(sup))
+
+    def step_wait(self) -> VecEnvStepReturn:
+        sup = self._pending
+        if sup is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        self._pending = None
+        self.last_supervision = sup
+        observation, rewards, dones, infos = self.venv.step_wait()
+        self._observation = observation
+        rewards = rewards + np.where(sup.safety_active, self.supervisor.penalty, 0.0).astype(
+            rewards.dtype
+        )
+        annotated: Sequence[MutableMapping[str, Any]] = infos
+        for i in range(self.num_envs):
+            self.supervisor.annotate(annotated[i], sup, i)
+        return observation, rewards, dones, infos

@@ -1,0 +1,172 @@
+"""Trained policies as rollout controllers: a run directory, one of its checkpoints, an
+interrupted run, or a policy that ships with the package.
+
+A policy is only as good as the observation statistics it was trained with: a policy trained
+with ``VecNormalize`` and fed raw observations drives confidently and wrongly. So loading
+refuses a policy whose run normalised observations but whose ``vecnormalize.pkl`` is missing or
+unreadable, and reads the statistics with SB3's own ``VecNormalize.load``.
+"""
+
+from __future__ import annotations
+
+import pickle
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
+
+from safeswitch.evaluation.rollout import Policy
+from safeswitch.leftturn.task import TaskState
+from safeswitch.training.config import TrainConfig, load_config
+from safeswitch.training.ppo import SwitchPPO
+
+#: Where the shipped policies live, one folder each.
+SHIPPED_DIR = Path(__file__).resolve().parent.parent / "policies"
+SHIPPED = {
+    "shipped": "paper",
+    "paper": "paper",
+    "paper-scratch": "paper_scratch",
+    "no-adas": "no_adas",
+    "certified": "certified",
+    "none": "none",
+}
+
+
+class PolicyLoadError(ValueError):
+    """A policy cannot be loaded as asked; the message says which file and why."""
+
+
+@dataclass
+class TrainedPolicy:
+    """A PPO policy with the observation statistics it was trained with.
+
+    Attributes:
+        model: The SB3 model.
+        normalizer: The run's ``VecNormalize`` (observation statistics; ``None`` if the run
+            did not normalise observations).
+        config: The run's training configuration.
+        path: The folder the model was loaded from (a run or one of its checkpoints).
+    """
+
+    model: SwitchPPO
+    normalizer: VecNormalize | None
+    config: TrainConfig
+    path: Path
+
+    def normalise(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        if self.normalizer is None:
+            return obs
+        return np.asarray(self.normalizer.normalize_obs(obs), dtype=np.float32)
+
+    def act(self, obs: NDArray[np.float32], deterministic: bool = True) -> NDArray[np.float64]:
+        """Actions ``[B]`` in [-1, 1] for observations ``[B, 6]``."""
+        actions, _ = self.model.predict(self.normalise(obs), deterministic=deterministic)
+        return np.asarray(actions, dtype=np.float64).reshape(obs.shape[0])
+
+    def as_policy(self, deterministic: bool = True) -> Policy:
+        def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> NDArray[np.float64]:
+            return self.act(obs, deterministic)
+
+        return policy
+
+
+class _Spaces(VecEnv):
+    """A VecEnv that only has spaces: what ``VecNormalize.load`` needs to check the statistics
+    against (nothing is ever stepped)."""
+
+    def __init__(self, observation_space: spaces.Space[Any], action_space: spaces.Space[Any]):
+        super().__init__(1, observation_space, action_space)
+
+    def reset(self) -> Any:
+        raise NotImplementedError
+
+    def step_async(self, actions: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def step_wait(self) -> Any:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        return None
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [None]  # SB3 asks for the render mode at construction
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        raise NotImplementedError
+
+    def env_method(
+        self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any
+    ) -> list[Any]:
+        raise NotImplementedError
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False]
+
+
+def resolve_model_dir(model: str | Path) -> Path:
+    """The folder holding ``model.zip``: a shipped policy by name (``shipped``, ``paper``,
+    ``paper-scratch``, ``no-adas``, ``certified``, ``none``), a run directory, one of its
+    checkpoints (``run/checkpoints/step_…``), or — for a run that was interrupted before it
+    finished — its latest complete checkpoint."""
+    path = SHIPPED_DIR / SHIPPED[str(model)] if str(model) in SHIPPED else Path(model)
+    if (path / "model.zip").is_file():
+        return path
+    checkpoints = sorted(
+        (p for p in (path / "checkpoints").glob("step_*") if (p / "state.json").is_file()),
+        key=lambda p: p.name,
+    )
+    if checkpoints and (checkpoints[-1] / "model.zip").is_file():
+        return checkpoints[-1]
+    known = ", ".join(sorted(SHIPPED))
+    raise FileNotFoundError(
+        f"no trained policy at {path} (expected model.zip there, or a checkpoint under "
+        f"{path / 'checkpoints'}); pass a run directory, a checkpoint or one of: {known}"
+    )
+
+
+def run_config_path(model_dir: Path) -> Path:
+    """The ``config.yaml`` of the run a model folder belongs to (a checkpoint's is two levels
+    up)."""
+    for folder in (model_dir, model_dir.parent.parent):
+        if (folder / "config.yaml").is_file():
+            return folder / "config.yaml"
+    raise FileNotFoundError(f"no config.yaml for the policy in {model_dir} (nor in its run)")
+
+
+def load_policy(model: str | Path) -> TrainedPolicy:
+    """Load a policy (see :func:`resolve_model_dir` for what ``model`` may name).
+
+    Raises:
+        FileNotFoundError: Nothing to load there.
+        PolicyLoadError: ``model.zip`` or ``vecnormalize.pkl`` is corrupt or missing although
+            the run normalised observations.
+        safeswitch.core.config.ConfigError: The run's ``config.yaml`` is invalid.
+    """
+    path = resolve_model_dir(model)
+    config = load_config(run_config_path(path))
+    try:
+        ppo = SwitchPPO.load(path / "model.zip", device="cpu")
+    except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError) as exc:
+        raise PolicyLoadError(f"{path / 'model.zip'} is not a readable SB3 model ({exc})") from exc
+    stats = path / "vecnormalize.pkl"
+    if not config.ppo.normalize_observations:
+        return TrainedPolicy(ppo, None, config, path)
+    if not stats.is_file():
+        raise PolicyLoadError(
+            f"{stats} is missing: the run normalised its observations "
+            "(ppo.normalize_observations), and without its statistics the policy would see "
+            "raw observations and act wrongly"
+        )
+    try:
+        normalizer = VecNormalize.load(str(stats), _Spaces(ppo.observation_space, ppo.action_space))
+    except (pickle.UnpicklingError, EOFError, AttributeError, ValueError, TypeError) as exc:
+        raise PolicyLoadError(f"{stats} is truncated or corrupt ({exc})") from exc
+    normalizer.training = False
+    normalizer.norm_reward = False
+    return TrainedPolicy(ppo, normalizer, config, path)

@@ -1,0 +1,81 @@
+"""Per-tick decisions of the left-turn task on the README's scenarios, digested per episode.
+
+``python tests/leftturn/golden.py`` writes ``tests/data/leftturn_golden.npz``. The file in the
+repository was written by commit 01d647c (before the task ran its switching through
+``safeswitch.core``); ``test_golden.py`` replays the same runs on the current code and requires
+every digest to be equal bit for bit: the redesign must not change a single decision.
+
+Each run is a controller and a switching logic on 300 random scenarios (seed 1000003, the
+README's evaluation seed). Per episode and tick the executed throttle and brake, the safety
+flag, the reason code, the reward and the ego's speed are folded into one float64 digest per
+column (a sum weighted by the tick index, so a change on any tick changes it).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from safeswitch.evaluation.adversaries import bang_bang, constant, uniform
+from safeswitch.leftturn.config import resolve_config
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.training.policies import load_policy
+
+PATH = Path(__file__).resolve().parent.parent / "data" / "leftturn_golden.npz"
+EPISODES = 300
+SEED = 1_000_003
+COLUMNS = ("throttle", "brake", "safety_active", "reason", "reward", "ego_speed", "separation")
+
+
+def runs():
+    """(name, task config, policy factory) of every recorded run."""
+    shipped = load_policy("shipped")
+    scratch = load_policy("paper-scratch")
+    episode = {"episode": {"learned_scope": "episode"}}
+
+    def learned(policy):
+        return lambda: lambda obs, state, tick: policy.act(obs)
+
+    return [
+        ("rule_paper", resolve_config({"episode": {"learned_scope": "never"}}),
+         lambda: constant(0.0)),
+        ("shipped_paper", resolve_config(episode), learned(shipped)),
+        ("shipped_certified", resolve_config(episode, switching="certified"), learned(shipped)),
+        ("scratch_window_paper", resolve_config(None), learned(scratch)),
+        ("uniform_paper", resolve_config(episode), lambda: uniform(np.random.default_rng(1))),
+        ("uniform_certified", resolve_config(episode, switching="certified"),
+         lambda: uniform(np.random.default_rng(2))),
+        ("bang_bang_none", resolve_config(episode, switching="none"),
+         lambda: bang_bang(np.random.default_rng(3))),
+    ]  # fmt: skip
+
+
+def digest(config, make_policy) -> np.ndarray:
+    """``[EPISODES, len(COLUMNS)]`` tick-weighted sums of the recorded columns (episodes are
+    not reset: every episode runs the whole horizon, as a rollout's batch does)."""
+    task = LeftTurnTask(config)
+    n = EPISODES
+    state = task.initial(task.draw_scenarios(SEED, np.arange(n), np.zeros(n, dtype=np.int64)))
+    policy = make_policy()
+    out = np.zeros((n, len(COLUMNS)))
+    observation = task.observe(state)
+    for tick in range(config.episode.horizon_ticks):
+        state, record = task.step(state, policy(observation, state, tick))
+        observation = record.observation
+        for j, name in enumerate(COLUMNS):
+            out[:, j] += (tick + 1) * np.asarray(getattr(record, name), dtype=np.float64)
+    return out
+
+
+def main() -> int:
+    data = {name: digest(config, make) for name, config, make in runs()}
+    PATH.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(PATH, **data)
+    print(f"wrote {PATH} ({', '.join(data)})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
