@@ -227,3 +227,32 @@ def test_lazy_infos_answer_bookkeeping_and_full_keys_alike():
     infos[0]["terminal_observation"] = "replaced"  # VecNormalize writes into infos
     assert infos[0]["terminal_observation"] == "replaced"
     assert set(dict(infos[1])) >= {"collision", "episode", "TimeLimit.truncated"}
+
+
+def test_vec_env_follows_the_dummy_vec_env_contract():
+    """reset_infos carry each episode's scenario (as the single Env reports it), get_attr and
+    env_method act per environment, reset options are refused loudly."""
+    vec = make_vec_env(3, seed=11, scenario=None)
+    vec.reset()
+    singles = [LeftTurnEnv(env_index=i) for i in range(3)]
+    for i, env in enumerate(singles):
+        assert vec.reset_infos[i]["scenario"] == env.reset(seed=11)[1]["scenario"]
+    assert vec.env_method("scenario") == [info["scenario"] for info in vec.reset_infos]
+    assert vec.env_method("episode_count", indices=[0, 2]) == [1, 1]
+    assert vec.get_attr("env_index") == [0, 1, 2]
+    assert vec.get_attr("config", indices=1) == [vec.config]
+    with pytest.raises(AttributeError, match="environment 0 of the LeftTurnVecEnv has no"):
+        vec.env_method("no_such_method", indices=0)
+    with pytest.raises(ValueError, match="takes no reset options"):
+        vec.set_options({"scenario": "cut"})
+    vec.set_options(None)  # no options is fine
+    # an auto-reset updates the ended environment's reset_info to its next scenario
+    for _ in range(vec.config.episode.horizon_ticks):
+        _, _, dones, infos = vec.step(np.zeros((3, 1), dtype=np.float32))
+    assert dones.all()
+    second = [env.reset()[1]["scenario"] for env in singles]
+    assert [info["scenario"] for info in vec.reset_infos] == second
+    # the infos behave like a list of dicts
+    as_list = list(infos)
+    assert len(as_list) == 3 and all(isinstance(i["reason"], str) for i in as_list)
+    assert "terminal_observation" in infos[0] and infos[-1] is infos[2]

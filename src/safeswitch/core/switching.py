@@ -249,9 +249,10 @@ def supervise(
     decision = check_decision(logic, logic.decide(state, candidate, safe), batch, dim)
     executed = np.empty((batch, dim))
     reason = np.empty(batch, dtype=np.int8)
+    active = np.empty(batch, dtype=np.bool_)
     problem = _execute(
         decision.use_safety, decision.reason, decision.safe_action, candidate, valid, bounds,
-        len(logic.reasons), executed, reason,
+        len(logic.reasons), executed, reason, active,
     )  # fmt: skip
     if problem == 1:
         raise SwitchingError(
@@ -262,8 +263,7 @@ def supervise(
         raise SwitchingError(
             f"{type(logic).__name__}.decide chose a safety action that is NaN or infinite"
         )
-    use = decision.use_safety
-    return Supervision(learned, safe, executed, use | ~valid, use, reason, valid, clipped)
+    return Supervision(learned, safe, executed, active, decision.use_safety, reason, valid, clipped)
 
 
 @jit
@@ -299,11 +299,11 @@ def _propose(
 def _execute(
     use: BoolArray, reason: NDArray[Any], safe_action: FloatArray, candidate: FloatArray,
     valid: BoolArray, bounds: FloatArray, n_reasons: int, executed: FloatArray,
-    reason_out: IntArray,
+    reason_out: IntArray, active: BoolArray,
 ) -> int:  # fmt: skip
     """The executed actions (the logic's safety action, clipped, where it chose it; else the
     candidate) and the reason codes (``n_reasons`` — the invalid-action code — where the learned
-    action was invalid). Returns 0, or 1 for a reason code out of range, 2 for a chosen safety
+    action was invalid), and whether the learned action was overridden (``active``). Returns 0, or 1 for a reason code out of range, 2 for a chosen safety
     action that is not finite."""
     batch, dim = candidate.shape
     for b in range(batch):
@@ -311,6 +311,7 @@ def _execute(
         if code < 0 or code >= n_reasons:
             return 1
         reason_out[b] = code if valid[b] else n_reasons
+        active[b] = use[b] or not valid[b]
         for j in range(dim):
             if use[b]:
                 value = safe_action[b, j]

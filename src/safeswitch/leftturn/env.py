@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
-from safeswitch.leftturn.info import step_info
+from safeswitch.leftturn.info import scenario_info, step_info
 from safeswitch.leftturn.spaces import action_space, observation_space
 from safeswitch.leftturn.task import StepRecord, TaskState, build_task
 
@@ -83,15 +83,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._episode += 1
         self._state = self.task.initial(scenarios)
         self._record = None
-        s = self._state.scenarios
-        info = {
-            "scenario": {
-                "ego_start_distance": float(s.ego_start_distance[0]),
-                "ego_speed": float(s.ego_speed[0]),
-                "north_speed": float(s.north_speed[0]),
-                "arrival_offset": float(s.arrival_offset[0]),
-            }
-        }
+        info = {"scenario": scenario_info(self._state.scenarios, 0)}
         return self.task.observe(self._state)[0], info
 
     def step(

@@ -15,7 +15,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.leftturn.rewards import REWARD_TERMS
+from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import CONTROLLERS, OUTCOMES, StepRecord
+
+
+def scenario_info(scenarios: Scenarios, i: int) -> dict[str, float]:
+    """Scenario ``i`` of a batch as plain numbers (what ``reset`` reports under
+    ``"scenario"``): the ego's start distance to the conflict point [m] and speed [m/s], the
+    north car's speed [m/s] and its arrival offset [s]."""
+    s = scenarios
+    return {
+        "ego_start_distance": float(s.ego_start_distance[i]),
+        "ego_speed": float(s.ego_speed[i]),
+        "north_speed": float(s.north_speed[i]),
+        "arrival_offset": float(s.arrival_offset[i]),
+    }
 
 
 def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str, Any]:

@@ -55,6 +55,9 @@ BoolArray = NDArray[np.bool_]
 
 #: Who proposed the executed action: codes of :attr:`StepRecord.controller`.
 CONTROLLERS: tuple[str, ...] = ("learned", "rule", "safety")
+#: Reason of a tick on which ``PID_th`` proposed (outside the learned controller's scope) and
+#: the switching logic accepted it.
+RULE_IN_CHARGE = "rule_in_charge"
 #: Codes of :attr:`TaskState.outcome`.
 OUTCOMES: tuple[str, ...] = ("undecided", "cut", "yield")
 
@@ -195,7 +198,11 @@ class LeftTurnTask:
         )
         #: The switching logic: the registered logic named by ``config.switching``.
         self.switching: SwitchingLogic[ConflictState] = make_logic(config.switching, self)
-        self.reasons = reason_names(self.switching)
+        #: Reason names of :attr:`StepRecord.reason`: the logic's, ``invalid_learned_action``,
+        #: then :data:`RULE_IN_CHARGE` (the logic accepted ``PID_th``'s proposal because the
+        #: learned controller was not in charge; ``"learned"`` always means the learned action
+        #: itself ran).
+        self.reasons = (*reason_names(self.switching), RULE_IN_CHARGE)
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
         ctrl = config.controllers
@@ -326,9 +333,8 @@ class LeftTurnTask:
         # switching logic sees (one compiled loop, see _controllers).
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
         pids = (state.pid_throttle, state.pid_brake, state.pid_north)
-        one = [np.empty(batch) for _ in range(16)]
-        two = [np.empty((batch, 2)) for _ in range(7)]
-        flags = (np.empty(batch, dtype=np.bool_), np.empty(batch, dtype=np.bool_))
+        one, two = np.empty((16, batch)), np.empty((7, batch, 2))
+        flags = np.empty((2, batch), dtype=np.bool_)
         v, routes = world.vehicles, self.world.route_set
         _controllers(
             self._gains, dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
@@ -338,7 +344,7 @@ class LeftTurnTask:
             state.scenarios.north_speed,
             tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
             (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
-            tuple(one), tuple(two), flags,
+            one, two, flags,
         )  # fmt: skip
         safety_brake, north_throttle, north_brake = one[1:4]
         pid_throttle, pid_brake, pid_north = (
@@ -366,9 +372,6 @@ class LeftTurnTask:
         )
         sup = supervise(self.switching, conflict, proposed, safe, 0.0, 1.0, fallback)
         throttle, brake = sup.executed[:, 0], sup.executed[:, 1]
-        controller = np.where(
-            sup.use_safety, np.int8(2), np.where(in_charge & sup.valid, np.int8(0), np.int8(1))
-        ).astype(np.int8)
 
         # 4. The plant.
         new_world, outputs, separation = self.world.step(
@@ -378,15 +381,17 @@ class LeftTurnTask:
         terms_out = tuple(np.empty(batch) for _ in REWARD_TERMS)
         reward, tick = np.empty(batch), np.empty(batch, dtype=np.int64)
         ends = tuple(np.empty(batch, dtype=np.bool_) for _ in range(4))
-        outcome = np.empty(batch, dtype=np.int8)
+        outcome, controller = np.empty(batch, dtype=np.int8), np.empty(batch, dtype=np.int8)
+        reason = np.empty(batch, dtype=np.int8)
         observation = np.empty((batch, 6), dtype=np.float32)
         nv = new_world.vehicles
         _after_plant(
             self._reward_tables, c.rewards.adas_penalty if c.adas_penalty else 0.0,
-            c.rewards.collision_penalty, self._limits, sup.safety_active, separation,
+            c.rewards.collision_penalty, self._limits, sup.safety_active, sup.use_safety,
+            sup.valid, in_charge, sup.reason, len(self.reasons) - 1, separation,
             nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
             outputs.accel_lat, state.tick, state.outcome,
-            terms_out, reward, tick, ends, outcome, observation,
+            terms_out, reward, tick, ends, outcome, controller, reason, observation,
         )  # fmt: skip
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
         collision, terminated, truncated, ego_cleared = ends
@@ -410,7 +415,7 @@ class LeftTurnTask:
             truncated=truncated,
             collision=collision,
             safety_active=sup.safety_active,
-            reason=sup.reason,
+            reason=reason,
             controller=controller,
             both_at_intersection=both,
             learned_throttle=learned_throttle,
@@ -497,7 +502,7 @@ def _controllers(
     x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, speed: FloatArray,
     progress: FloatArray, accel_lon: FloatArray, north_target: FloatArray,
     pids: tuple[FloatArray, ...], lane: tuple[FloatArray, ...],
-    one: tuple[FloatArray, ...], two: tuple[FloatArray, ...], flags: tuple[BoolArray, ...],
+    one: FloatArray, two: FloatArray, flags: BoolArray,
 ) -> None:  # fmt: skip
     """Step 1 of the tick for every episode: ``PID_th`` on ``v_lim − v``, ``PID_b`` on
     ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, the
@@ -506,12 +511,14 @@ def _controllers(
     while in charge, else ``PID_th``'s) and the distances the switching logic reads.
 
     ``pids`` holds (integral, previous error, derivative) of PID_th, PID_b and the autopilot's
-    PID, ``[B]`` each; ``lane`` those of PID_lka, ``[B, 2]``. Written: ``one`` = rule throttle,
+    PID, ``[B]`` each; ``lane`` those of PID_lka, ``[B, 2]``. Written (by row): ``one``
+    ``[16, B]`` = rule throttle,
     safety brake, north throttle, north brake, the new (integral, error, derivative) of the
     three ``[B]`` PIDs, then the ego's distance to the conflict point and to its stopping point
-    and the north car's distance to the conflict point; ``two`` = steering of both cars,
-    PID_lka's new state, then the proposed, safety and fallback pedals (throttle, brake);
-    ``flags`` = both cars at the intersection, the learned controller in charge.
+    and the north car's distance to the conflict point; ``two`` ``[7, B, 2]`` = steering of
+    both cars, PID_lka's new state, then the proposed, safety and fallback pedals (throttle,
+    brake); ``flags`` ``[2, B]`` = both cars at the intersection, the learned controller in
+    charge.
     """
     for b in range(x.shape[0]):
         pid = pids
@@ -520,13 +527,13 @@ def _controllers(
             gains.throttle, dt, error, pid[0][b], pid[1][b], pid[2][b]
         )
         rule = out
-        one[0][b], one[4][b], one[5][b], one[6][b] = out, integral, error, derivative
+        one[0, b], one[4, b], one[5, b], one[6, b] = out, integral, error, derivative
         error = emergency_decel + accel_lon[b]
         out, integral, derivative = pid_tick(
             gains.brake, dt, error, pid[3][b], pid[4][b], pid[5][b]
         )
-        one[1][b], one[7][b], one[8][b], one[9][b] = out, integral, error, derivative
-        one[2][b], one[3][b], one[10][b], one[11][b], one[12][b] = autopilot_tick(
+        one[1, b], one[7, b], one[8, b], one[9, b] = out, integral, error, derivative
+        one[2, b], one[3, b], one[10, b], one[11, b], one[12, b] = autopilot_tick(
             gains.north_speed, dt, plant, speed[b, 1], north_target[b], pid[6][b], pid[7][b],
             pid[8][b],
         )  # fmt: skip
@@ -538,39 +545,45 @@ def _controllers(
             out, integral, derivative = pid_tick(
                 gains.lane, dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
-            two[0][b, j], two[1][b, j], two[2][b, j], two[3][b, j] = (
+            two[0, b, j], two[1, b, j], two[2, b, j], two[3, b, j] = (
                 out,
                 integral,
                 error,
                 derivative,
             )
         s_e, s_n = progress[b, 0], progress[b, 1]
-        one[13][b] = layout.ego_point - s_e
-        one[14][b] = layout.ego_zone_entry - s_e
-        one[15][b] = layout.north_point - s_n
+        one[13, b] = layout.ego_point - s_e
+        one[14, b] = layout.ego_zone_entry - s_e
+        one[15, b] = layout.north_point - s_n
         at = at_intersection(s_e, s_n, layout)
         in_charge = at if scope == 0 else scope == 1
-        flags[0][b], flags[1][b] = at, in_charge
-        two[4][b, 0], two[4][b, 1] = (learned_throttle[b] if in_charge else rule), 0.0
-        two[5][b, 0], two[5][b, 1] = 0.0, one[1][b]
-        two[6][b, 0], two[6][b, 1] = rule, 0.0
+        flags[0, b], flags[1, b] = at, in_charge
+        two[4, b, 0], two[4, b, 1] = (learned_throttle[b] if in_charge else rule), 0.0
+        two[5, b, 0], two[5, b, 1] = 0.0, one[1, b]
+        two[6, b, 0], two[6, b, 1] = rule, 0.0
 
 
 @jit
 def _after_plant(
     tables: tuple[FloatArray, ...], adas_penalty: float, collision_penalty: float,
     limits: EpisodeLimits,
-    safety_active: BoolArray, separation: FloatArray, x: FloatArray, y: FloatArray,
+    safety_active: BoolArray, use_safety: BoolArray, valid: BoolArray, in_charge: BoolArray,
+    reason: NDArray[np.int8], rule_code: int, separation: FloatArray, x: FloatArray,
+    y: FloatArray,
     speed: FloatArray, progress: FloatArray, lateral: FloatArray, accel_lon: FloatArray,
     accel_lat: FloatArray, tick: NDArray[np.int64], outcome: NDArray[np.int8],
     terms: tuple[FloatArray, ...], reward: FloatArray, new_tick: NDArray[np.int64],
-    flags: tuple[BoolArray, ...], new_outcome: NDArray[np.int8],
-    observation: NDArray[np.float32],
+    flags: tuple[BoolArray, ...], new_outcome: NDArray[np.int8], controller: NDArray[np.int8],
+    new_reason: NDArray[np.int8], observation: NDArray[np.float32],
 ) -> None:  # fmt: skip
     """Step 4's bookkeeping for every episode, from the new plant state: the five reward terms
     (Eq. 5, in :data:`REWARD_TERMS` order) and their sum, collision, termination, truncation
     (horizon or end of route), the ego leaving its zone, who crossed first, and the observation.
-    ``flags`` = (collision, terminated, truncated, ego_cleared)."""
+    ``flags`` = (collision, terminated, truncated, ego_cleared); ``controller`` = who proposed
+    the executed pedals (:data:`CONTROLLERS`: the safety side where the logic chose its safety
+    action, the learned controller where it was in charge with a valid action, else the rule);
+    ``new_reason`` = the supervision's reason, ``rule_code`` where the rule's proposal ran.
+    """
     for b in range(x.shape[0]):
         adas, lka, v, lon, lat = tick_terms(
             tables, adas_penalty, safety_active[b], lateral[b, 0], speed[b, 0], accel_lon[b, 0],
@@ -599,6 +612,15 @@ def _after_plant(
             new_outcome[b] = 2
         else:
             new_outcome[b] = 0
+        new_reason[b] = reason[b]
+        if use_safety[b]:
+            controller[b] = 2
+        elif in_charge[b] and valid[b]:
+            controller[b] = 0
+        else:
+            controller[b] = 1
+            if not in_charge[b]:
+                new_reason[b] = rule_code
         for j in range(2):
             observation[b, 3 * j] = x[b, j]
             observation[b, 3 * j + 1] = y[b, j]

@@ -1,10 +1,17 @@
 """A natively batched Stable-Baselines3 ``VecEnv`` of the left turn.
 
 All environments advance in one call of :meth:`LeftTurnTask.step`; ended episodes are reset in
-place with one call of :meth:`LeftTurnTask.initial` for just those. SB3 conventions hold: the
+place with one call of :meth:`LeftTurnTask.initial` for just those. SB3 conventions hold (``DummyVecEnv`` is the reference): the
 returned observation of an ended environment is the first of its next episode, and its info
 carries ``terminal_observation``, ``TimeLimit.truncated`` and an ``episode`` summary (the keys
-of SB3's ``Monitor`` — ``r``, ``l``, ``t`` — plus the safety and comfort statistics below).
+of SB3's ``Monitor`` — ``r``, ``l``, ``t`` — plus the safety and comfort statistics below);
+``reset_infos[i]`` holds the scenario of environment ``i``'s current episode; ``get_attr`` and
+``env_method`` act per environment, on an :class:`EnvironmentView`; reset options are refused
+(the scenario distribution is part of the configuration).
+
+The ``infos`` of a step are a :class:`~safeswitch.leftturn.info.BatchInfos`: a sequence of
+per-environment dicts built lazily on access (``infos[i]["reason"]``, ``for info in infos``,
+``list(infos)`` all work as with a list), so that 4,096 dicts are not built every tick.
 """
 
 from __future__ import annotations
@@ -24,7 +31,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
-from safeswitch.leftturn.info import BatchInfos
+from safeswitch.leftturn.info import BatchInfos, scenario_info
 from safeswitch.leftturn.rewards import REWARD_TERMS
 from safeswitch.leftturn.spaces import action_space, observation_space
 from safeswitch.leftturn.task import StepRecord, TaskState, build_task
@@ -189,7 +196,19 @@ class LeftTurnVecEnv(VecEnv):
         self._episodes += 1
         self._state = self.task.initial(scenarios)
         self._stats = EpisodeStatistics(self.num_envs)
+        self.reset_infos = [{"scenario": scenario_info(scenarios, i)} for i in self._env_ids]
+        self._reset_options()
         return self.task.observe(self._state)
+
+    def set_options(self, options: list[dict[str, Any]] | dict[str, Any] | None = None) -> None:
+        """Reset options are refused: the left turn takes none (choose scenarios with
+        ``scenario=`` or the configuration's ``scenarios`` section)."""
+        given = options if isinstance(options, list) else [options]
+        if any(given):
+            raise ValueError(
+                f"LeftTurnVecEnv takes no reset options, got {options!r}; set the scenario "
+                "with scenario=... or the configuration's 'scenarios' section"
+            )
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = np.asarray(actions, dtype=np.float64).reshape(self.num_envs)
@@ -213,6 +232,8 @@ class LeftTurnVecEnv(VecEnv):
             )
             self._episodes[ended] += 1
             self._state.replace_at(ended, fresh)
+            for j, i in enumerate(ended):
+                self.reset_infos[i] = {"scenario": scenario_info(fresh.scenarios, j)}
             observation = observation.copy()
             observation[ended] = self.task.observe(fresh)
         self.last_record = record
@@ -222,11 +243,16 @@ class LeftTurnVecEnv(VecEnv):
     def close(self) -> None:
         self._state = None
 
-    # -- the VecEnv attribute protocol: the batch shares one configuration ---------------------
+    # -- the VecEnv attribute protocol, per environment -----------------------------------
+
+    def environment(self, index: int) -> EnvironmentView:
+        """Environment ``index`` of the batch (what ``get_attr`` and ``env_method`` act on)."""
+        if not -self.num_envs <= index < self.num_envs:
+            raise IndexError(f"environment {index} out of range for {self.num_envs}")
+        return EnvironmentView(self, index % self.num_envs)
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        value = getattr(self, attr_name)
-        return [value for _ in self._get_indices(indices)]
+        return [getattr(self.environment(i), attr_name) for i in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         if len(list(self._get_indices(indices))) != self.num_envs:
@@ -243,8 +269,8 @@ class LeftTurnVecEnv(VecEnv):
         indices: VecEnvIndices = None,
         **method_kwargs: Any,
     ) -> list[Any]:
-        method = getattr(self, method_name)
-        return [method(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+        views = [self.environment(i) for i in self._get_indices(indices)]
+        return [getattr(view, method_name)(*method_args, **method_kwargs) for view in views]
 
     def env_is_wrapped(
         self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
@@ -252,11 +278,50 @@ class LeftTurnVecEnv(VecEnv):
         return [False for _ in self._get_indices(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
+        return [self.environment(i).render() for i in range(self.num_envs)]
+
+
+class EnvironmentView:
+    """One environment of a :class:`LeftTurnVecEnv`: what ``get_attr`` and ``env_method``
+    reach, as they reach the environments of SB3's ``DummyVecEnv``.
+
+    Attributes not defined here are the batch's (its ``config``, ``task``, spaces and
+    ``render_mode`` are shared by every environment).
+
+    Args:
+        vec: The batch.
+        index: Which environment.
+    """
+
+    def __init__(self, vec: LeftTurnVecEnv, index: int) -> None:
+        self._vec = vec
+        self.env_index = index
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        try:
+            return getattr(self._vec, name)
+        except AttributeError:
+            raise AttributeError(
+                f"environment {self.env_index} of the LeftTurnVecEnv has no attribute {name!r}"
+            ) from None
+
+    def scenario(self) -> dict[str, float]:
+        """The scenario of this environment's current episode (see ``reset_infos``)."""
+        return scenario_info(self._vec.state.scenarios, self.env_index)
+
+    def episode_count(self) -> int:
+        """Episodes this environment has started."""
+        return int(self._vec.episode_counters[self.env_index])
+
+    def render(self) -> np.ndarray | None:
+        """This environment's current scene as an RGB image (``render_mode="rgb_array"``)."""
+        if self._vec.render_mode != "rgb_array":
+            return None
         from safeswitch.leftturn.render import render_scene
 
-        return [
-            render_scene(self.task, self.state, i, self.last_record) for i in range(self.num_envs)
-        ]
+        return render_scene(self._vec.task, self._vec.state, self.env_index, self._vec.last_record)
 
 
 def _fresh_seed() -> int:

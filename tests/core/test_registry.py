@@ -1,0 +1,115 @@
+"""Switching logics as plugins: run-time registration and the ``safeswitch.logics`` entry
+points of an installed distribution."""
+
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import safeswitch
+from safeswitch.core.config import ConfigError
+from safeswitch.core.registry import (
+    LogicContextError,
+    UnknownLogicError,
+    logic_names,
+    make_logic,
+    refresh_entry_points,
+    register_logic,
+    unregister_logic,
+)
+from safeswitch.core.switching import NeverSwitch, SwitchingError
+
+PLUGIN = '''
+import numpy as np
+from safeswitch import Decision
+
+CREATED = []
+
+
+class BrakeBelowTwoMetres:
+    """Brakes whenever the ego is within 2 m of its conflict-zone entry (a toy plugin)."""
+
+    reasons = ("learned", "near_zone")
+
+    def decide(self, state, learned, safe):
+        near = np.abs(state.ego_to_stop) < 2.0
+        return Decision(near, near.astype(np.int8), safe)
+
+
+def make(task):
+    CREATED.append(type(task).__name__)
+    return BrakeBelowTwoMetres()
+'''
+
+
+@pytest.fixture
+def installed_plugin(tmp_path, monkeypatch):
+    """A distribution ``toyplugin`` on sys.path that declares the logic ``toy-brake``."""
+    (tmp_path / "toyplugin.py").write_text(PLUGIN)
+    info = tmp_path / "toyplugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toyplugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[safeswitch.logics]\ntoy-brake = toyplugin:make\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    refresh_entry_points()
+    yield sys.modules.get("toyplugin")
+    sys.modules.pop("toyplugin", None)
+    refresh_entry_points()
+
+
+def test_a_logic_declared_by_an_installed_package_is_usable_by_name(installed_plugin):
+    assert "toy-brake" in logic_names()
+    env = gym.make(safeswitch.ENV_ID, switching="toy-brake", scenario="yield2")
+    env.reset(seed=0)
+    reasons = set()
+    for _ in range(400):
+        *_, info = env.step(np.array([1.0], dtype=np.float32))
+        reasons.add(info["reason"])
+    import toyplugin
+
+    assert toyplugin.CREATED == ["LeftTurnTask"]  # the factory got the task as its context
+    assert reasons >= {"learned", "near_zone"}
+
+
+def test_the_builtin_logics_are_entry_points_like_any_plugin():
+    from importlib import metadata
+
+    declared = {ep.name for ep in metadata.entry_points(group="safeswitch.logics")}
+    assert {"paper", "certified", "none"} <= declared
+    assert isinstance(make_logic("none", object()), NeverSwitch)
+
+
+def test_run_time_registration_and_its_errors():
+    register_logic("always-learned", lambda context: NeverSwitch())
+    try:
+        assert "always-learned" in logic_names()
+        with pytest.raises(ValueError, match="already registered"):
+            register_logic("always-learned", NeverSwitch)
+        env = gym.make(safeswitch.ENV_ID, switching="always-learned")
+        env.reset(seed=0)
+        *_, info = env.step(np.array([np.nan], dtype=np.float32))
+        # t = 0 is outside Algorithm 1's window: PID_th proposes, the NaN is not used
+        assert info["reason"] == "rule_in_charge" and info["controller"] == "rule"
+    finally:
+        unregister_logic("always-learned")
+    with pytest.raises(ValueError, match="must start with a letter"):
+        register_logic("1bad name", NeverSwitch)
+    with pytest.raises(ValueError, match="not callable"):
+        register_logic("fine", 42)  # type: ignore[arg-type]
+    with pytest.raises(UnknownLogicError, match="'nonesuch'.*known logics: certified"):
+        make_logic("nonesuch", None)
+    with pytest.raises(ConfigError, match="'nonesuch' is not a registered switching logic"):
+        gym.make(safeswitch.ENV_ID, switching="nonesuch")
+
+
+def test_a_logic_refuses_a_plant_it_was_not_written_for():
+    with pytest.raises(LogicContextError, match="'paper' switching logic supervises the left"):
+        make_logic("paper", object())
+    register_logic("bad-reasons", lambda context: type("L", (), {"reasons": ("x",),
+                                                                 "decide": lambda *a: None})())  # fmt: skip
+    try:
+        with pytest.raises(SwitchingError, match="must start with 'learned'"):
+            gym.make(safeswitch.ENV_ID, switching="bad-reasons")
+    finally:
+        unregister_logic("bad-reasons")
