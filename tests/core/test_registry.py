@@ -97,7 +97,7 @@ def test_run_time_registration_and_its_errors():
         register_logic("1bad name", NeverSwitch)
     with pytest.raises(ValueError, match="not callable"):
         register_logic("fine", 42)  # type: ignore[arg-type]
-    with pytest.raises(UnknownLogicError, match="'nonesuch'.*known logics: certified"):
+    with pytest.raises(UnknownLogicError, match=r"'nonesuch'.*known logics: certified"):
         make_logic("nonesuch", None)
     with pytest.raises(ConfigError, match="'nonesuch' is not a registered switching logic"):
         gym.make(safeswitch.ENV_ID, switching="nonesuch")
@@ -106,8 +106,14 @@ def test_run_time_registration_and_its_errors():
 def test_a_logic_refuses_a_plant_it_was_not_written_for():
     with pytest.raises(LogicContextError, match="'paper' switching logic supervises the left"):
         make_logic("paper", object())
-    register_logic("bad-reasons", lambda context: type("L", (), {"reasons": ("x",),
-                                                                 "decide": lambda *a: None})())  # fmt: skip
+
+    class BadReasons:
+        reasons = ("x",)
+
+        def decide(self, state, learned, safe):
+            raise AssertionError("never called")
+
+    register_logic("bad-reasons", lambda context: BadReasons())
     try:
         with pytest.raises(SwitchingError, match="must start with 'learned'"):
             gym.make(safeswitch.ENV_ID, switching="bad-reasons")

@@ -303,8 +303,8 @@ def _execute(
 ) -> int:  # fmt: skip
     """The executed actions (the logic's safety action, clipped, where it chose it; else the
     candidate) and the reason codes (``n_reasons`` — the invalid-action code — where the learned
-    action was invalid), and whether the learned action was overridden (``active``). Returns 0, or 1 for a reason code out of range, 2 for a chosen safety
-    action that is not finite."""
+    action was invalid), and whether the learned action was overridden (``active``). Returns 0,
+    or 1 for a reason code out of range, 2 for a chosen safety action that is not finite."""
     batch, dim = candidate.shape
     for b in range(batch):
         code = reason[b]

@@ -1,8 +1,8 @@
 """A natively batched Stable-Baselines3 ``VecEnv`` of the left turn.
 
 All environments advance in one call of :meth:`LeftTurnTask.step`; ended episodes are reset in
-place with one call of :meth:`LeftTurnTask.initial` for just those. SB3 conventions hold (``DummyVecEnv`` is the reference): the
-returned observation of an ended environment is the first of its next episode, and its info
+place with one call of :meth:`LeftTurnTask.initial` for just those. SB3 conventions hold
+(``DummyVecEnv`` is the reference): the returned observation of an ended environment is the first of its next episode, and its info
 carries ``terminal_observation``, ``TimeLimit.truncated`` and an ``episode`` summary (the keys
 of SB3's ``Monitor`` — ``r``, ``l``, ``t`` — plus the safety and comfort statistics below);
 ``reset_infos[i]`` holds the scenario of environment ``i``'s current episode; ``get_attr`` and
@@ -196,7 +196,7 @@ class LeftTurnVecEnv(VecEnv):
         self._episodes += 1
         self._state = self.task.initial(scenarios)
         self._stats = EpisodeStatistics(self.num_envs)
-        self.reset_infos = [{"scenario": scenario_info(scenarios, i)} for i in self._env_ids]
+        self.reset_infos = [{"scenario": scenario_info(scenarios, i)} for i in range(self.num_envs)]
         self._reset_options()
         return self.task.observe(self._state)
 
