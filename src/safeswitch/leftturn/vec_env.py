@@ -2,12 +2,13 @@
 
 All environments advance in one call of :meth:`LeftTurnTask.step`; ended episodes are reset in
 place with one call of :meth:`LeftTurnTask.initial` for just those. SB3 conventions hold
-(``DummyVecEnv`` is the reference): the returned observation of an ended environment is the first of its next episode, and its info
-carries ``terminal_observation``, ``TimeLimit.truncated`` and an ``episode`` summary (the keys
-of SB3's ``Monitor`` — ``r``, ``l``, ``t`` — plus the safety and comfort statistics below);
-``reset_infos[i]`` holds the scenario of environment ``i``'s current episode; ``get_attr`` and
-``env_method`` act per environment, on an :class:`EnvironmentView`; reset options are refused
-(the scenario distribution is part of the configuration).
+(``DummyVecEnv`` is the reference): the returned observation of an ended environment is the
+first of its next episode, and its info carries ``terminal_observation``,
+``TimeLimit.truncated`` and an ``episode`` summary (the keys of SB3's ``Monitor`` — ``r``,
+``l``, ``t`` — plus the safety and comfort statistics below); ``reset_infos[i]`` holds the
+scenario of environment ``i``'s current episode; ``get_attr`` and ``env_method`` act per
+environment, on an :class:`EnvironmentView`; reset options are refused (the scenario
+distribution is part of the configuration).
 
 The ``infos`` of a step are a :class:`~safeswitch.leftturn.info.BatchInfos`: a sequence of
 per-environment dicts built lazily on access (``infos[i]["reason"]``, ``for info in infos``,
