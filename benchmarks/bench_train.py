@@ -1,9 +1,9 @@
 """Training speed and decision latency.
 
-Trains one policy from a configuration (default ``configs/paper_scratch.yaml``, Table II from
+Trains one policy from a configuration (default ``--config paper_scratch``, Table II from
 scratch: 1.2 M steps, 16 environments, 1 torch thread) into a temporary run directory and
 reports wall time and steps per second (for a configuration with a warm start, such as
-``configs/paper.yaml``, the warm start's wall time separately), then times the trained
+``--config paper``, the warm start's wall time separately), then times the trained
 policy's decision for a single observation (normalisation + forward pass, median of 2,000
 calls, 1 torch thread). Run on an otherwise idle machine:
 ``python benchmarks/bench_train.py [--config FILE] [--timesteps N] [--json]``.
@@ -46,7 +46,7 @@ def decision_latency_ms(run: Path, calls: int = 2000) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default=str(ROOT / "configs" / "paper_scratch.yaml"))
+    parser.add_argument("--config", default="paper_scratch")
     parser.add_argument("--timesteps", type=int, help="override the configuration's timesteps")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)

@@ -1,8 +1,8 @@
 """How much a 1.2 M-step training run depends on its seed (and what a configuration gives).
 
-Trains a configuration (default ``configs/paper.yaml``, the shipped paper policy's) once per
+Trains a configuration (default ``--config paper``, the shipped paper policy's) once per
 seed — about 3 minutes each on this machine, plus the warm start if the configuration has one
-(about 7 minutes for ``configs/paper.yaml``) — and prints each run's
+(about 7 minutes for ``--config paper``) — and prints each run's
 collisions during training (warm start included) and its evaluation on the fixed unseen
 scenario set (seed 1000003). Usage:
 ``python benchmarks/train_seeds.py [--config PATH] [seed ...]`` (default seeds: 1 2).
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default=str(ROOT / "configs" / "paper.yaml"))
+    parser.add_argument("--config", default="paper")
     parser.add_argument("seeds", nargs="*", type=int, default=[1, 2])
     args = parser.parse_args(argv)
     base = load_config(args.config)

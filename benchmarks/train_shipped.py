@@ -2,7 +2,7 @@
 artefacts into ``src/safeswitch/policies/<name>/`` with a README of how it was made.
 
 Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all five).
-Training is the same as ``safeswitch train --config configs/<name>.yaml --out runs/<name>``;
+Training is the same as ``safeswitch train --config <name> --out runs/<name>``;
 ``--from-runs`` only copies already finished runs from ``runs/``.
 """
 
@@ -34,7 +34,7 @@ def policy_readme(name: str, metrics: dict) -> str:
 
 Made with
 
-    safeswitch train --config configs/{name}.yaml --out runs/{name}
+    safeswitch train --config {name} --out runs/{name}
 
 (seed {metrics["seed"]}, {metrics["timesteps"]:,} steps, {metrics["n_envs"]} environments,
 {metrics["torch_threads"]} torch thread(s); {metrics["wall_time_s"]:.0f} s on the project's
@@ -76,7 +76,7 @@ def main(argv: list[str]) -> int:
         if not from_runs:
             run = ROOT / "runs" / name
             shutil.rmtree(run, ignore_errors=True)
-            train(load_config(ROOT / "configs" / f"{name}.yaml"), run, progress_bar=False)
+            train(load_config(name), run, progress_bar=False)
         ship(name)
         print(f"shipped {name}")
     return 0

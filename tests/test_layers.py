@@ -2,6 +2,7 @@
 and only ``report`` imports matplotlib.
 
 core → sim → leftturn → evaluation → training, report → app, examples → cli
+(``io`` and ``progress`` are leaf utilities every layer may use.)
 """
 
 import ast
@@ -11,19 +12,21 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "src" / "safeswitch"
 
+UTILITIES = {"io", "progress"}
 BELOW = {
     "io": set(),
-    "core": {"io"},
-    "sim": {"io", "core"},
-    "leftturn": {"io", "core", "sim"},
-    "evaluation": {"io", "core", "sim", "leftturn"},
-    "training": {"io", "core", "sim", "leftturn", "evaluation"},
-    "report": {"io", "core", "sim", "leftturn", "evaluation"},
-    "examples": {"io", "core", "sim", "leftturn", "evaluation", "training"},
-    "bench": {"io", "core", "sim", "leftturn", "evaluation", "training"},
-    "app": {"io", "core", "sim", "leftturn", "evaluation", "training", "report", "examples"},
-    "cli": {"io", "core", "sim", "leftturn", "evaluation", "training", "report", "app", "bench"},
+    "progress": set(),
+    "core": UTILITIES,
+    "sim": UTILITIES | {"core"},
+    "leftturn": UTILITIES | {"core", "sim"},
+    "evaluation": UTILITIES | {"core", "sim", "leftturn"},
+    "training": UTILITIES | {"core", "sim", "leftturn", "evaluation"},
+    "report": UTILITIES | {"core", "sim", "leftturn", "evaluation"},
+    "examples": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
+    "bench": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
 }
+BELOW["app"] = BELOW["training"] | {"training", "report", "examples"}
+BELOW["cli"] = BELOW["app"] | {"app", "bench"}
 
 
 def modules():

@@ -17,9 +17,14 @@ import gymnasium as _gym
 __version__ = "0.2.0"
 
 ENV_ID = "safeswitch/LeftTurn-v0"
+#: highway-env's highway with continuous actions under a switching logic (needs the
+#: ``highway-env`` package; see :mod:`safeswitch.examples.highway`).
+HIGHWAY_ENV_ID = "safeswitch/Highway-v0"
 
 if ENV_ID not in _gym.registry:
     _gym.register(id=ENV_ID, entry_point="safeswitch.leftturn.env:LeftTurnEnv")
+if HIGHWAY_ENV_ID not in _gym.registry:
+    _gym.register(id=HIGHWAY_ENV_ID, entry_point="safeswitch.examples.highway:make_highway_env")
 
 #: Public name → the module that defines it.
 _EXPORTS = {
@@ -37,6 +42,7 @@ _EXPORTS = {
 
 __all__ = [
     "ENV_ID",
+    "HIGHWAY_ENV_ID",
     "Decision",
     "NeverSwitch",
     "SafeSwitch",

@@ -1,45 +1,101 @@
-"""The ``safeswitch`` command line."""
+"""The ``safeswitch`` command line (``safeswitch --help``; also ``python -m safeswitch``)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
+
+from safeswitch import __version__
+
+#: The configuration ``safeswitch train`` uses without ``--config``: the paper's recipe.
+DEFAULT_CONFIG = "paper_scratch"
+LEFT_TURN = "safeswitch/LeftTurn-v0"
+
+
+class UsageError(ValueError):
+    """A combination of options that cannot work; the message says which."""
+
+
+def _errors() -> tuple[type[BaseException], ...]:
+    """What a command reports as one line and exit code 2 (imported lazily: the heavy
+    modules load only for the command that needs them)."""
+    from safeswitch.core.config import ConfigError
+    from safeswitch.core.switching import SwitchingError
+    from safeswitch.io import OutputDirectoryError
+
+    return (ConfigError, SwitchingError, OutputDirectoryError, ValueError, FileNotFoundError)
+
+
+def _run(command: str, body: Callable[[], int]) -> int:
+    try:
+        return body()
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:
+        from safeswitch.training.run import RunDirectoryError
+
+        if isinstance(exc, (*_errors(), RunDirectoryError)):
+            print(f"safeswitch {command}: error: {exc}", file=sys.stderr)
+            return 2
+        raise
+
+
+def _number(value: Any) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, int):  # bool included
+        return f"{value:,}"
+    if isinstance(value, float):
+        return f"{value:,.4g}" if abs(value) < 1e4 else f"{value:,.0f}"
+    return str(value)
+
+
+def print_summary(summary: dict[str, Any]) -> None:
+    """A summary as aligned ``name: value`` lines, numbers rounded (``--json`` has them all)."""
+    width = max(len(k) for k in summary)
+    for key, value in summary.items():
+        if isinstance(value, dict):
+            print(f"{key:>{width}}:")
+            inner = max((len(k) for k in value), default=0)
+            for name, v in value.items():
+                print(f"{'':>{width}}  {name:>{inner}}: {_number(v)}")
+        else:
+            print(f"{key:>{width}}: {_number(value)}")
 
 
 def _train(args: argparse.Namespace) -> int:
     from safeswitch.app.train import train_and_plot
-    from safeswitch.core.config import ConfigError
-    from safeswitch.training.config import TrainConfig, load_config
-    from safeswitch.training.run import RunDirectoryError
 
-    try:
-        config = load_config(args.config) if args.config else TrainConfig()
-        overrides = {
-            k: v
-            for k, v in (
-                ("timesteps", args.timesteps),
-                ("n_envs", args.n_envs),
-                ("seed", args.seed),
-                ("torch_threads", args.torch_threads),
-            )
-            if v is not None
-        }
-        env = config.env
-        if args.switching is not None:
-            env = replace(env, switching=args.switching)
-        if args.no_adas_penalty:
-            env = replace(env, adas_penalty=False)
-        config = replace(config, env=env, **overrides)
-        metrics = train_and_plot(
-            config, args.out, resume=args.resume, progress_bar=not args.no_progress
+    if args.env not in (None, LEFT_TURN):
+        return _train_env(args)
+    if args.resume and args.config:
+        raise UsageError("--resume continues with the run's own config.yaml; drop --config")
+    from safeswitch.training.config import load_config
+
+    config = load_config(args.config or DEFAULT_CONFIG)
+    overrides = {
+        k: v
+        for k, v in (
+            ("timesteps", args.timesteps),
+            ("n_envs", args.n_envs),
+            ("seed", args.seed),
+            ("torch_threads", args.torch_threads),
         )
-    except (ConfigError, RunDirectoryError, FileNotFoundError) as exc:
-        print(f"safeswitch train: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+        if v is not None
+    }
+    env = config.env
+    if args.switching is not None:
+        env = replace(env, switching=args.switching)
+    if args.no_adas_penalty:
+        env = replace(env, adas_penalty=False)
+    config = replace(config, env=env, **overrides)
+    metrics = train_and_plot(
+        config, args.out, resume=args.resume, progress_bar=not args.no_progress
+    )
     t, e = metrics["training"], metrics["evaluation"]
     print(
         f"trained {metrics['timesteps']:,} steps in {metrics['wall_time_s']:.0f} s "
@@ -47,20 +103,54 @@ def _train(args: argparse.Namespace) -> int:
         f"{t['collisions']}; safety activations: {t['safety_activation_episodes']} episodes"
     )
     if e.get("episodes"):
+        clear = e["mean_time_to_clear_s"]
         print(
             f"evaluation on {e['episodes']} unseen scenarios: collisions {e['collisions']}, "
             f"safety activated in {e['safety_activation_episodes']} episodes, "
-            f"full stops {e['stops']}, mean time to clear {e['mean_time_to_clear_s']:.2f} s"
+            f"full stops {e['stops']}, mean time to clear "
+            + (f"{clear:.2f} s" if clear is not None else "– (never cleared)")
         )
     print(f"run directory: {args.out}")
     return 0
 
 
-def _evaluate(args: argparse.Namespace) -> int:
-    from safeswitch.app.evaluate import evaluate
-    from safeswitch.core.config import ConfigError
+def _train_env(args: argparse.Namespace) -> int:
+    from safeswitch.training.config import EnvTrainConfig, load_env_config
+    from safeswitch.training.generic import train_env
 
-    try:
+    if args.no_adas_penalty:
+        raise UsageError("--no-adas-penalty is for the left turn; set penalty: 0 in a config")
+    base = load_env_config(args.config) if args.config else EnvTrainConfig(env_id=args.env)
+    overrides = {
+        k: v
+        for k, v in (
+            ("env_id", args.env),
+            ("switching", args.switching),
+            ("timesteps", args.timesteps),
+            ("n_envs", args.n_envs),
+            ("seed", args.seed),
+            ("torch_threads", args.torch_threads),
+        )
+        if v is not None
+    }
+    config = replace(base, **overrides)
+    metrics = train_env(config, args.out, resume=args.resume, progress_bar=not args.no_progress)
+    t = metrics["training"]
+    print(
+        f"trained {metrics['timesteps']:,} steps on {config.env_id} in "
+        f"{metrics['wall_time_s']:.0f} s; collisions during training: {t['collisions']} in "
+        f"{t['episodes']:,} episodes; safety activations: {t['safety_activation_steps']:,} steps"
+    )
+    print(f"run directory: {args.out}")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    if args.env not in (None, LEFT_TURN):
+        summary = _evaluate_env(args)
+    else:
+        from safeswitch.app.evaluate import evaluate
+
         summary = evaluate(
             args.controller,
             args.model,
@@ -69,16 +159,44 @@ def _evaluate(args: argparse.Namespace) -> int:
             args.seed,
             args.switching,
             args.out,
+            overwrite=args.overwrite,
+            progress=not (args.no_progress or args.json),
         )
-    except (ConfigError, ValueError, FileNotFoundError) as exc:
-        print(f"safeswitch evaluate: error: {exc}", file=sys.stderr)
-        return 2
     if args.json:
-        print(json.dumps(summary))
+        from safeswitch.io import to_json
+
+        sys.stdout.write(to_json(summary))
     else:
-        for key, value in summary.items():
-            print(f"{key:>28}: {value}")
+        print_summary(summary)
     return 0
+
+
+def _evaluate_env(args: argparse.Namespace) -> dict[str, Any]:
+    from safeswitch.io import prepare_output_dir, write_json
+    from safeswitch.training.generic import make_supervised_env, run_episodes
+    from safeswitch.training.policies import load_policy
+
+    if args.controller != "learned" or args.model is None:
+        raise UsageError(f"--env {args.env} evaluates a trained policy: pass --model RUN")
+    policy = load_policy(args.model)
+    folder = prepare_output_dir(args.out, args.overwrite) if args.out else None
+    env_config = policy.config
+    switching = args.switching or getattr(env_config, "switching", None)
+    env = make_supervised_env(
+        args.env, switching, getattr(env_config, "penalty", None),
+        **getattr(env_config, "env_kwargs", {}),
+    )  # fmt: skip
+    summary = {
+        "env_id": args.env,
+        "model": str(args.model),
+        "switching": switching,
+        "seed": args.seed,
+        **run_episodes(env, policy.act_one, args.episodes, args.seed),
+    }
+    env.close()
+    if folder is not None:
+        write_json(folder / "summary.json", summary)
+    return summary
 
 
 def _bench(args: argparse.Namespace) -> int:
@@ -98,41 +216,69 @@ def _reproduce(args: argparse.Namespace) -> int:
     from safeswitch.app.reproduce import reproduce
 
     if args.episodes < 1:
-        print(
-            f"safeswitch reproduce: error: --episodes must be >= 1, got {args.episodes}",
-            file=sys.stderr,
-        )
-        return 2
+        raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
     if args.timesteps is not None and args.timesteps < 1:
-        print(
-            f"safeswitch reproduce: error: --timesteps must be >= 1, got {args.timesteps}",
-            file=sys.stderr,
-        )
-        return 2
-    reproduce(args.out, quick=args.quick, episodes=args.episodes, timesteps=args.timesteps)
+        raise UsageError(f"--timesteps must be >= 1, got {args.timesteps}")
+    if args.quick and args.timesteps is not None:
+        raise UsageError("--timesteps sets the training budget; --quick trains nothing")
+    reproduce(
+        args.out,
+        quick=args.quick,
+        episodes=args.episodes,
+        timesteps=args.timesteps,
+        overwrite=args.overwrite,
+    )
+    return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    from safeswitch.app.render import render
+
+    path = render(
+        args.controller,
+        args.model,
+        args.scenario,
+        args.seed,
+        args.switching,
+        args.out,
+        overwrite=args.overwrite,
+    )
+    print(f"wrote {path}")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from safeswitch.core.registry import logic_names
+
+    logics = logic_names()
     parser = argparse.ArgumentParser(
         prog="safeswitch",
         description="Safe reinforcement learning with a rule-based Safety controller, a learned "
         "controller and a switching logic (Aksjonov & Kyrki), on an embedded simulator.",
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=f"safeswitch {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     train = sub.add_parser("train", help="train a PPO policy with the switching logic in the loop")
-    train.add_argument("--config", help="YAML training configuration (see configs/)")
-    train.add_argument("--timesteps", type=int, help="environment ticks (default 1,200,000)")
+    train.add_argument(
+        "--config",
+        help=f"a YAML file, or a packaged configuration by name (default: {DEFAULT_CONFIG}, the "
+        "paper's recipe; see safeswitch/configs/)",
+    )
+    train.add_argument(
+        "--env",
+        help=f"a Gymnasium id (default {LEFT_TURN}); others train through SafeSwitch",
+    )
+    train.add_argument("--timesteps", type=int, help="environment steps (default: the config's)")
     train.add_argument("--n-envs", type=int, help="environments stepped as one batch")
-    train.add_argument("--switching", choices=("paper", "certified", "none"))
+    train.add_argument("--switching", choices=logics, help="a registered switching logic")
     train.add_argument(
         "--no-adas-penalty",
         action="store_true",
         help="leave R_ADAS out of the reward (the paper's ablation)",
     )
     train.add_argument("--seed", type=int, help="seed of PPO and of the training scenarios")
-    train.add_argument("--torch-threads", type=int, help="CPU threads for torch (default 2)")
+    train.add_argument("--torch-threads", type=int, help="CPU threads for torch")
     train.add_argument("--out", required=True, help="run directory")
     train.add_argument(
         "--resume",
@@ -145,8 +291,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="evaluate a controller on the paper's or random scenarios")
     ev.add_argument(
         "--model",
-        help="run directory, or a shipped policy: shipped (the paper "
-        "policy), paper, paper-scratch, no-adas, certified, none",
+        help="a run directory, one of its checkpoints (run/checkpoints/step_…), or a shipped "
+        "policy: shipped (the paper policy), paper, paper-scratch, no-adas, certified, none",
     )
     ev.add_argument(
         "--controller",
@@ -156,17 +302,32 @@ def build_parser() -> argparse.ArgumentParser:
         "planner: a throttle-only rule-based planner that avoids the paper logic's braking; "
         "oracle: the minimum-time crossing planned with knowledge of the north car",
     )
+    ev.add_argument("--env", help=f"a Gymnasium id (default {LEFT_TURN})")
     ev.add_argument("--scenarios", choices=("paper", "random"), default="random")
-    ev.add_argument("--episodes", type=int, default=1000, help="random scenarios")
+    ev.add_argument("--episodes", type=int, default=1000, help="random scenarios (default 1000)")
     ev.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
     ev.add_argument(
-        "--switching",
-        choices=("paper", "certified", "none"),
-        help="override the switching logic the policy was trained with",
+        "--switching", choices=logics, help="override the switching logic it was trained with"
     )
     ev.add_argument("--out", help="folder for episodes.csv and summary.json")
+    ev.add_argument("--overwrite", action="store_true", help="replace files in a non-empty --out")
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    ev.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     ev.set_defaults(func=_evaluate)
+
+    render = sub.add_parser("render", help="animate one episode of a controller as a GIF")
+    render.add_argument("--model", help="a trained policy (as for evaluate)")
+    render.add_argument("--controller", choices=("learned", "rule", "planner"), default="learned")
+    render.add_argument(
+        "--scenario",
+        default="cut",
+        help="cut, yield1, yield2 (the paper's) or random:K (random scenario K of --seed)",
+    )
+    render.add_argument("--seed", type=int, default=0, help="seed of random:K scenarios")
+    render.add_argument("--switching", choices=logics, help="override the switching logic")
+    render.add_argument("--out", required=True, help="the GIF to write (e.g. episode.gif)")
+    render.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    render.set_defaults(func=_render)
 
     bench = sub.add_parser("bench", help="throughput figures of the simulator and environments")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
@@ -180,24 +341,32 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument(
         "--quick",
         action="store_true",
-        help="use the shipped policies (under 2 minutes) instead of training all five first",
+        help="use the shipped policies (about a minute) instead of training all five first",
     )
     rep.add_argument("--out", default="out/report", help="report folder (default: out/report)")
     rep.add_argument("--episodes", type=int, default=1000, help="random evaluation scenarios")
     rep.add_argument(
-        "--timesteps", type=int, help="training steps per policy without --quick (default 1.2 M)"
+        "--timesteps",
+        type=int,
+        help="PPO steps per policy without --quick (default: each config's 1.2 M); a "
+        "configuration's warm start keeps its own size",
     )
+    rep.add_argument("--overwrite", action="store_true", help="replace an existing report")
     rep.set_defaults(func=_reproduce)
 
     demo = sub.add_parser("demo", help="the same as reproduce --quick (the README's make demo)")
     demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
-    demo.set_defaults(func=_reproduce, quick=True, episodes=1000, timesteps=None)
+    demo.set_defaults(func=_reproduce, quick=True, episodes=1000, timesteps=None, overwrite=True)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
+    return _run(args.command, lambda: int(args.func(args)))
 
 
 if __name__ == "__main__":

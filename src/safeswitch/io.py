@@ -49,3 +49,27 @@ def _jsonable(value: Any) -> Any:
 def write_json(path: str | Path, value: Any) -> None:
     """:func:`to_json` written atomically."""
     write_atomic(path, to_json(value))
+
+
+class OutputDirectoryError(ValueError):
+    """An ``--out`` folder cannot be used as asked; the message says why and what to do."""
+
+
+def prepare_output_dir(path: str | Path, overwrite: bool = False) -> Path:
+    """A folder for a command's outputs: created if absent; refused if it is a file, or if it
+    holds anything and ``overwrite`` is off (nothing is deleted either way — files the command
+    writes are replaced, others are left alone).
+
+    Raises:
+        OutputDirectoryError: Naming the folder and the way out.
+    """
+    folder = Path(path)
+    if folder.exists() and not folder.is_dir():
+        raise OutputDirectoryError(f"--out {folder} is a file, not a folder; choose another --out")
+    if folder.is_dir() and any(folder.iterdir()) and not overwrite:
+        raise OutputDirectoryError(
+            f"--out {folder} is not empty; choose another --out, or pass --overwrite to replace "
+            "the files this command writes there"
+        )
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder

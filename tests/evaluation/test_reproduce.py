@@ -1,15 +1,18 @@
-"""``safeswitch reproduce --quick``: the report holds every figure, animation and table it lists."""
+"""``safeswitch reproduce --quick``: the report holds every figure, animation and table it
+lists, and never hides a collision."""
 
 import csv
 import json
 import re
+from html.parser import HTMLParser
 
 import pytest
 from PIL import Image
 
-from safeswitch.app.reproduce import ENTRIES, TABLE, _figure_list
+from safeswitch.app.reproduce import ENTRIES
 from safeswitch.cli import main
 from safeswitch.leftturn.config import SCENARIO_NAMES
+from safeswitch.report.document import COMPARISON, DEFINITIONS, figure_list
 
 EPISODES = 24
 
@@ -21,14 +24,47 @@ def report(tmp_path_factory):
     return out
 
 
+class Tables(HTMLParser):
+    """Every <table> of a page as rows of (cell texts, row class)."""
+
+    def __init__(self):
+        super().__init__()
+        self.tables, self._row, self._cell, self._class = [], None, None, None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr":
+            self._row, self._class = [], dict(attrs).get("class")
+        elif tag in ("td", "th"):
+            self._cell = ""
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell += data
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th"):
+            self._row.append(self._cell)
+            self._cell = None
+        elif tag == "tr":
+            self.tables[-1].append((self._row, self._class))
+
+
+def tables(page):
+    parser = Tables()
+    parser.feed(page)
+    return parser.tables
+
+
 def test_the_report_embeds_every_figure_and_animation_it_lists(report):
     summary = json.loads((report / "summary.json").read_text())
     page = (report / "report.html").read_text()
-    listed = _figure_list(summary)
-    assert len(listed) == 1 + 3 * (len(ENTRIES) - 1)  # comparison + 3 scenarios per controller
+    listed = figure_list(summary)
+    assert len(listed) == 3 * (len(ENTRIES) - 1)  # 3 scenarios per controller but the oracle
     pngs = re.findall(r'src="data:image/png;base64,', page)
     gifs = re.findall(r'src="data:image/gif;base64,', page)
-    assert len(pngs) == len(listed)
+    assert len(pngs) == len(listed) + 1  # and the comparison
     assert len(gifs) == len(SCENARIO_NAMES)
     assert not re.search(r"(src|href)=\"(?!data:)", page)  # self-contained, offline
     markdown = (report / "report.md").read_text()
@@ -41,17 +77,46 @@ def test_the_report_embeds_every_figure_and_animation_it_lists(report):
             assert gif.n_frames >= 50  # an animation of the whole episode, not a still
 
 
-def test_the_report_tables_name_every_controller_and_column(report):
+def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report):
     page = (report / "report.html").read_text()
-    markdown = (report / "report.md").read_text()
-    for entry in ENTRIES:
-        assert f"<td>{entry.name}</td>" in page
-        assert f"| {entry.name} |" in markdown
-    for _, header, _ in TABLE:
-        assert f"<th>{header}</th>" in page
-    for scenario in SCENARIO_NAMES:
-        assert f"<th>{scenario}</th>" in page
+    for name, _ in DEFINITIONS:
+        assert f"<dt>{name}</dt>" in page
+    assert "3 m/s²" in page and "5 m/s²" in page  # the comfort limits, with their values
+    policies = tables(page)[0]
+    made = {row[0]: row[1] for row, _ in policies[1:]}
+    assert made["ppo-paper"].startswith("warm start (behaviour cloning of the planner")
+    assert made["ppo-paper-scratch"].startswith("PPO from a random initialisation, 1,200,")
+    comparison_header = tables(page)[1][0][0]
+    for _, header, _ in COMPARISON:
+        assert header in comparison_header
     assert page.count("reproduced:") == 4
+
+
+def test_a_collision_is_shown_in_every_table_and_figure_caption(report):
+    """The unshielded policy collides in yield1 and yield2 (raw CSV); the report must say so
+    wherever those episodes appear, and say "never cleared" rather than a number."""
+    with open(report / "raw" / "ppo-unshielded_paper.csv") as handle:
+        raw = {row["episode"]: row for row in csv.DictReader(handle)}
+    crashed = [name for name, row in raw.items() if row["collision"] == "1"]
+    assert crashed  # the premise: this policy collides in some paper scenario
+    page = (report / "report.html").read_text()
+    comparison, scenarios = tables(page)[1], tables(page)[2]
+    header = comparison[0][0]
+    summary = json.loads((report / "summary.json").read_text())
+    for row, css in comparison[1:]:
+        collisions = int(row[header.index("collisions")])
+        assert collisions == summary["controllers"][row[0]]["random"]["collisions"]
+        assert (css == "alert") == (collisions > 0)
+    lines = {(row[0], row[1]): (row, css) for row, css in scenarios[1:]}
+    for name in crashed:
+        row, css = lines["ppo-unshielded", name]
+        assert row[3].startswith("COLLISION at") and css == "alert"
+        assert row[4] == "never cleared"  # not "nan s" — it never left the zone
+        caption = dict(figure_list(summary))[f"ppo-unshielded_{name}"]
+        assert "COLLISION at" in caption and caption in page
+    text = re.sub(r'src="data:[^"]*"', "", page)
+    assert not re.search(r"\bnan\b", text, re.IGNORECASE)
+    assert not re.search(r"\bnan\b", (report / "report.md").read_text(), re.IGNORECASE)
 
 
 def test_the_raw_results_hold_one_row_per_episode(report):
@@ -71,3 +136,9 @@ def test_the_raw_results_hold_one_row_per_episode(report):
     reckless = {r["switching"]: r for r in summary["reckless_full_throttle"]}
     assert reckless["none"]["collisions"] > 0
     assert reckless["certified"]["collisions"] == 0
+
+
+def test_reproduce_refuses_to_overwrite_a_report_without_overwrite(report, capsys):
+    args = ["reproduce", "--quick", "--out", str(report), "--episodes", "2"]
+    assert main(args) == 2
+    assert "is not empty" in capsys.readouterr().err

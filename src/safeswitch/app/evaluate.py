@@ -8,16 +8,17 @@ from typing import Any
 
 from safeswitch.evaluation.evaluate import (
     BASELINES,
+    EpisodeCSV,
     baseline_setup,
-    episodes_csv,
     run_controller,
-    scenario_set,
-    summary_against_oracle,
+    scenario_chunks,
 )
+from safeswitch.evaluation.metrics import SummaryAccumulator
 from safeswitch.evaluation.rollout import Policy
-from safeswitch.io import write_atomic, write_json
-from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.io import prepare_output_dir, write_json
+from safeswitch.leftturn.config import SCENARIO_NAMES, LeftTurnConfig
 from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.progress import Progress
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import load_policy
 
@@ -61,27 +62,49 @@ def evaluate(
     seed: int,
     switching: str | None,
     out: str | Path | None,
+    overwrite: bool = False,
+    progress: bool = False,
 ) -> dict[str, Any]:
-    """Run the evaluation, write ``episodes.csv`` and ``summary.json`` into ``out``, and return
-    the summary (see :mod:`safeswitch.evaluation.metrics` for its fields; ``mean_efficiency``
-    is the mean over scenarios of the oracle's time to clear divided by the controller's)."""
+    """Run the evaluation and return its summary (see :mod:`safeswitch.evaluation.metrics` for
+    the fields); with ``out``, write ``episodes.csv`` (row by row, as chunks finish) and
+    ``summary.json`` there. Episodes run in chunks of
+    :data:`~safeswitch.evaluation.evaluate.CHUNK`, so memory stays bounded whatever
+    ``episodes`` is.
+
+    Raises:
+        OutputDirectoryError: ``out`` is a file, or holds files and ``overwrite`` is off.
+    """
     env_config, policy = controller_setup(controller, model, switching)
     task = LeftTurnTask(env_config)
-    batch, names = scenario_set(task, scenarios, episodes, seed)
-    result, plan = run_controller(task, policy, batch)
+    chunks = scenario_chunks(task, scenarios, episodes, seed)  # validates the arguments
+    folder = prepare_output_dir(out, overwrite) if out is not None else None
+    total = len(SCENARIO_NAMES) if scenarios == "paper" else episodes
+    accumulator = SummaryAccumulator()
+    writer = EpisodeCSV(folder / "episodes.csv") if folder is not None else None
+    bar = Progress(total, f"evaluate {controller}", enabled=progress)
+    try:
+        for names, batch in chunks:
+            result, plan = run_controller(task, policy, batch)
+            accumulator.add(result, plan.time_to_clear, env_config.episode.horizon_s)
+            if writer is not None:
+                writer.write(names, batch, result, plan.time_to_clear)
+            bar.update(len(names))
+    except BaseException:
+        if writer is not None:
+            writer.abandon()
+        raise
+    finally:
+        bar.close()
+    if writer is not None:
+        writer.close()
     summary = {
         "controller": controller,
         "model": str(model) if model else None,
         "switching": env_config.switching if policy is not None else None,
         "scenarios": scenarios,
         "seed": seed,
-        **summary_against_oracle(result, plan, env_config.episode.horizon_s),
+        **accumulator.summary(),
     }
-    if out is not None:
-        folder = Path(out)
-        folder.mkdir(parents=True, exist_ok=True)
-        write_atomic(
-            folder / "episodes.csv", episodes_csv(names, batch, result, plan.time_to_clear)
-        )
+    if folder is not None:
         write_json(folder / "summary.json", summary)
     return summary

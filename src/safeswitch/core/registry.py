@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
+from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
 
@@ -141,3 +142,45 @@ def resolve_logic(logic: SwitchingLogic[Any] | str, context: Any) -> SwitchingLo
         return make_logic(logic, context)
     check_logic(logic)
     return logic
+
+
+@dataclass(frozen=True)
+class RegisteredController:
+    """A Safety controller registered for a Gymnasium id.
+
+    Attributes:
+        factory: ``factory(env) -> safety_controller`` (``safety_controller(state) -> [B, A]``).
+        state_fn: ``state_fn(env) -> state`` for :class:`~safeswitch.core.wrappers.SafeSwitch`
+            (``None``: the last observation).
+    """
+
+    factory: Callable[[Any], Callable[[Any], Any]]
+    state_fn: Callable[[Any], Any] | None = None
+
+
+_controllers: dict[str, RegisteredController] = {}
+
+
+def register_safety_controller(
+    env_id: str,
+    factory: Callable[[Any], Callable[[Any], Any]],
+    *,
+    state_fn: Callable[[Any], Any] | None = None,
+) -> None:
+    """Register the Safety controller of the environments ``env_id``, so that ``safeswitch
+    train --env ENV_ID --switching LOGIC`` can wrap them in
+    :class:`~safeswitch.core.wrappers.SafeSwitch`.
+
+    Args:
+        env_id: A Gymnasium id.
+        factory: ``factory(env) -> safety_controller``.
+        state_fn: What the controller and the logic see (default: the last observation).
+    """
+    if not callable(factory):
+        raise ValueError(f"the Safety controller factory of {env_id!r} is not callable")
+    _controllers[env_id] = RegisteredController(factory, state_fn)
+
+
+def safety_controller_for(env_id: str) -> RegisteredController | None:
+    """The Safety controller registered for ``env_id``, if any."""
+    return _controllers.get(env_id)

@@ -9,20 +9,26 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Callable
+import os
+from collections.abc import Callable, Iterator
 from dataclasses import fields, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from safeswitch.evaluation.metrics import summarize
-from safeswitch.evaluation.oracle import Oracle, OraclePlan, efficiency
+from safeswitch.evaluation.oracle import Oracle, OraclePlan
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.leftturn.config import SCENARIO_NAMES, LearnedScope, LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask, StepRecord, TaskState
 from safeswitch.sim.geometry import FloatArray
+
+#: Scenarios simulated at once by a streaming evaluation (memory stays bounded whatever the
+#: number of episodes).
+CHUNK = 4096
 
 #: The rule-based controllers and the oracle (``safeswitch evaluate --controller``).
 BASELINES: tuple[str, ...] = ("rule", "planner", "oracle")
@@ -90,15 +96,81 @@ def run_controller(
 def summary_against_oracle(
     result: RolloutResult, plan: OraclePlan, horizon_s: float
 ) -> dict[str, Any]:
-    """:func:`~safeswitch.evaluation.metrics.summarize` plus the oracle's mean time to clear
-    and ``mean_efficiency``: the mean over scenarios of the oracle's time to clear divided by
-    the controller's (see :func:`~safeswitch.evaluation.oracle.efficiency`)."""
-    ratio = efficiency(plan.time_to_clear, result.time_to_clear, horizon_s)
-    return {
-        **summarize(result),
-        "mean_oracle_time_to_clear_s": float(np.nanmean(plan.time_to_clear)),
-        "mean_efficiency": float(np.nanmean(ratio)),
-    }
+    """:func:`~safeswitch.evaluation.metrics.summarize` with the oracle's plan of the same
+    scenarios: its mean time to clear and ``mean_efficiency`` (the mean over scenarios of the
+    oracle's time to clear divided by the controller's, see
+    :func:`~safeswitch.evaluation.oracle.efficiency`)."""
+    return summarize(result, plan.time_to_clear, horizon_s)
+
+
+def scenario_chunks(
+    task: LeftTurnTask, which: str, episodes: int, seed: int, chunk: int = CHUNK
+) -> Iterator[tuple[list[str], Scenarios]]:
+    """:func:`scenario_set` in chunks of at most ``chunk`` scenarios (the same scenarios in
+    the same order: random scenario ``i`` is a pure function of ``(seed, i)``)."""
+    if which == "paper":
+        scenarios, names = scenario_set(task, which, episodes, seed)
+        yield names, scenarios
+        return
+    if which != "random":
+        raise ValueError(f"--scenarios must be 'paper' or 'random', got {which!r}")
+    if episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {episodes}")
+    for start in range(0, episodes, chunk):
+        ids = np.arange(start, min(start + chunk, episodes))
+        scenarios = task.draw_scenarios(seed, ids, np.zeros(ids.size, dtype=int))
+        yield [f"random-{i}" for i in ids], scenarios
+
+
+#: Columns of ``episodes.csv`` (a never-cleared episode has an empty ``time_to_clear_s``).
+CSV_COLUMNS = (
+    "episode",
+    "ego_start_distance_m",
+    "ego_speed_kmh",
+    "north_speed_kmh",
+    "arrival_offset_s",
+    "collision",
+    "safety_steps",
+    "min_speed_kmh",
+    "time_to_clear_s",
+    "outcome",
+    "comfort_violation_steps",
+    "max_accel_lon",
+    "max_accel_lat",
+    "max_lateral_m",
+    "return",
+    "oracle_time_to_clear_s",
+)
+
+
+def _number(value: float) -> str:
+    return f"{value:.3f}" if np.isfinite(value) else ""
+
+
+def episode_rows(
+    names: list[str], scenarios: Scenarios, result: RolloutResult, oracle_time: FloatArray
+) -> Iterator[list[Any]]:
+    """One row of :data:`CSV_COLUMNS` per episode."""
+    s, r = scenarios, result
+    for i, name in enumerate(names):
+        yield [
+            name,
+            _number(s.ego_start_distance[i]),
+            _number(s.ego_speed[i] * 3.6),
+            _number(s.north_speed[i] * 3.6),
+            _number(s.arrival_offset[i]),
+            int(r.collision[i]),
+            int(r.safety_steps[i]),
+            _number(r.min_speed[i] * 3.6),
+            _number(r.time_to_clear[i]),
+            OUTCOMES[int(r.outcome[i])],
+            int(r.comfort_violation_steps[i]),
+            _number(r.max_accel_lon[i]),
+            _number(r.max_accel_lat[i]),
+            _number(r.max_lateral[i]),
+            _number(r.episode_return[i]),
+            _number(oracle_time[i]),
+        ]
 
 
 def episodes_csv(
@@ -107,45 +179,33 @@ def episodes_csv(
     """One row per episode: the scenario, what happened, and the oracle's time to clear."""
     buffer = io.StringIO()
     writer = csv.writer(buffer)
-    writer.writerow(
-        [
-            "episode",
-            "ego_start_distance_m",
-            "ego_speed_kmh",
-            "north_speed_kmh",
-            "arrival_offset_s",
-            "collision",
-            "safety_steps",
-            "min_speed_kmh",
-            "time_to_clear_s",
-            "outcome",
-            "comfort_violation_steps",
-            "max_accel_lon",
-            "max_accel_lat",
-            "max_lateral_m",
-            "return",
-            "oracle_time_to_clear_s",
-        ]
-    )
-    for i, name in enumerate(names):
-        writer.writerow(
-            [
-                name,
-                f"{scenarios.ego_start_distance[i]:.3f}",
-                f"{scenarios.ego_speed[i] * 3.6:.3f}",
-                f"{scenarios.north_speed[i] * 3.6:.3f}",
-                f"{scenarios.arrival_offset[i]:.3f}",
-                int(result.collision[i]),
-                int(result.safety_steps[i]),
-                f"{result.min_speed[i] * 3.6:.3f}",
-                f"{result.time_to_clear[i]:.3f}",
-                OUTCOMES[int(result.outcome[i])],
-                int(result.comfort_violation_steps[i]),
-                f"{result.max_accel_lon[i]:.3f}",
-                f"{result.max_accel_lat[i]:.3f}",
-                f"{result.max_lateral[i]:.3f}",
-                f"{result.episode_return[i]:.3f}",
-                f"{oracle_time[i]:.3f}",
-            ]
-        )
+    writer.writerow(CSV_COLUMNS)
+    writer.writerows(episode_rows(names, scenarios, result, oracle_time))
     return buffer.getvalue()
+
+
+class EpisodeCSV:
+    """``episodes.csv`` written chunk by chunk into a temporary file beside it, renamed into
+    place on :meth:`close` (a reader never sees half a file; an interrupted evaluation leaves
+    none)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._tmp = path.with_name(f".{path.name}.tmp")
+        self._handle = open(self._tmp, "w", newline="", encoding="utf-8")  # noqa: SIM115
+        self._writer = csv.writer(self._handle)
+        self._writer.writerow(CSV_COLUMNS)
+
+    def write(
+        self, names: list[str], scenarios: Scenarios, result: RolloutResult, oracle: FloatArray
+    ) -> None:
+        self._writer.writerows(episode_rows(names, scenarios, result, oracle))
+
+    def close(self) -> None:
+        self._handle.close()
+        os.replace(self._tmp, self.path)
+
+    def abandon(self) -> None:
+        """Drop the partial file (on an error or an interrupt)."""
+        self._handle.close()
+        self._tmp.unlink(missing_ok=True)

@@ -1,12 +1,14 @@
-"""Summary figures of a batch of episodes (the fields of ``safeswitch evaluate --json``).
+"""Summary figures of a batch of episodes (the fields of ``safeswitch evaluate --json``),
+accumulated chunk by chunk so that any number of episodes fits in constant memory.
 
 Fields:
     episodes: Episodes evaluated.
     collisions: Episodes that ended in a collision.
     safety_activation_episodes: Episodes in which a safety action was executed at least once.
     safety_activation_steps: Ticks, over all episodes, on which a safety action was executed.
-    mean_time_to_clear_s: Mean time until the ego left its conflict zone [s] (episodes where
-        it did).
+    cleared_episodes: Episodes in which the ego left its conflict zone.
+    mean_time_to_clear_s: Mean time until the ego left its conflict zone [s], over the cleared
+        episodes (``null`` if none cleared).
     comfort_violation_steps: Ticks beyond a comfort limit (|a_lon| > 5 or |a_lat| > 3 m/s²).
     comfort_violation_fraction: The same as a share of all ticks.
     stops: Episodes in which the ego came to a full stop (speed below 0.1 m/s).
@@ -17,40 +19,157 @@ Fields:
     max_accel_lon / max_accel_lat: Largest |a_lon| and |a_lat| of any episode [m/s²].
     max_lateral_deviation_m: Largest distance from the route's centre line [m].
     ticks: Ticks simulated (all episodes).
+    mean_oracle_time_to_clear_s: The oracle's mean time to clear over the same scenarios [s]
+        (with an oracle).
+    mean_efficiency: Mean over scenarios of the oracle's time to clear divided by the
+        controller's; an episode that never clears counts with the whole horizon (with an
+        oracle).
+
+Sums are taken per chunk with numpy and combined exactly (``math.fsum``), so a summary
+depends only on the episodes and the chunk size — not on how many processes ran the chunks.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
+from safeswitch.evaluation.oracle import efficiency
 from safeswitch.evaluation.rollout import RolloutResult
+from safeswitch.sim.geometry import FloatArray
 
 #: Speed below which the ego counts as stopped [m/s].
 STOP_SPEED = 0.1
 
 
-def summarize(result: RolloutResult) -> dict[str, Any]:
-    """The documented summary of a :class:`RolloutResult`."""
-    cleared = result.time_to_clear[np.isfinite(result.time_to_clear)]
-    ticks = int(result.ticks.sum())
-    return {
-        "episodes": int(result.collision.size),
-        "collisions": int(result.collision.sum()),
-        "safety_activation_episodes": int((result.safety_steps > 0).sum()),
-        "safety_activation_steps": int(result.safety_steps.sum()),
-        "mean_time_to_clear_s": float(cleared.mean()) if cleared.size else float("nan"),
-        "comfort_violation_steps": int(result.comfort_violation_steps.sum()),
-        "comfort_violation_fraction": result.comfort_violation_steps.sum() / max(ticks, 1),
-        "stops": int((result.min_speed < STOP_SPEED).sum()),
-        "cut_episodes": int((result.outcome == 1).sum()),
-        "yield_episodes": int((result.outcome == 2).sum()),
-        "mean_return": float(result.episode_return.mean()),
-        "mean_terms": {name: float(v.mean()) for name, v in result.terms.items()},
-        "mean_min_speed_kmh": float(result.min_speed.mean() * 3.6),
-        "max_accel_lon": float(result.max_accel_lon.max()),
-        "max_accel_lat": float(result.max_accel_lat.max()),
-        "max_lateral_deviation_m": float(result.max_lateral.max()),
-        "ticks": ticks,
-    }
+class SummaryAccumulator:
+    """The documented summary of episodes added chunk by chunk (:meth:`add`)."""
+
+    _COUNTS = (
+        "episodes",
+        "collisions",
+        "safety_activation_episodes",
+        "safety_activation_steps",
+        "cleared_episodes",
+        "comfort_violation_steps",
+        "stops",
+        "cut_episodes",
+        "yield_episodes",
+        "ticks",
+        "oracle_cleared",
+        "efficiency_count",
+    )
+    _SUMS = ("time_to_clear", "return", "min_speed", "oracle_time", "efficiency")
+    _MAXIMA = ("max_accel_lon", "max_accel_lat", "max_lateral_deviation_m")
+
+    def __init__(self) -> None:
+        self.counts = dict.fromkeys(self._COUNTS, 0)
+        self.sums: dict[str, list[float]] = {name: [] for name in self._SUMS}
+        self.term_sums: dict[str, list[float]] = {}
+        self.maxima = dict.fromkeys(self._MAXIMA, -math.inf)
+        self.with_oracle = False
+
+    def add(
+        self,
+        result: RolloutResult,
+        oracle_time: FloatArray | None = None,
+        horizon_s: float | None = None,
+    ) -> None:
+        """Add a chunk of episodes (and the oracle's times to clear of the same scenarios)."""
+        r, c, s = result, self.counts, self.sums
+        cleared = np.isfinite(r.time_to_clear)
+        c["episodes"] += int(r.collision.size)
+        c["collisions"] += int(r.collision.sum())
+        c["safety_activation_episodes"] += int((r.safety_steps > 0).sum())
+        c["safety_activation_steps"] += int(r.safety_steps.sum())
+        c["cleared_episodes"] += int(cleared.sum())
+        c["comfort_violation_steps"] += int(r.comfort_violation_steps.sum())
+        c["stops"] += int((r.min_speed < STOP_SPEED).sum())
+        c["cut_episodes"] += int((r.outcome == 1).sum())
+        c["yield_episodes"] += int((r.outcome == 2).sum())
+        c["ticks"] += int(r.ticks.sum())
+        s["time_to_clear"].append(float(r.time_to_clear[cleared].sum()))
+        s["return"].append(float(r.episode_return.sum()))
+        s["min_speed"].append(float(r.min_speed.sum()))
+        for name, values in r.terms.items():
+            self.term_sums.setdefault(name, []).append(float(values.sum()))
+        if r.collision.size:
+            for key, values in (
+                ("max_accel_lon", r.max_accel_lon),
+                ("max_accel_lat", r.max_accel_lat),
+                ("max_lateral_deviation_m", r.max_lateral),
+            ):
+                self.maxima[key] = max(self.maxima[key], float(values.max()))
+        if oracle_time is not None:
+            if horizon_s is None:
+                raise ValueError("an oracle's times need the horizon (horizon_s)")
+            self.with_oracle = True
+            known = np.isfinite(oracle_time)
+            c["oracle_cleared"] += int(known.sum())
+            s["oracle_time"].append(float(oracle_time[known].sum()))
+            ratio = efficiency(oracle_time, r.time_to_clear, horizon_s)
+            finite = np.isfinite(ratio)
+            c["efficiency_count"] += int(finite.sum())
+            s["efficiency"].append(float(ratio[finite].sum()))
+
+    def merge(self, other: SummaryAccumulator) -> None:
+        """Add another accumulator's episodes (chunks in order: ``self`` first)."""
+        for key in self._COUNTS:
+            self.counts[key] += other.counts[key]
+        for key in self._SUMS:
+            self.sums[key] += other.sums[key]
+        for name, parts in other.term_sums.items():
+            self.term_sums.setdefault(name, []).extend(parts)
+        for key in self._MAXIMA:
+            self.maxima[key] = max(self.maxima[key], other.maxima[key])
+        self.with_oracle |= other.with_oracle
+
+    def summary(self) -> dict[str, Any]:
+        """The summary (see the module docstring); undefined means are ``None``."""
+        c, n = self.counts, self.counts["episodes"]
+
+        def mean(key: str, count: int) -> float | None:
+            return math.fsum(self.sums[key]) / count if count else None
+
+        def largest(key: str) -> float | None:
+            return self.maxima[key] if n else None
+
+        out: dict[str, Any] = {
+            "episodes": n,
+            "collisions": c["collisions"],
+            "safety_activation_episodes": c["safety_activation_episodes"],
+            "safety_activation_steps": c["safety_activation_steps"],
+            "cleared_episodes": c["cleared_episodes"],
+            "mean_time_to_clear_s": mean("time_to_clear", c["cleared_episodes"]),
+            "comfort_violation_steps": c["comfort_violation_steps"],
+            "comfort_violation_fraction": c["comfort_violation_steps"] / max(c["ticks"], 1),
+            "stops": c["stops"],
+            "cut_episodes": c["cut_episodes"],
+            "yield_episodes": c["yield_episodes"],
+            "mean_return": mean("return", n),
+            "mean_terms": {
+                name: math.fsum(parts) / n if n else None for name, parts in self.term_sums.items()
+            },
+            "mean_min_speed_kmh": None if not n else 3.6 * math.fsum(self.sums["min_speed"]) / n,
+            "max_accel_lon": largest("max_accel_lon"),
+            "max_accel_lat": largest("max_accel_lat"),
+            "max_lateral_deviation_m": largest("max_lateral_deviation_m"),
+            "ticks": c["ticks"],
+        }
+        if self.with_oracle:
+            out["mean_oracle_time_to_clear_s"] = mean("oracle_time", c["oracle_cleared"])
+            out["mean_efficiency"] = mean("efficiency", c["efficiency_count"])
+        return out
+
+
+def summarize(
+    result: RolloutResult,
+    oracle_time: FloatArray | None = None,
+    horizon_s: float | None = None,
+) -> dict[str, Any]:
+    """The documented summary of one :class:`RolloutResult` (one chunk)."""
+    accumulator = SummaryAccumulator()
+    accumulator.add(result, oracle_time, horizon_s)
+    return accumulator.summary()

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import scenario_info, step_info
 from safeswitch.leftturn.spaces import action_space, observation_space
-from safeswitch.leftturn.task import StepRecord, TaskState, build_task
+from safeswitch.leftturn.task import StepRecord, TaskState, build_task, learned_actions
 
 
 class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -32,8 +32,12 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         config: Full configuration (a :class:`LeftTurnConfig` or a dict). The three arguments
             above override its fields when given; left out, the configuration's values hold
             (by default ``"paper"``, ``True`` and ``None``).
-        render_mode: ``None`` or ``"rgb_array"``.
+        render_mode: ``None`` or ``"rgb_array"`` (``"human"`` is refused: no window is
+            opened; see ``safeswitch render``).
         env_index: Which stream of scenarios this environment draws from.
+        learned_scope: ``"window"`` (Algorithm 1: the learned controller drives while both cars
+            are at the intersection), ``"episode"`` (throughout) or ``"never"``; left out, the
+            configuration's (``"window"`` by default).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012 (gym API)
@@ -46,10 +50,12 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         config: LeftTurnConfig | dict[str, Any] | None = None,
         render_mode: str | None = None,
         env_index: int = 0,
+        learned_scope: str = FROM_CONFIG,
     ) -> None:
         self.task = build_task(
-            render_mode, config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
-        )
+            render_mode, config, learned_scope, switching=switching, adas_penalty=adas_penalty,
+            scenario=scenario,
+        )  # fmt: skip
         self.config = self.task.config
         self.render_mode = render_mode
         self.observation_space = observation_space()  # type: ignore[assignment]
@@ -89,7 +95,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        self._state, record = self.task.step(self.state, np.asarray(action, np.float64).reshape(1))
+        self._state, record = self.task.step(self.state, learned_actions(action, 1))
         self._record = record
         return (
             record.observation[0],

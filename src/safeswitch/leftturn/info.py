@@ -38,7 +38,8 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
     Keys: ``collision``, ``safety_active`` (the safety action was executed), ``reward_terms``
     (the five terms of Eq. 5), ``reason`` (why the switching logic chose as it did),
     ``controller`` (``learned``, ``rule`` or ``safety``: who proposed the executed action),
-    ``learned_throttle`` (what the learned action asked for), ``safety_brake`` (what ``PID_b``
+    ``learned_throttle`` (what the learned action asked for), ``action_clipped`` (it was outside
+    [-1, 1] and was clipped to it), ``safety_brake`` (what ``PID_b``
     computed), ``throttle`` and ``brake`` (executed), ``both_at_intersection``, ``outcome``
     (``cut``, ``yield`` or ``undecided``), ``separation`` [m], ``ego_speed``, ``north_speed``
     [m/s], ``accel_lon``, ``accel_lat`` [m/s²], ``lateral_deviation`` [m].
@@ -51,6 +52,7 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
         "reason": reasons[int(r.reason[i])],
         "controller": CONTROLLERS[int(r.controller[i])],
         "learned_throttle": float(r.learned_throttle[i]),
+        "action_clipped": bool(r.action_clipped[i]),
         "safety_brake": float(r.safety_brake[i]),
         "throttle": float(r.throttle[i]),
         "brake": float(r.brake[i]),

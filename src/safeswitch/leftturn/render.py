@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
 from safeswitch.leftturn.task import CONTROLLERS, LeftTurnTask, StepRecord, TaskState
 
@@ -21,6 +21,33 @@ COLOURS = {
     "crash": (220, 20, 20),
     "text": (20, 20, 20),
 }
+
+
+def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    """Pillow's bundled font at ``size`` px (its bitmap font where FreeType is missing)."""
+    try:
+        return ImageFont.load_default(size=size)
+    except (OSError, TypeError):  # pragma: no cover - Pillow without FreeType
+        return ImageFont.load_default()
+
+
+def _legend(draw: ImageDraw.ImageDraw, font: ImageFont.FreeTypeFont | ImageFont.ImageFont) -> None:
+    """What the colours mean, in the bottom-left corner."""
+    items = (
+        ("ego (automated)", "ego", "box"),
+        ("north car (never yields)", "north", "box"),
+        ("ego route", "route", "line"),
+        ("ego conflict zone", "zone", "line"),
+    )
+    top = SIZE_PX - 8 - 18 * len(items)
+    draw.rectangle((4, top - 4, 206, SIZE_PX - 4), fill=(255, 255, 255))
+    for j, (label, colour, kind) in enumerate(items):
+        y = top + 18 * j
+        if kind == "box":
+            draw.rectangle((10, y + 3, 28, y + 13), fill=COLOURS[colour], outline=COLOURS["text"])
+        else:
+            draw.line((10, y + 8, 28, y + 8), fill=COLOURS[colour], width=4)
+        draw.text((36, y), label, fill=COLOURS["text"], font=font)
 
 
 def _px(xy: NDArray[np.float64]) -> list[tuple[float, float]]:
@@ -40,7 +67,8 @@ def render_scene(
     task: LeftTurnTask, state: TaskState, index: int, record: StepRecord | None = None
 ) -> NDArray[np.uint8]:
     """A ``[480, 480, 3]`` picture of episode ``index``: roads, the ego's route and conflict
-    zone, both cars (red when they collide) and a status line."""
+    zone, both cars (outlined red when they collide), a status line (time, speeds, who drives)
+    and a legend."""
     g = task.config.geometry
     image = Image.new("RGB", (SIZE_PX, SIZE_PX), COLOURS["grass"])
     draw = ImageDraw.Draw(image)
@@ -85,14 +113,23 @@ def render_scene(
             outline=COLOURS["crash"] if crashed else COLOURS["text"],
         )
 
+    font = _font(15)
+    t = state.tick[index] * task.config.episode.dt
     status = (
-        f"t={state.tick[index] * task.config.episode.dt:5.2f} s  "
-        f"ego {v.speed[index, 0] * 3.6:4.1f} km/h  north {v.speed[index, 1] * 3.6:4.1f} km/h"
+        f"t = {t:5.2f} s   ego {v.speed[index, 0] * 3.6:4.1f} km/h   "
+        f"north {v.speed[index, 1] * 3.6:4.1f} km/h"
     )
+    draw.rectangle((0, 0, SIZE_PX, 22), fill=(255, 255, 255))
+    draw.text((6, 3), status, fill=COLOURS["text"], font=font)
     if record is not None:
-        status += f"  [{CONTROLLERS[int(record.controller[index])]}]"
-        if crashed:
-            status += "  COLLISION"
-    draw.rectangle((0, 0, SIZE_PX, 16), fill=(255, 255, 255))
-    draw.text((4, 2), status, fill=COLOURS["text"])
+        who = CONTROLLERS[int(record.controller[index])]
+        line = f"driving: {who}" + ("   COLLISION" if crashed else "")
+        draw.rectangle((0, 22, SIZE_PX, 42), fill=(255, 255, 255))
+        draw.text(
+            (6, 24),
+            line,
+            fill=COLOURS["crash"] if crashed or who == "safety" else COLOURS["text"],
+            font=font,
+        )
+    _legend(draw, _font(13))
     return np.asarray(image, dtype=np.uint8)

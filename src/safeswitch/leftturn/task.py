@@ -32,10 +32,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import columns, jit, take_rows
+from safeswitch.core.config import to_dict
 from safeswitch.core.pid import PIDKernel, PIDState, pid_tick
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
-from safeswitch.leftturn.config import LeftTurnConfig, resolve_config
+from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig, resolve_config
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
@@ -135,7 +136,10 @@ class StepRecord:
         reason: Reason code of the switching decision, into :attr:`LeftTurnTask.reasons`.
         controller: Who proposed the executed action, a code of :data:`CONTROLLERS`.
         both_at_intersection: Algorithm 1's While condition held at the start of the tick.
-        learned_throttle: Throttle the learned action asked for (NaN if it was NaN).
+        learned_throttle: Throttle the learned action asked for (NaN if it was NaN; outside
+            [0, 1] if the action was outside [-1, 1]).
+        action_clipped: The learned action was outside [-1, 1] and was clipped (where the
+            learned controller was in charge).
         safety_brake: Brake the Safety controller ``PID_b`` computed.
         throttle: Executed throttle command.
         brake: Executed brake command.
@@ -160,6 +164,7 @@ class StepRecord:
     controller: NDArray[np.int8]
     both_at_intersection: BoolArray
     learned_throttle: FloatArray
+    action_clipped: BoolArray
     safety_brake: FloatArray
     throttle: FloatArray
     brake: FloatArray
@@ -419,6 +424,7 @@ class LeftTurnTask:
             controller=controller,
             both_at_intersection=both,
             learned_throttle=learned_throttle,
+            action_clipped=sup.clipped,
             safety_brake=safety_brake,
             throttle=throttle,
             brake=brake,
@@ -434,14 +440,48 @@ class LeftTurnTask:
         return new_state, record
 
 
+def learned_actions(action: Any, batch: int) -> FloatArray:
+    """The learned actions of a step as ``[batch]`` float64 (NaN/inf and out-of-range values
+    pass: the supervision step handles them).
+
+    Raises:
+        ValueError: ``None``, or not ``batch`` numbers (the message names the value).
+    """
+    if action is None:
+        raise ValueError("the action is None; pass an array of shape (1,) per environment")
+    try:
+        values = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"the action {action!r} is not numeric") from exc
+    if values.size != batch:
+        raise ValueError(
+            f"{values.size} action value(s) of shape {values.shape} for {batch} environment(s); "
+            "expected one throttle action in [-1, 1] each"
+        )
+    return values.reshape(batch)
+
+
 def build_task(
-    render_mode: str | None, config: LeftTurnConfig | dict[str, Any] | None, **overrides: Any
+    render_mode: str | None,
+    config: LeftTurnConfig | dict[str, Any] | None,
+    learned_scope: str = FROM_CONFIG,
+    **overrides: Any,
 ) -> LeftTurnTask:
     """The task behind an environment: ``render_mode`` checked, ``config`` resolved with the
-    constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`)."""
-    if render_mode not in (None, "rgb_array"):
+    constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`;
+    ``learned_scope`` sets ``episode.learned_scope``)."""
+    if render_mode not in (None, "rgb_array", "human"):
         raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-    return LeftTurnTask(resolve_config(config, **overrides))
+    if render_mode == "human":
+        raise ValueError(
+            "render_mode='human' needs a window, which safeswitch does not open (it draws with "
+            "Pillow, headless); use render_mode='rgb_array', or `safeswitch render --out x.gif`"
+        )
+    resolved = resolve_config(config, **overrides)
+    if learned_scope is not FROM_CONFIG:
+        episode = {**to_dict(resolved.episode), "learned_scope": learned_scope}
+        resolved = resolve_config(resolved, episode=episode)
+    return LeftTurnTask(resolved)
 
 
 class ControllerGains(NamedTuple):

@@ -35,7 +35,7 @@ from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import BatchInfos, scenario_info
 from safeswitch.leftturn.rewards import REWARD_TERMS
 from safeswitch.leftturn.spaces import action_space, observation_space
-from safeswitch.leftturn.task import StepRecord, TaskState, build_task
+from safeswitch.leftturn.task import StepRecord, TaskState, build_task, learned_actions
 
 #: Keys of the ``episode`` summary beyond SB3's ``r``, ``l`` and ``t``.
 EPISODE_KEYS: tuple[str, ...] = (
@@ -137,6 +137,7 @@ class LeftTurnVecEnv(VecEnv):
             (by default ``"paper"``, ``True`` and ``None``).
         seed: Base seed; ``None`` draws one from the operating system.
         render_mode: ``None`` or ``"rgb_array"``.
+        learned_scope: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv`.
     """
 
     def __init__(
@@ -148,12 +149,14 @@ class LeftTurnVecEnv(VecEnv):
         config: LeftTurnConfig | dict[str, Any] | None = None,
         seed: int | None = None,
         render_mode: str | None = None,
+        learned_scope: str = FROM_CONFIG,
     ) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.task = build_task(
-            render_mode, config, switching=switching, adas_penalty=adas_penalty, scenario=scenario
-        )
+            render_mode, config, learned_scope, switching=switching, adas_penalty=adas_penalty,
+            scenario=scenario,
+        )  # fmt: skip
         self.config = self.task.config
         self.render_mode = render_mode
         super().__init__(int(num_envs), observation_space(), action_space())
@@ -212,7 +215,7 @@ class LeftTurnVecEnv(VecEnv):
             )
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.asarray(actions, dtype=np.float64).reshape(self.num_envs)
+        self._actions = learned_actions(actions, self.num_envs)
 
     def step_wait(self) -> VecEnvStepReturn:
         if self._actions is None:

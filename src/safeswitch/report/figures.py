@@ -28,6 +28,9 @@ TRACED = (
     "both_at_intersection",
     "ego_cleared",
     "controller",
+    "collision",
+    "terminated",
+    "truncated",
 )
 
 
@@ -46,7 +49,7 @@ class Trace:
     task: LeftTurnTask
     animate: tuple[int, ...] = ()
     frame_every: int = 6
-    frame_px: int = 360
+    frame_px: int = 480
     signals: dict[str, list[NDArray[np.float64]]] = field(default_factory=dict)
     frames: dict[int, list[Image.Image]] = field(default_factory=dict)
 
@@ -60,8 +63,18 @@ class Trace:
                 self.frames.setdefault(i, []).append(frame)
 
     def array(self, name: str) -> NDArray[np.float64]:
-        """Signal ``name`` as ``[B, T]``."""
+        """Signal ``name`` as ``[B, T]`` (every tick of the rollout, also after an episode
+        ended; see :meth:`episode`)."""
         return np.stack(self.signals[name], axis=1)
+
+    def episode(self, name: str, index: int) -> NDArray[np.float64]:
+        """Signal ``name`` of episode ``index`` up to and including the tick it ended on (a
+        rollout keeps stepping ended episodes; those ticks are not the episode's)."""
+        values = self.array(name)[index]
+        ended = np.flatnonzero(
+            (self.array("terminated")[index] > 0) | (self.array("truncated")[index] > 0)
+        )
+        return values[: ended[0] + 1] if ended.size else values
 
     def gif(self, episode: int) -> bytes:
         """The episode's animation as a GIF (played at twice the real speed)."""
@@ -94,10 +107,13 @@ def episode_figure(
     title: str,
     path: Path,
     oracle_speed: NDArray[np.float64] | None = None,
-) -> None:
+) -> str:
     """The paper's Figs. 8–11 for one episode: control signals, speeds, longitudinal and lateral
     acceleration (comfort limits dashed), the intersection window shaded, ticks on which the
-    Safety controller acted shaded red. Saved as PNG."""
+    Safety controller acted shaded red, the moment the ego leaves its conflict zone (dotted) and
+    a collision (a red line and marker). Legends sit beside the panels, not on the data. Saved
+    as PNG; returns the episode's ending as the figure states it ("COLLISION at 5.30 s",
+    "cleared at 7.62 s" or "never cleared the zone")."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -107,23 +123,37 @@ def episode_figure(
     dt = config.episode.dt
 
     def sig(name: str) -> NDArray[np.float64]:
-        return trace.array(name)[episode]
+        return trace.episode(name, episode)
 
     time: NDArray[np.float64] = dt * np.arange(1, sig("ego_speed").size + 1, dtype=np.float64)
     window = sig("both_at_intersection") > 0
     safety = sig("safety_active") > 0
-    fig, axes = plt.subplots(4, 1, figsize=(8, 9), sharex=True, constrained_layout=True)
+    crash = np.flatnonzero(sig("collision") > 0)
+    crash_time = float(time[crash[0]]) if crash.size else None
+    cleared = np.flatnonzero(sig("ego_cleared") > 0)
+    clear_time = float(time[cleared[0]]) if cleared.size else None
+    fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True, constrained_layout=True)
     for j, ax in enumerate(axes):
         first = j == 0
         _spans(ax, time, window, color="0.88", label="both at the intersection" if first else None)
         _spans(ax, time, safety, color="#f4a6a6", label="safety action executed" if first else None)
-        cleared = np.flatnonzero(sig("ego_cleared") > 0)
-        if cleared.size:
-            ax.axvline(time[cleared[0]], color="tab:blue", lw=0.8, ls=":")
-    if (sig("controller") == 0).any():  # the learned controller proposed the pedals
-        axes[0].plot(time, sig("learned_throttle"), color="tab:green", label="learned throttle")
-    axes[0].plot(time, sig("throttle"), color="k", lw=0.8, label="executed throttle")
-    axes[0].plot(time, sig("brake"), color="tab:red", lw=0.8, label="executed brake (PID_b)")
+        if clear_time is not None:
+            ax.axvline(
+                clear_time, color="tab:blue", lw=1.0, ls=":",
+                label="ego leaves the conflict zone" if first else None,
+            )  # fmt: skip
+        if crash_time is not None:
+            ax.axvline(crash_time, color="red", lw=2.0, label="COLLISION" if first else None)
+    learned = sig("controller") == 0
+    if learned.any():  # the learned controller proposed the pedals on these ticks
+        axes[0].plot(
+            time, np.where(learned, sig("learned_throttle"), np.nan), color="tab:green",
+            lw=2.5, alpha=0.6, label="learned throttle (proposed)",
+        )  # fmt: skip
+    axes[0].plot(time, sig("throttle"), color="k", lw=1.0, label="executed throttle")
+    axes[0].plot(
+        time, sig("brake"), color="tab:red", lw=1.0, ls="--", label="executed brake (PID_b)"
+    )
     axes[0].set_ylabel("pedal [0, 1]")
     axes[0].set_ylim(-0.05, 1.05)
     axes[1].plot(time, 3.6 * sig("ego_speed"), color="tab:blue", label="ego")
@@ -132,52 +162,123 @@ def episode_figure(
         axes[1].plot(
             time, 3.6 * oracle_speed[1 : time.size + 1], color="0.4", ls="--", label="oracle ego"
         )
-    axes[1].axhline(config.controllers.speed_limit_kmh, color="k", ls="--", lw=0.8)
+    limit = config.controllers.speed_limit_kmh
+    tolerated = config.rewards.speed_points_kmh[3]
+    axes[1].axhline(limit, color="k", ls="--", lw=0.8, label=f"speed limit {limit:g} km/h")
+    axes[1].axhline(
+        tolerated, color="0.5", ls=":", lw=0.8, label=f"tolerated speeding {tolerated:g} km/h"
+    )
     axes[1].set_ylabel("speed [km/h]")
     limits = config.rewards
-    for ax, name, limit, label in (
+    for ax, name, bound, label in (
         (axes[2], "accel_lon", limits.comfort_accel_lon, "a_lon [m/s²]"),
         (axes[3], "accel_lat", limits.comfort_accel_lat, "a_lat [m/s²]"),
     ):
-        ax.plot(time, sig(name), color="tab:blue")
+        ax.plot(time, sig(name), color="tab:blue", label=name)
         for sign in (-1, 1):
-            ax.axhline(sign * limit, color="k", ls="--", lw=0.8)
+            ax.axhline(
+                sign * bound, color="k", ls="--", lw=0.8,
+                label=f"comfort limit ±{bound:g} m/s²" if sign > 0 else None,
+            )  # fmt: skip
         ax.set_ylabel(label)
-    axes[3].set_xlabel("time [s] (dotted: the ego leaves the conflict zone)")
-    axes[0].legend(loc="upper right", fontsize=7, ncol=2)
-    axes[1].legend(loc="lower left", fontsize=7, ncol=3)
-    fig.suptitle(title)
+    if crash_time is not None:
+        axes[1].plot(
+            [crash_time], [3.6 * sig("ego_speed")[crash[0]]], marker="X", color="red", ms=12,
+            ls="none", label="collision",
+        )  # fmt: skip
+    axes[3].set_xlabel("time [s]")
+    for ax in axes:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    status = (
+        f"COLLISION at {crash_time:.2f} s"
+        if crash_time is not None
+        else f"cleared at {clear_time:.2f} s"
+        if clear_time is not None
+        else "never cleared the zone"
+    )
+    fig.suptitle(f"{title}\n{status}", color="red" if crash_time is not None else "k")
     fig.savefig(path, dpi=90)
     plt.close(fig)
+    return status
+
+
+@dataclass
+class ComparisonRow:
+    """One controller's episodes on the comparison's random scenarios.
+
+    Attributes:
+        label: What it is.
+        time_to_clear: Per scenario [s] (NaN: never cleared) ``[N]``.
+        collision: Per scenario ``[N]``.
+        outcome: Per scenario: 1 cut, 2 yield, 0 undecided ``[N]``.
+        efficiency: Per scenario (oracle time / time) ``[N]``.
+    """
+
+    label: str
+    time_to_clear: NDArray[np.float64]
+    collision: NDArray[np.bool_]
+    outcome: NDArray[np.int8]
+    efficiency: NDArray[np.float64]
 
 
 def comparison_figure(
-    rows: list[tuple[str, NDArray[np.float64], NDArray[np.float64]]],
+    rows: list[ComparisonRow],
     oracle_time: NDArray[np.float64],
     offsets: NDArray[np.float64],
+    horizon_s: float,
     path: Path,
 ) -> None:
-    """Time to clear against the north car's arrival offset for each controller, the oracle as
-    the lower envelope. ``rows``: (label, time to clear ``[N]``, efficiency ``[N]``)."""
+    """Small multiples, one panel per controller: its time to clear against the north car's
+    arrival offset (cuts blue, yields orange), the oracle's in grey on every panel, episodes
+    that never cleared as triangles at the top, collisions as red crosses; each title gives
+    the mean efficiency and the collisions. Saved as PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-    for label, time, _ in rows:
-        left.scatter(offsets, time, s=4, alpha=0.5, label=label)
-    left.scatter(offsets, oracle_time, s=3, color="k", label="oracle (the limit)")
-    left.set_xlabel("north arrival − ego arrival at cruise [s]")
-    left.set_ylabel("time to clear the conflict zone [s]\n(missing: never within 12 s)")
-    left.legend(fontsize=7, markerscale=3)
-    means = [float(np.nanmean(eff)) for _, _, eff in rows]
-    right.barh([label for label, _, _ in rows], means, color="tab:blue")
-    right.axvline(1.0, color="k", lw=0.8)
-    right.set_xlim(0, max(1.05, max(means, default=1.0) + 0.1))
-    right.set_xlabel("mean oracle time / controller time")
-    for y, value in enumerate(means):
-        right.text(value + 0.01, y, f"{value:.2f}", va="center", fontsize=8)
+    columns = 4
+    lines = -(-len(rows) // columns)
+    fig, axes = plt.subplots(
+        lines, columns, figsize=(15, 3.6 * lines), sharex=True, sharey=True,
+        constrained_layout=True, squeeze=False,
+    )  # fmt: skip
+    top = horizon_s + 0.4
+    for ax, row in zip(axes.flat, rows, strict=False):
+        ax.scatter(offsets, oracle_time, s=3, color="0.75", label="oracle (the limit)")
+        never = ~np.isfinite(row.time_to_clear)
+        shown = np.where(never, top, row.time_to_clear)
+        for code, colour, name in ((1, "tab:blue", "crossed first (cut)"),
+                                   (2, "tab:orange", "crossed after (yield)"),
+                                   (0, "tab:purple", "undecided")):  # fmt: skip
+            pick = (row.outcome == code) & ~never & ~row.collision
+            if pick.any():
+                ax.scatter(offsets[pick], shown[pick], s=5, color=colour, label=name)
+        pick = never & ~row.collision
+        if pick.any():
+            ax.scatter(
+                offsets[pick], shown[pick], s=14, marker="^", color="tab:purple",
+                label="never cleared",
+            )  # fmt: skip
+        if row.collision.any():
+            ax.scatter(
+                offsets[row.collision], shown[row.collision], s=40, marker="x", color="red",
+                lw=1.5, label=f"collision ({int(row.collision.sum())})", zorder=5,
+            )  # fmt: skip
+        mean = float(np.nanmean(row.efficiency)) if np.isfinite(row.efficiency).any() else 0.0
+        ax.set_title(
+            f"{row.label}\nefficiency {mean:.2f}, {int(row.collision.sum())} collisions",
+            fontsize=9,
+            color="red" if row.collision.any() else "k",
+        )
+        ax.set_ylim(0, top + 0.6)
+        ax.legend(fontsize=6, loc="lower right", markerscale=2, framealpha=0.8)
+    for ax in axes.flat[len(rows) :]:
+        ax.axis("off")
+    for ax in axes[-1]:
+        ax.set_xlabel("north arrival − ego arrival at cruise [s]")
+    for ax in axes[:, 0]:
+        ax.set_ylabel(f"time to clear [s]\n(▲ at top: never within {horizon_s:g} s)")
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

@@ -24,6 +24,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.leftturn.rewards import REWARD_TERMS
+from safeswitch.progress import Progress
 
 PROGRESS_FIELDS = (
     "timesteps",
@@ -148,3 +149,19 @@ class TrainingMonitor(BaseCallback):
                 writer.writeheader()
             writer.writerow({k: row.get(k, "") for k in PROGRESS_FIELDS})
         self._reset_rollout()
+
+
+class ProgressLines(BaseCallback):
+    """Training progress as plain lines (steps done, rate, ETA) every ``every`` seconds, for
+    logs and terminals without a progress bar."""
+
+    def __init__(self, total: int, label: str, every: float = 15.0) -> None:
+        super().__init__()
+        self.progress = Progress(total, label, unit="steps", every=every)
+
+    def _on_step(self) -> bool:
+        self.progress.update(self.training_env.num_envs)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.progress.close()

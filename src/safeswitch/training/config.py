@@ -1,6 +1,7 @@
 """The training configuration: PPO with the paper's Table II as defaults.
 
-Every field is documented; the docstrings double as the reference for ``configs/*.yaml``. A
+Every field is documented; the docstrings double as the reference for the packaged
+``safeswitch/configs/*.yaml`` (``--config NAME``). A
 configuration is loaded from YAML with unknown keys rejected by name, and the resolved
 configuration is saved with every run.
 """
@@ -10,11 +11,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
+import gymnasium as gym
 import yaml
 
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
+from safeswitch.core.registry import logic_names
 from safeswitch.evaluation.planner import PlannerConfig
 from safeswitch.leftturn.config import LeftTurnConfig
 
@@ -204,13 +207,143 @@ class TrainConfig:
         return self.ppo.n_steps * self.n_envs // self.ppo.n_minibatches
 
 
+#: The configurations that ship with the package, by name (``--config paper``).
+PACKAGED_CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+
+
+def packaged_config_names() -> tuple[str, ...]:
+    """Names of the packaged configurations (``paper``, ``experimental/...``)."""
+    return tuple(
+        sorted(p.relative_to(PACKAGED_CONFIGS).with_suffix("").as_posix()
+               for p in PACKAGED_CONFIGS.rglob("*.yaml"))
+    )  # fmt: skip
+
+
+def config_path(name_or_path: str | Path) -> Path:
+    """A configuration file: an existing path, or a packaged configuration by name.
+
+    Raises:
+        FileNotFoundError: Neither, naming the packaged configurations.
+    """
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    packaged = PACKAGED_CONFIGS / f"{Path(str(name_or_path)).with_suffix('')}.yaml"
+    if packaged.is_file():
+        return packaged
+    raise FileNotFoundError(
+        f"no configuration {str(name_or_path)!r}: not a file, and not a packaged configuration "
+        f"({', '.join(packaged_config_names())})"
+    )
+
+
+def _read_yaml(path: str | Path) -> dict[str, Any]:
+    """The YAML document of a configuration file; a malformed or empty file is a
+    :class:`ConfigError` naming the file (an empty file would silently mean "every default")."""
+    try:
+        with open(path, encoding="utf-8") as handle:
+            data = yaml.safe_load(handle)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path} is not valid YAML: {exc}") from exc
+    if data is None:
+        raise ConfigError(
+            f"{path} is empty; a configuration must set at least one key (to train with every "
+            "default, use --config paper or no --config)"
+        )
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path} must hold a mapping of keys, got {type(data).__name__}")
+    return data
+
+
 def load_config(path: str | Path) -> TrainConfig:
-    """A :class:`TrainConfig` from a YAML file (missing keys keep their defaults)."""
-    with open(path, encoding="utf-8") as handle:
-        data = yaml.safe_load(handle)
-    return from_dict(TrainConfig, data or {})
+    """A :class:`TrainConfig` from a YAML file or a packaged name (missing keys keep their
+    defaults)."""
+    path = config_path(path)
+    return from_dict(TrainConfig, _read_yaml(path), where="")
 
 
 def dump_config(config: TrainConfig) -> str:
     """The configuration as YAML (every value, defaults included)."""
     return yaml.safe_dump(to_dict(config), sort_keys=False)
+
+
+@dataclass(frozen=True)
+class EnvTrainConfig:
+    """A training run on a registered Gymnasium environment.
+
+    Attributes:
+        env_id: The Gymnasium id.
+        switching: A registered switching logic (``None``: the environment's default).
+        penalty: The reward added on a step the Safety controller acted (``None``: the
+            environment's default, or -25 — the paper's ``R_ADAS`` — for a wrapped one).
+        env_kwargs: Further keyword arguments of ``gymnasium.make``.
+        timesteps: Environment steps to train for, summed over environments.
+        n_envs: Environments (SB3 ``DummyVecEnv``).
+        seed: Seed of PPO, the networks and the environments.
+        torch_threads: CPU threads torch may use.
+        checkpoint_every: Save a resumable checkpoint every this many timesteps.
+        eval_episodes: Episodes of the final evaluation.
+        eval_seed: Seed of the final evaluation's episodes (never used in training).
+        ppo: PPO hyper-parameters (the paper's Table II by default).
+    """
+
+    env_id: str
+    switching: str | None = None
+    penalty: float | None = None
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    timesteps: int = 100_000
+    n_envs: int = 4
+    seed: int = 0
+    torch_threads: int = 1
+    checkpoint_every: int = 20_000
+    eval_episodes: int = 20
+    eval_seed: int = 1_000_003
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+
+    def __post_init__(self) -> None:
+        o = "train"
+        check(self.timesteps >= 1, o, "timesteps", self.timesteps, "must be >= 1")
+        check(self.n_envs >= 1, o, "n_envs", self.n_envs, "must be >= 1")
+        check(self.torch_threads >= 1, o, "torch_threads", self.torch_threads, "must be >= 1")
+        check(self.checkpoint_every >= 1, o, "checkpoint_every", self.checkpoint_every, ">= 1")
+        check(self.eval_episodes >= 0, o, "eval_episodes", self.eval_episodes, "must be >= 0")
+        if self.env_id not in gym.registry:
+            raise ConfigError(f"env_id={self.env_id!r} is not a registered Gymnasium id")
+        if self.switching is not None and self.switching not in logic_names():
+            raise ConfigError(
+                f"switching={self.switching!r} is not a registered switching logic "
+                f"(known: {', '.join(logic_names())})"
+            )
+        if self.penalty is not None:
+            check(math.isfinite(self.penalty), o, "penalty", self.penalty, "must be finite")
+        rollout = self.ppo.n_steps * self.n_envs
+        check(
+            rollout % self.ppo.n_minibatches == 0,
+            o,
+            "n_envs",
+            self.n_envs,
+            f"times ppo.n_steps ({self.ppo.n_steps}) must be divisible by ppo.n_minibatches",
+        )
+
+    @property
+    def batch_size(self) -> int:
+        return self.ppo.n_steps * self.n_envs // self.ppo.n_minibatches
+
+
+def load_env_config(path: str | Path) -> EnvTrainConfig:
+    """An :class:`EnvTrainConfig` from YAML."""
+    return from_dict(EnvTrainConfig, _read_yaml(config_path(path)))
+
+
+def dump_env_config(config: EnvTrainConfig) -> str:
+    return yaml.safe_dump(to_dict(config), sort_keys=False)
+
+
+def load_any_config(path: str | Path) -> TrainConfig | EnvTrainConfig:
+    """A run's configuration: an :class:`EnvTrainConfig` if it names an ``env_id``, else the
+    left turn's :class:`TrainConfig`."""
+    path = config_path(path)
+    data = _read_yaml(path)
+    if isinstance(data, dict) and "env_id" in data:
+        return from_dict(EnvTrainConfig, data)
+    return from_dict(TrainConfig, data)

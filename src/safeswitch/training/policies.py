@@ -22,7 +22,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.rollout import Policy
 from safeswitch.leftturn.task import TaskState
-from safeswitch.training.config import TrainConfig, load_config
+from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_any_config
 from safeswitch.training.ppo import SwitchPPO
 
 #: Where the shipped policies live, one folder each.
@@ -55,7 +55,7 @@ class TrainedPolicy:
 
     model: SwitchPPO
     normalizer: VecNormalize | None
-    config: TrainConfig
+    config: TrainConfig | EnvTrainConfig
     path: Path
 
     def normalise(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -67,6 +67,12 @@ class TrainedPolicy:
         """Actions ``[B]`` in [-1, 1] for observations ``[B, 6]``."""
         actions, _ = self.model.predict(self.normalise(obs), deterministic=deterministic)
         return np.asarray(actions, dtype=np.float64).reshape(obs.shape[0])
+
+    def act_one(self, obs: Any, deterministic: bool = True) -> NDArray[Any]:
+        """The action for one observation of any environment (its action space's shape)."""
+        batch = np.asarray(obs, dtype=np.float32)[None]
+        actions, _ = self.model.predict(self.normalise(batch), deterministic=deterministic)
+        return np.asarray(actions)[0]
 
     def as_policy(self, deterministic: bool = True) -> Policy:
         def policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> NDArray[np.float64]:
@@ -149,7 +155,7 @@ def load_policy(model: str | Path) -> TrainedPolicy:
         safeswitch.core.config.ConfigError: The run's ``config.yaml`` is invalid.
     """
     path = resolve_model_dir(model)
-    config = load_config(run_config_path(path))
+    config = load_any_config(run_config_path(path))
     try:
         ppo = SwitchPPO.load(path / "model.zip", device="cpu")
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError) as exc:

@@ -19,12 +19,14 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecNormalize
 
 from safeswitch.evaluation.metrics import summarize
@@ -32,8 +34,8 @@ from safeswitch.evaluation.rollout import rollout
 from safeswitch.io import write_atomic
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
-from safeswitch.training.callbacks import TrainingMonitor
-from safeswitch.training.config import TrainConfig, dump_config, load_config
+from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
+from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.warm_start import warm_start
@@ -47,7 +49,9 @@ def _activation(name: str) -> type[torch.nn.Module]:
     return torch.nn.Tanh if name == "tanh" else torch.nn.ReLU
 
 
-def build_model(config: TrainConfig, env: VecNormalize, tensorboard_log: Path | None) -> SwitchPPO:
+def build_model(
+    config: TrainConfig | EnvTrainConfig, env: VecNormalize, tensorboard_log: Path | None
+) -> SwitchPPO:
     """PPO with the configured hyper-parameters (Table II by default)."""
     ppo = config.ppo
     arch = list(ppo.net_arch)
@@ -91,9 +95,10 @@ def complete_checkpoints(run: Path) -> list[Path]:
     return sorted(done, key=lambda p: int(p.name.split("_")[1]))
 
 
-def _save_checkpoint(
-    run: Path, model: SwitchPPO, env: VecNormalize, vec: LeftTurnVecEnv, monitor: TrainingMonitor
-) -> Path:
+def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[str, Any]) -> Path:
+    """A resumable checkpoint ``run/checkpoints/step_N`` (model, normaliser and ``state`` as
+    ``state.json``), written into a temporary folder and renamed whole; the last two are
+    kept."""
     folder = run / "checkpoints"
     folder.mkdir(exist_ok=True)
     final = folder / f"step_{model.num_timesteps:09d}"
@@ -102,17 +107,111 @@ def _save_checkpoint(
     tmp.mkdir()
     model.save(tmp / "model.zip")
     env.save(str(tmp / "vecnormalize.pkl"))
-    state = {
-        "timesteps": model.num_timesteps,
-        "totals": monitor.totals,
-        "episode_counters": vec.episode_counters.tolist(),
-    }
+    state = {"timesteps": model.num_timesteps, **state}
     (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
     shutil.rmtree(final, ignore_errors=True)
     os.replace(tmp, final)
     for old in complete_checkpoints(run)[:-2]:  # keep the last two
         shutil.rmtree(old, ignore_errors=True)
     return final
+
+
+def _save_checkpoint(
+    run: Path, model: SwitchPPO, env: VecNormalize, vec: LeftTurnVecEnv, monitor: TrainingMonitor
+) -> Path:
+    state = {"totals": monitor.totals, "episode_counters": vec.episode_counters.tolist()}
+    return save_checkpoint(run, model, env, state)
+
+
+def open_run(run: Path, resume: bool, config_text: str) -> dict[str, Any] | None:
+    """Check ``run`` for a new run (empty or absent; the configuration is written) or for
+    ``--resume`` (an incomplete run with a checkpoint); returns the latest checkpoint's state
+    with its ``path`` when resuming, else ``None``.
+
+    Raises:
+        RunDirectoryError: Saying what is wrong and what to do.
+    """
+    if resume:
+        if not (run / "config.yaml").is_file():
+            raise RunDirectoryError(f"--resume: {run} holds no run (no config.yaml)")
+        if (run / "metrics.json").is_file():
+            raise RunDirectoryError(f"--resume: the run in {run} is already complete")
+        checkpoints = complete_checkpoints(run)
+        if not checkpoints:
+            raise RunDirectoryError(
+                f"--resume: {run} has no complete checkpoint yet (it was interrupted before "
+                "the first one, e.g. during the warm start); delete it and start again"
+            )
+        latest = checkpoints[-1]
+        state: dict[str, Any] = json.loads((latest / "state.json").read_text(encoding="utf-8"))
+        return {**state, "path": latest}
+    if run.exists() and not run.is_dir():
+        raise RunDirectoryError(f"--out {run} is a file, not a folder; choose another --out")
+    if run.exists() and any(run.iterdir()):
+        raise RunDirectoryError(
+            f"{run} is not empty; choose another --out, or --resume an interrupted run"
+        )
+    run.mkdir(parents=True, exist_ok=True)
+    write_atomic(run / "config.yaml", config_text)
+    return None
+
+
+def save_final(run: Path, model: SwitchPPO, env: VecNormalize) -> None:
+    """The trained model and its normaliser, each written whole."""
+    tmp_model = run / "model.tmp.zip"
+    model.save(tmp_model)
+    os.replace(tmp_model, run / "model.zip")
+    env.save(str(run / "vecnormalize.pkl.tmp"))
+    os.replace(run / "vecnormalize.pkl.tmp", run / "vecnormalize.pkl")
+
+
+def normalized(venv: Any, config: Any, checkpoint: dict[str, Any] | None) -> VecNormalize:
+    """``venv`` behind ``VecNormalize`` as the configuration asks (or as the checkpoint left
+    it)."""
+    if checkpoint is not None:
+        return VecNormalize.load(str(checkpoint["path"] / "vecnormalize.pkl"), venv)
+    return VecNormalize(
+        venv,
+        norm_obs=config.ppo.normalize_observations,
+        norm_reward=config.ppo.normalize_rewards,
+        gamma=config.ppo.gamma,
+    )
+
+
+def learn(
+    model: SwitchPPO,
+    run: Path,
+    timesteps: int,
+    monitor: Any,
+    save: Any,
+    resume: bool,
+    progress_bar: bool,
+) -> None:
+    """PPO up to ``timesteps``; on Ctrl-C a checkpoint first (``save()``), then the
+    interrupt goes on. ``progress_bar``: SB3's bar on a terminal, a plain line every 15 s
+    otherwise (a log never stays silent for minutes)."""
+    remaining = timesteps - model.num_timesteps
+    terminal = sys.stderr.isatty()
+    callbacks: list[BaseCallback] = [monitor]
+    if progress_bar and not terminal:
+        callbacks.append(ProgressLines(remaining, f"train {run.name}"))
+    try:
+        if remaining > 0:
+            model.learn(
+                total_timesteps=remaining,
+                callback=CallbackList(callbacks),
+                progress_bar=progress_bar and terminal,
+                reset_num_timesteps=not resume,
+                tb_log_name="ppo",
+            )
+    except KeyboardInterrupt:
+        monitor.totals["wall_time_s"] = monitor.wall_time_s
+        path = save()
+        print(
+            f"\ninterrupted at {model.num_timesteps:,} timesteps; checkpoint {path}; "
+            f"continue with: safeswitch train --resume --out {run}"
+        )
+        raise
 
 
 def evaluate_trained(
@@ -136,82 +235,35 @@ def train(
     """
     run = Path(out)
     torch.set_num_threads(config.torch_threads)
-    totals: dict[str, float] | None = None
-    counters: list[int] | None = None
-    if resume:
-        if not (run / "config.yaml").is_file():
-            raise RunDirectoryError(f"--resume: {run} holds no run (no config.yaml)")
-        if (run / "metrics.json").is_file():
-            raise RunDirectoryError(f"--resume: the run in {run} is already complete")
+    checkpoint = open_run(run, resume, dump_config(config))
+    if checkpoint is not None:
         config = load_config(run / "config.yaml")
-        checkpoints = complete_checkpoints(run)
-        if not checkpoints:
-            raise RunDirectoryError(
-                f"--resume: {run} has no complete checkpoint yet (it was interrupted before "
-                "the first one, e.g. during the warm start); delete it and start again"
-            )
-        latest = checkpoints[-1]
-        state = json.loads((latest / "state.json").read_text(encoding="utf-8"))
-        totals, counters = state["totals"], state["episode_counters"]
-    else:
-        if run.exists() and any(run.iterdir()):
-            raise RunDirectoryError(
-                f"{run} is not empty; choose another --out, or --resume an interrupted run"
-            )
-        run.mkdir(parents=True, exist_ok=True)
-        write_atomic(run / "config.yaml", dump_config(config))
-
     vec = LeftTurnVecEnv(config.n_envs, config=config.env, seed=config.seed)
-    if counters is not None:
-        vec.episode_counters = np.asarray(counters, dtype=np.int64)
-    if resume:
-        env = VecNormalize.load(str(latest / "vecnormalize.pkl"), vec)
+    if checkpoint is not None:
+        vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
+    env = normalized(vec, config, checkpoint)
+    if checkpoint is not None:
         model = SwitchPPO.load(
-            latest / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
+            checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
         )
     else:
-        env = VecNormalize(
-            vec,
-            norm_obs=config.ppo.normalize_observations,
-            norm_reward=config.ppo.normalize_rewards,
-            gamma=config.ppo.gamma,
-        )
         model = build_model(config, env, run / "tb")
 
     monitor = TrainingMonitor(
         run / "progress.csv",
         config.checkpoint_every,
         lambda m: _save_checkpoint(run, model, env, vec, m),
-        totals,
+        checkpoint["totals"] if checkpoint else None,
     )
-    if not resume and config.warm_start.episodes > 0:
+    if checkpoint is None and config.warm_start.episodes > 0:
         write_atomic(run / "warm_start.json", json.dumps(warm_start(model, env, config), indent=2))
         _save_checkpoint(run, model, env, vec, monitor)  # --resume starts after the warm start
-    remaining = config.timesteps - model.num_timesteps
-    try:
-        if remaining > 0:
-            model.learn(
-                total_timesteps=remaining,
-                callback=monitor,
-                progress_bar=progress_bar,
-                reset_num_timesteps=not resume,
-                tb_log_name="ppo",
-            )
-    except KeyboardInterrupt:
-        monitor.totals["wall_time_s"] = monitor.wall_time_s
-        path = _save_checkpoint(run, model, env, vec, monitor)
-        print(
-            f"\ninterrupted at {model.num_timesteps:,} timesteps; checkpoint {path}; "
-            f"continue with: safeswitch train --resume --out {run}"
-        )
-        raise
+    learn(
+        model, run, config.timesteps, monitor,
+        lambda: _save_checkpoint(run, model, env, vec, monitor), resume, progress_bar,
+    )  # fmt: skip
     wall = monitor.wall_time_s
-
-    tmp_model = run / "model.tmp.zip"
-    model.save(tmp_model)
-    os.replace(tmp_model, run / "model.zip")
-    env.save(str(run / "vecnormalize.pkl.tmp"))
-    os.replace(run / "vecnormalize.pkl.tmp", run / "vecnormalize.pkl")
+    save_final(run, model, env)
 
     started = time.perf_counter()
     evaluation = (

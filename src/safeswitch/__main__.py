@@ -1,0 +1,7 @@
+"""``python -m safeswitch``: the command line."""
+
+import sys
+
+from safeswitch.cli import main
+
+sys.exit(main())

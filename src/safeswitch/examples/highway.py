@@ -1,0 +1,325 @@
+"""The framework on a plant nobody here wrote: highway-env's multi-lane highway.
+
+``gymnasium.make("safeswitch/Highway-v0", switching="ttc")`` is highway-env's
+``highway-fast-v0`` (Leurent, *An Environment for Autonomous Driving Decision-Making*, 2018)
+with continuous acceleration and steering, wrapped in :class:`~safeswitch.core.wrappers.SafeSwitch`:
+
+* **Learned controller** — the agent's action ``(a, δ) ∈ [-1, 1]²``: acceleration ``5·a`` m/s²
+  and front-wheel angle ``δ·π/4`` (highway-env's ``ContinuousAction``).
+* **Safety controller** (:class:`HighwaySafetyController`, rule-based) — brakes at
+  ``ego_max_brake`` (not below standstill) when the braking envelope to the vehicle ahead is
+  short, else holds its speed; steers back to the centre of the nearest lane (a PD law on the
+  lateral offset and heading error).
+* **Switching logic** ``ttc`` (:class:`TimeToCollisionLogic`, registered by name) — executes the
+  learned action unless, after one decision period of it (predicted on highway-env's own
+  kinematic bicycle), the ego would (a) close on the vehicle ahead in its corridor so that full
+  braking could no longer stop it ``min_gap`` behind a leader braking at ``lead_max_brake``
+  (the responsibility-sensitive-safety distance of Shalev-Shwartz et al., 2017), or come within
+  ``min_ttc`` seconds of it at the current closing speed; or (b) leave the road.
+
+Other vehicles follow IDM and change lanes with MOBIL (highway-env's defaults); they may cut in
+closer than the envelope, which no rule on the ego can prevent: the benchmark
+``benchmarks/highway_switch.py`` measures what the switch achieves, it does not assume it.
+
+Highway-env is imported only when an environment is made.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from safeswitch.core.registry import LogicContextError
+from safeswitch.core.switching import BoolArray, Decision, FloatArray
+from safeswitch.core.wrappers import SafeSwitch
+
+#: The Gymnasium id this module registers (in :mod:`safeswitch`).
+ENV_ID = "safeswitch/Highway-v0"
+
+ACCEL_RANGE = 5.0  # [m/s²] highway-env's ContinuousAction maps a ∈ [-1, 1] to ±5 m/s²
+STEER_RANGE = math.pi / 4  # [rad] and δ ∈ [-1, 1] to ±45°
+VEHICLE_LENGTH = 5.0  # [m] highway-env's Vehicle.LENGTH
+VEHICLE_WIDTH = 2.0  # [m] highway-env's Vehicle.WIDTH
+ALONGSIDE = 3.0  # [m] longitudinal margin within which a vehicle in another lane is alongside
+SIDE_MARGIN = 0.5  # [m] lateral clearance the learned action must leave to a vehicle alongside
+
+#: highway-env configuration of ``safeswitch/Highway-v0`` (on top of ``highway-fast-v0``).
+HIGHWAY_CONFIG: dict[str, Any] = {
+    "action": {"type": "ContinuousAction", "longitudinal": True, "lateral": True},
+    "observation": {
+        "type": "Kinematics",
+        "vehicles_count": 5,
+        "features": ["presence", "x", "y", "vx", "vy", "cos_h", "sin_h"],
+        "absolute": False,
+        "normalize": True,
+    },
+    "simulation_frequency": 5,  # [Hz] one simulation frame per decision
+    "policy_frequency": 5,  # [Hz]
+    "lanes_count": 3,
+    "vehicles_count": 15,
+    "duration": 30,  # [s]
+    "offroad_terminal": True,
+}
+
+#: The state the Safety controller and the logic read, ``[B, 8 + 3·lanes]``: these columns,
+#: then per lane (lowest ``y`` first) its centre [m], the bumper-to-bumper gap to the nearest
+#: vehicle ahead that overlaps the lane [m] (1,000 if none) and that vehicle's speed [m/s].
+STATE_COLUMNS = (
+    "speed",  # ego speed [m/s]
+    "heading",  # ego heading relative to the road [rad]
+    "lateral",  # ego offset from the centre of its nearest lane [m]
+    "y",  # ego lateral position on the road [m]
+    "road_low",  # lowest lateral position the ego's centre may take on the road [m]
+    "road_high",  # highest [m]
+    "room_left",  # lateral clearance to the nearest vehicle alongside, towards +y [m]
+    "room_right",  # towards -y [m]
+)
+_LANES = len(STATE_COLUMNS)  # first per-lane column
+
+
+@dataclass(frozen=True)
+class HighwayRules:
+    """The numbers behind the Safety controller and the ``ttc`` logic.
+
+    Attributes:
+        decision_period: Time between two decisions [s] (``1 / policy_frequency``).
+        ego_max_brake: Braking the Safety controller commands [m/s²] (highway-env's full
+            ``a = -1``).
+        lead_max_brake: Assumed hardest braking of a leader [m/s²] (highway-env's IDM caps
+            its acceleration at ±6 m/s²).
+        min_gap: Gap that must remain when both have braked to a stop [m].
+        min_ttc: Smallest time to collision at the current closing speed [s].
+        max_heading: Largest heading relative to the road the learned action may reach [rad]
+            (beyond it the lane keeper needs several decisions to turn the car back).
+        lateral_gain: Steering of the lane keeper per metre of offset [rad/m].
+        heading_gain: Steering per radian of heading error.
+    """
+
+    decision_period: float = 0.2
+    ego_max_brake: float = 5.0
+    lead_max_brake: float = 6.0
+    min_gap: float = 3.0
+    min_ttc: float = 1.5
+    max_heading: float = 0.3
+    lateral_gain: float = 0.08
+    heading_gain: float = 0.8
+
+
+def highway_state(env: gym.Env[Any, Any]) -> FloatArray:
+    """What the Safety controller and the logic see of a highway-env environment (see
+    :data:`STATE_COLUMNS`), ``[1, 8 + 3·lanes]``, read from its road: the straight road runs
+    along ``x``; a vehicle overlaps a lane when its centre is within half a lane plus half a
+    car of the lane's centre line."""
+    road = env.unwrapped.road  # type: ignore[attr-defined]
+    ego = env.unwrapped.vehicle  # type: ignore[attr-defined]
+    x, y = float(ego.position[0]), float(ego.position[1])
+    lane = road.network.get_lane(ego.lane_index)
+    _, lateral = lane.local_coordinates(ego.position)
+    heading = float(ego.heading - lane.heading_at(0.0))
+    heading = (heading + math.pi) % (2 * math.pi) - math.pi
+    lanes = sorted(
+        (float(lane_.start[1]), float(lane_.width_at(0.0))) for lane_ in road.network.lanes_list()
+    )
+    low = lanes[0][0] - lanes[0][1] / 2 + VEHICLE_WIDTH / 2
+    high = lanes[-1][0] + lanes[-1][1] / 2 - VEHICLE_WIDTH / 2
+    gaps = [1e3] * len(lanes)
+    speeds = [float(ego.speed)] * len(lanes)
+    left, right = 1e3, 1e3
+    for other in road.vehicles:
+        if other is ego:
+            continue
+        ox, oy = float(other.position[0]), float(other.position[1])
+        dx, dy = ox - x, oy - y
+        if abs(dx) < VEHICLE_LENGTH + ALONGSIDE and abs(dy) >= VEHICLE_WIDTH:
+            if dy > 0:
+                left = min(left, dy - VEHICLE_WIDTH)
+            else:
+                right = min(right, -dy - VEHICLE_WIDTH)
+        if dx <= 0:
+            continue
+        for k, (centre, width) in enumerate(lanes):
+            if abs(oy - centre) < (width + VEHICLE_WIDTH) / 2 and dx - VEHICLE_LENGTH < gaps[k]:
+                gaps[k], speeds[k] = dx - VEHICLE_LENGTH, float(other.speed)
+    row = [float(ego.speed), heading, float(lateral), y, low, high, left, right]
+    for (centre, _), gap, speed in zip(lanes, gaps, speeds, strict=True):
+        row += [centre, gap, speed]
+    return np.array([row])
+
+
+def _lanes(state: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per lane ``[B, L]``: centre, gap to the vehicle ahead, its speed."""
+    per_lane = state[:, _LANES:].reshape(state.shape[0], -1, 3)
+    return per_lane[..., 0], per_lane[..., 1], per_lane[..., 2]
+
+
+def _overlapping(centres: FloatArray, low: FloatArray, high: FloatArray) -> BoolArray:
+    """Lanes ``[B, L]`` the ego overlaps while its centre is anywhere in ``[low, high]``
+    (4 m lanes)."""
+    half = 2.0 + VEHICLE_WIDTH / 2
+    return (centres > low[:, None] - half) & (centres < high[:, None] + half)
+
+
+def _stopping_margin(
+    gap: FloatArray, speed: FloatArray, lead_speed: FloatArray, rules: HighwayRules
+) -> FloatArray:
+    """Gap left [m] when the ego brakes at ``ego_max_brake`` and the leader at
+    ``lead_max_brake`` from now on, both until standstill."""
+    ego_stop = speed * speed / (2 * rules.ego_max_brake)
+    lead_stop = lead_speed * lead_speed / (2 * rules.lead_max_brake)
+    return gap + lead_stop - ego_stop
+
+
+class HighwaySafetyController:
+    """Brake when the braking envelope is short, hold speed otherwise; keep the lane.
+
+    Args:
+        rules: Gains and limits.
+    """
+
+    def __init__(self, rules: HighwayRules | None = None) -> None:
+        self.rules = rules or HighwayRules()
+
+    def __call__(self, state: FloatArray) -> FloatArray:
+        r = self.rules
+        speed, heading, lateral, y = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
+        centres, gaps, leads = _lanes(state)
+        margin = _stopping_margin(gaps, speed[:, None], leads, r)
+        short = np.where(_overlapping(centres, y, y), margin, np.inf).min(axis=1)
+        short = short < 2 * r.min_gap + speed * r.decision_period
+        # never command more braking than stops the car within one decision period
+        brake = np.minimum(r.ego_max_brake, speed / r.decision_period)
+        accel = np.where(short, -brake, 0.0)
+        steer = -r.lateral_gain * lateral - r.heading_gain * heading
+        return np.stack(
+            [np.clip(accel / ACCEL_RANGE, -1, 1), np.clip(steer / STEER_RANGE, -1, 1)], axis=1
+        )
+
+
+class TimeToCollisionLogic:
+    """The ``ttc`` switching logic (see the module docstring).
+
+    Args:
+        rules: Thresholds and the decision period.
+    """
+
+    reasons: tuple[str, ...] = (
+        "learned",
+        "braking_envelope",
+        "time_to_collision",
+        "off_road",
+        "vehicle_alongside",
+    )
+
+    def __init__(self, rules: HighwayRules | None = None) -> None:
+        self.rules = rules or HighwayRules()
+
+    def predict(self, state: FloatArray, action: FloatArray) -> tuple[FloatArray, ...]:
+        """The ego one decision period ahead under ``action`` ``[B, 2]``, on highway-env's
+        kinematic bicycle (position and heading with the current speed, then the speed): its
+        gap to the leader of every lane ``[B, L]`` (each leader may brake hard meanwhile), its
+        speed, the leaders' speeds ``[B, L]``, its lateral position and its heading."""
+        r, dt = self.rules, self.rules.decision_period
+        speed, heading, y = state[:, 0], state[:, 1], state[:, 3]
+        _, gaps, leads = _lanes(state)
+        accel = action[:, 0] * ACCEL_RANGE
+        slip = np.arctan(0.5 * np.tan(action[:, 1] * STEER_RANGE))
+        travelled = speed * np.cos(heading + slip) * dt
+        leads_next = np.maximum(leads - r.lead_max_brake * dt, 0.0)
+        leads_travelled = 0.5 * (leads + leads_next) * dt
+        return (
+            gaps - travelled[:, None] + leads_travelled,
+            np.maximum(speed + accel * dt, 0.0),
+            leads_next,
+            y + speed * np.sin(heading + slip) * dt,
+            heading + speed * np.sin(slip) / (0.5 * VEHICLE_LENGTH) * dt,
+        )
+
+    def decide(self, state: FloatArray, learned: FloatArray, safe: FloatArray) -> Decision:
+        r = self.rules
+        gaps1, speed1, leads1, y1, heading1 = self.predict(state, learned)
+        # where the car can get to while the lane keeper turns it back: two more periods of
+        # its lateral drift
+        drift = 2 * speed1 * np.sin(heading1) * r.decision_period
+        reach_high, reach_low = y1 + np.maximum(drift, 0.0), y1 + np.minimum(drift, 0.0)
+        y = state[:, 3]
+        centres, _, _ = _lanes(state)
+        relevant = _overlapping(centres, np.minimum(reach_low, y), np.maximum(reach_high, y))
+        margin = _stopping_margin(gaps1, speed1[:, None], leads1, r)
+        envelope = (relevant & (margin < r.min_gap)).any(axis=1)
+        closing = speed1[:, None] - leads1
+        ttc = np.where(closing > 0, gaps1 / np.maximum(closing, 1e-9), np.inf)
+        too_soon = (relevant & (ttc < r.min_ttc)).any(axis=1)
+        off_road = (
+            (reach_low < state[:, 4])
+            | (reach_high > state[:, 5])
+            | (np.abs(heading1) > r.max_heading)
+        )
+        alongside = (reach_high - y > state[:, 6] - SIDE_MARGIN) | (
+            y - reach_low > state[:, 7] - SIDE_MARGIN
+        )
+        reason = np.select([envelope, too_soon, off_road, alongside], [1, 2, 3, 4], 0)
+        reason = reason.astype(np.int8)
+        return Decision(reason > 0, reason, safe)
+
+
+def ttc_logic(context: object) -> TimeToCollisionLogic:
+    """Factory of the ``ttc`` logic (registered under that name) for highway-env plants."""
+    road = getattr(getattr(context, "unwrapped", None), "road", None)
+    if road is None:
+        raise LogicContextError(
+            f"the 'ttc' switching logic supervises highway-env plants, not {type(context).__name__}"
+        )
+    return TimeToCollisionLogic(_rules_for(context))
+
+
+def _rules_for(env: object) -> HighwayRules:
+    config = getattr(getattr(env, "unwrapped", None), "config", {})
+    return HighwayRules(decision_period=1.0 / float(config.get("policy_frequency", 5)))
+
+
+def make_highway_env(
+    switching: str = "ttc",
+    penalty: float = -1.0,
+    config: dict[str, Any] | None = None,
+    render_mode: str | None = None,
+) -> SafeSwitch:
+    """``safeswitch/Highway-v0``: highway-env's ``highway-fast-v0`` with continuous actions
+    under a switching logic.
+
+    Args:
+        switching: A registered logic (``ttc``, ``none`` or a plugin's).
+        penalty: ``R_ADAS`` on a step the Safety controller acted (ours: highway-env's
+            normalised reward lies in [0, 1] per step, so -1 costs a step's worth of reward; the
+            paper's -25 was set against a per-tick reward of up to 4).
+        config: highway-env configuration entries that replace :data:`HIGHWAY_CONFIG`'s.
+        render_mode: Passed to highway-env (``"rgb_array"`` for pictures).
+    """
+    import highway_env  # noqa: F401  (registers highway-fast-v0)
+
+    env = gym.make(
+        "highway-fast-v0", config={**HIGHWAY_CONFIG, **(config or {})}, render_mode=render_mode
+    )
+    controller = HighwaySafetyController(_rules_for(env))
+    return SafeSwitch(env, controller, switching, penalty=penalty, state_fn=highway_state)
+
+
+def collided(info: dict[str, Any]) -> bool:
+    """Whether a highway-env step ended in a crash."""
+    return bool(info.get("crashed", False))
+
+
+__all__ = [
+    "ENV_ID",
+    "HIGHWAY_CONFIG",
+    "HighwayRules",
+    "HighwaySafetyController",
+    "TimeToCollisionLogic",
+    "collided",
+    "highway_state",
+    "make_highway_env",
+    "ttc_logic",
+]

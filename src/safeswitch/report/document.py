@@ -1,0 +1,223 @@
+"""The reproduction report as Markdown and as one self-contained HTML page, from the same
+tables and the same Jinja2 templates (``report/templates``).
+
+Every table shows collisions; an episode that never left its conflict zone reads "never
+cleared", not a number.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jinja2
+
+from safeswitch.leftturn.config import SCENARIO_NAMES
+
+TEMPLATES = Path(__file__).resolve().parent / "templates"
+
+#: Columns of the comparison table: (summary key, header, format).
+COMPARISON = (
+    ("collisions", "collisions", "{:d}"),
+    ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("stops", "full stops", "{:d}"),
+    ("cut_episodes", "cut", "{:d}"),
+    ("yield_episodes", "yield", "{:d}"),
+    ("cleared_episodes", "cleared", "{:d}"),
+    ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
+    ("mean_efficiency", "efficiency", "{:.3f}"),
+    ("mean_return", "return", "{:.0f}"),
+)
+
+#: What each column means (the report's introduction lists them).
+DEFINITIONS = (
+    ("collisions", "episodes that ended with the two cars' footprints touching"),
+    (
+        "safety episodes / safety ticks",
+        "episodes (ticks) in which the Safety controller's action was executed instead of the "
+        "proposal — the paper's s*",
+    ),
+    (
+        "comfort exceeded (ticks)",
+        "share of ticks with |a_lon| > {lon:g} m/s² or |a_lat| > {lat:g} m/s² (the paper's "
+        "comfort limits)",
+    ),
+    ("full stops", "episodes in which the ego's speed fell below 0.1 m/s"),
+    (
+        "cut / yield",
+        "episodes in which the ego left its conflict zone before the north car left its own / "
+        "after it (neither: undecided within the horizon)",
+    ),
+    ("cleared", "episodes in which the ego left its conflict zone within the {horizon:g} s"),
+    (
+        "time to clear",
+        "mean time until the ego left its conflict zone, over the cleared episodes ('never' "
+        "when none cleared)",
+    ),
+    (
+        "efficiency",
+        "mean over scenarios of the oracle's time to clear divided by the controller's; an "
+        "episode that never clears counts with the whole {horizon:g} s horizon",
+    ),
+    (
+        "return",
+        "mean episode return: Eq. 5 (R_ADAS + R_lka + R_v + R_a_lon + R_a_lat) summed over the "
+        "{horizon:g} s episode",
+    ),
+)
+
+
+@dataclass(frozen=True)
+class Table:
+    """A report table: its header, rows of cell texts, the rows that show a collision (drawn
+    red) and the columns holding words rather than numbers (aligned left)."""
+
+    header: list[str]
+    rows: list[list[str]]
+    alert: list[bool]
+    text_columns: tuple[int, ...] = (0,)
+
+
+def _cell(value: Any, fmt: str, key: str) -> str:
+    if value is None:
+        return "never" if key == "mean_time_to_clear_s" else "–"
+    return fmt.format(value)
+
+
+def comparison_table(summary: dict[str, Any]) -> Table:
+    rows, alert = [], []
+    for name, result in summary["controllers"].items():
+        r = result["random"]
+        rows.append([name, *(_cell(r.get(k), f, k) for k, _, f in COMPARISON)])
+        alert.append(r["collisions"] > 0)
+    return Table(["controller", *(h for _, h, _ in COMPARISON)], rows, alert)
+
+
+def scenario_table(summary: dict[str, Any]) -> Table:
+    header = ["controller", "scenario", "outcome", "collision", "time to clear",
+              "oracle", "min speed", "safety ticks", "comfort ticks"]  # fmt: skip
+    rows, alert = [], []
+    for name, result in summary["controllers"].items():
+        for scenario in SCENARIO_NAMES:
+            s = result["paper"][scenario]
+            crashed = s["collision"]
+            clear = s["time_to_clear_s"]
+            oracle = s["oracle_time_to_clear_s"]
+            rows.append(
+                [
+                    name,
+                    scenario,
+                    s["outcome"],
+                    f"COLLISION at {s['collision_time_s']:.2f} s" if crashed else "no",
+                    "never cleared" if clear is None else f"{clear:.2f} s",
+                    "–" if oracle is None else f"{oracle:.2f} s",
+                    f"{s['min_speed_kmh']:.1f} km/h",
+                    str(s["safety_steps"]),
+                    str(s["comfort_violation_steps"]),
+                ]
+            )
+            alert.append(bool(crashed))
+    return Table(header, rows, alert, text_columns=(0, 1, 2, 3))
+
+
+def policy_table(summary: dict[str, Any]) -> Table:
+    header = ["controller", "how it was made", "switching", "R_ADAS", "collisions in training"]
+    rows = []
+    for name, result in summary["controllers"].items():
+        t = result.get("training")
+        if t is None:
+            rows.append([name, result["label"], result["switching"] or "–", "–", "–"])
+            continue
+        rows.append(
+            [name, t["method"], t["switching"], "on" if t["adas_penalty"] else "off",
+             str(t["collisions"])]
+        )  # fmt: skip
+    return Table(header, rows, [False] * len(rows), text_columns=(0, 1, 2, 3))
+
+
+def reckless_table(summary: dict[str, Any]) -> Table:
+    rows = [
+        [r["switching"], str(r["collisions"]), str(r["safety_activation_episodes"])]
+        for r in summary["reckless_full_throttle"]
+    ]
+    alert = [r["collisions"] > 0 for r in summary["reckless_full_throttle"]]
+    return Table(["switching logic", "collisions", "safety episodes"], rows, alert)
+
+
+def figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """The report's episode figures in order, as (file stem, caption)."""
+    out = []
+    for name, result in summary["controllers"].items():
+        if name == "oracle":
+            continue
+        for scenario in SCENARIO_NAMES:
+            ending = result["paper"][scenario].get("figure", "")
+            caption = f"{result['label']}, scenario {scenario}: {ending}"
+            out.append((f"{name}_{scenario}", caption))
+    return out
+
+
+def _context(summary: dict[str, Any]) -> dict[str, Any]:
+    limits = summary["limits"]
+    return {
+        "s": summary,
+        "definitions": [(k, v.format(**limits)) for k, v in DEFINITIONS],
+        "comparison": comparison_table(summary),
+        "scenarios": scenario_table(summary),
+        "policies": policy_table(summary),
+        "reckless": reckless_table(summary),
+        "figures": figure_list(summary),
+        "scenario_names": SCENARIO_NAMES,
+    }
+
+
+def _environment(autoescape: bool) -> jinja2.Environment:
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(TEMPLATES),
+        autoescape=autoescape,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+    )
+
+
+def render_markdown(summary: dict[str, Any]) -> str:
+    """``report.md`` (pictures referenced beside it, in ``figures/``)."""
+    return _environment(False).get_template("report.md.j2").render(**_context(summary))
+
+
+def render_html(summary: dict[str, Any], folder: Path) -> str:
+    """``report.html``: one self-contained page, every picture embedded as a data URI."""
+
+    def embed(stem: str, alt: str) -> str:
+        path = folder / "figures" / stem
+        mime = "image/gif" if path.suffix == ".gif" else "image/png"
+        data = base64.b64encode(path.read_bytes()).decode("ascii")
+        return (
+            f'<figure><img alt="{html.escape(alt)}" src="data:{mime};base64,{data}"/>'
+            f"<figcaption>{html.escape(alt)}</figcaption></figure>"
+        )
+
+    template = _environment(True).get_template("report.html.j2")
+    return template.render(embed=embed, **_context(summary))
+
+
+def comparison_text(summary: dict[str, Any]) -> str:
+    """The comparison table as aligned text (printed at the end of a run)."""
+    table = comparison_table(summary)
+    widths = [max(len(x) for x in col) for col in zip(table.header, *table.rows, strict=True)]
+    lines = [
+        f"{summary['episodes']} random scenarios (seed {summary['seed']}):",
+        "  ".join(h.rjust(w) for h, w in zip(table.header, widths, strict=True)),
+    ]
+    lines += ["  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)) for row in table.rows]
+    lines.append("Paper findings (the paper policy in the paper scenarios):")
+    lines += [
+        f"  [{'x' if f['reproduced'] else ' '}] {f['finding']}" for f in summary["paper_findings"]
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,293 @@
+"""Training and evaluation on any registered Gymnasium environment under a switching logic.
+
+``safeswitch train --env ID`` and ``safeswitch evaluate --env ID`` work for
+
+* an environment whose constructor takes ``switching=`` (and ``penalty=``) itself — a
+  safeswitch-aware environment such as ``safeswitch/Highway-v0``; or
+* any environment with a ``Box`` action space for which a Safety controller is registered
+  (:func:`~safeswitch.core.registry.register_safety_controller`): it is wrapped in
+  :class:`~safeswitch.core.wrappers.SafeSwitch` with the named logic.
+
+The run directory is the left turn's (``config.yaml``, ``progress.csv``, ``tb/``, checkpoints,
+``model.zip``, ``vecnormalize.pkl``, ``metrics.json`` last), and ``--resume`` works the same.
+Collisions are counted from the ``crashed`` or ``collision`` key of a final step's ``info``.
+"""
+
+from __future__ import annotations
+
+import csv
+import inspect
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+from safeswitch.core.config import ConfigError
+from safeswitch.core.registry import safety_controller_for
+from safeswitch.core.wrappers import SafeSwitch
+from safeswitch.io import write_json
+from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
+from safeswitch.training.policies import load_policy
+from safeswitch.training.ppo import SwitchPPO
+from safeswitch.training.run import (
+    build_model,
+    learn,
+    normalized,
+    open_run,
+    save_checkpoint,
+    save_final,
+)
+
+PROGRESS_FIELDS = (
+    "timesteps",
+    "wall_time_s",
+    "episodes",
+    "collisions_total",
+    "activation_rate",
+    "collision_rate",
+    "return",
+)
+
+
+def _takes_switching(env_id: str) -> bool:
+    entry = gym.spec(env_id).entry_point
+    maker: Any = gym.envs.registration.load_env_creator(entry) if isinstance(entry, str) else entry
+    try:
+        return "switching" in inspect.signature(maker).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def make_supervised_env(
+    env_id: str,
+    switching: str | None = None,
+    penalty: float | None = None,
+    **kwargs: Any,
+) -> gym.Env[Any, Any]:
+    """The environment ``env_id`` under a switching logic (see the module docstring).
+
+    Raises:
+        ConfigError: ``env_id`` takes no ``switching`` and has no registered Safety controller.
+    """
+    if _takes_switching(env_id):
+        extra: dict[str, Any] = {} if switching is None else {"switching": switching}
+        if penalty is not None:
+            extra["penalty"] = penalty
+        return gym.make(env_id, **kwargs, **extra)
+    registered = safety_controller_for(env_id)
+    if registered is None:
+        raise ConfigError(
+            f"{env_id} takes no switching logic and no Safety controller is registered for it; "
+            "register one with safeswitch.core.registry.register_safety_controller"
+        )
+    env = gym.make(env_id, **kwargs)
+    return SafeSwitch(
+        env,
+        registered.factory(env),
+        switching or "none",
+        penalty=-25.0 if penalty is None else penalty,
+        state_fn=registered.state_fn,
+    )
+
+
+def _collided(info: dict[str, Any]) -> bool:
+    return bool(info.get("crashed", False) or info.get("collision", False))
+
+
+class EnvMonitor(BaseCallback):
+    """Collisions, safety activations and returns of a run on any environment, logged once per
+    rollout to ``progress.csv`` and TensorBoard (``safety/collisions_total``,
+    ``safety/activation_rate``, ``safety/collision_rate``, ``reward/return``)."""
+
+    def __init__(
+        self,
+        progress_csv: Path,
+        checkpoint_every: int,
+        save_checkpoint: Callable[[EnvMonitor], object],
+        totals: dict[str, float] | None = None,
+    ) -> None:
+        super().__init__()
+        self.progress_csv = progress_csv
+        self.checkpoint_every = checkpoint_every
+        self.save_checkpoint = save_checkpoint
+        self.totals: dict[str, float] = {
+            "collisions": 0,
+            "safety_steps": 0,
+            "episodes": 0,
+            "steps": 0,
+            "wall_time_s": 0.0,
+        } | (totals or {})
+        self._started = time.perf_counter()
+        self._wall_before = float(self.totals["wall_time_s"])
+        self._next_checkpoint = 0
+        self._rollout: dict[str, list[float]] = {"safety": [], "collision": [], "return": []}
+
+    @property
+    def wall_time_s(self) -> float:
+        return self._wall_before + time.perf_counter() - self._started
+
+    def _on_training_start(self) -> None:
+        every = self.checkpoint_every
+        self._next_checkpoint = (self.num_timesteps // every + 1) * every
+
+    def _on_step(self) -> bool:
+        for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
+            active = bool(info.get("safety_active", False))
+            self.totals["steps"] += 1
+            self.totals["safety_steps"] += active
+            self._rollout["safety"].append(float(active))
+            if done:
+                crashed = _collided(info)
+                self.totals["episodes"] += 1
+                self.totals["collisions"] += crashed
+                self._rollout["collision"].append(float(crashed))
+                if "episode" in info:
+                    self._rollout["return"].append(float(info["episode"]["r"]))
+        if self.num_timesteps >= self._next_checkpoint:
+            self.totals["wall_time_s"] = self.wall_time_s
+            self.save_checkpoint(self)
+            self._next_checkpoint += self.checkpoint_every
+        return True
+
+    def _on_rollout_end(self) -> None:
+        r = self._rollout
+        row: dict[str, float] = {
+            "timesteps": self.num_timesteps,
+            "wall_time_s": round(self.wall_time_s, 3),
+            "episodes": self.totals["episodes"],
+            "collisions_total": self.totals["collisions"],
+            "activation_rate": float(np.mean(r["safety"])) if r["safety"] else 0.0,
+        }
+        if r["collision"]:
+            row["collision_rate"] = float(np.mean(r["collision"]))
+        if r["return"]:
+            row["return"] = float(np.mean(r["return"]))
+        for key, tag in (
+            ("collisions_total", "safety/collisions_total"),
+            ("activation_rate", "safety/activation_rate"),
+            ("collision_rate", "safety/collision_rate"),
+            ("return", "reward/return"),
+        ):
+            if key in row:
+                self.logger.record(tag, row[key])
+        new_file = not self.progress_csv.exists()
+        with open(self.progress_csv, "a", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
+            if new_file:
+                writer.writeheader()
+            writer.writerow({k: row.get(k, "") for k in PROGRESS_FIELDS})
+        self._rollout = {"safety": [], "collision": [], "return": []}
+
+
+def _make_vec(config: EnvTrainConfig) -> VecMonitor:
+    def make() -> gym.Env[Any, Any]:
+        return make_supervised_env(
+            config.env_id, config.switching, config.penalty, **config.env_kwargs
+        )
+
+    vec = DummyVecEnv([make] * config.n_envs)
+    vec.seed(config.seed)
+    return VecMonitor(vec)
+
+
+def run_episodes(
+    env: gym.Env[Any, Any],
+    act: Callable[[Any], Any],
+    episodes: int,
+    seed: int,
+) -> dict[str, Any]:
+    """``episodes`` episodes of ``act`` (observation → action), reset with seeds ``seed``,
+    ``seed + 1``, …; returns ``evaluate --json``'s fields for a generic environment."""
+    returns, lengths, safety, collisions = [], [], [], 0
+    for k in range(episodes):
+        obs, _ = env.reset(seed=seed + k)
+        total, steps, active, done = 0.0, 0, 0, False
+        info: dict[str, Any] = {}
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(act(obs))
+            total += float(reward)
+            steps += 1
+            active += bool(info.get("safety_active", False))
+            done = terminated or truncated
+        returns.append(total)
+        lengths.append(steps)
+        safety.append(active)
+        collisions += _collided(info)
+    return {
+        "episodes": episodes,
+        "collisions": collisions,
+        "safety_activation_episodes": int(sum(a > 0 for a in safety)),
+        "safety_activation_steps": int(sum(safety)),
+        "mean_return": float(np.mean(returns)) if returns else None,
+        "mean_episode_steps": float(np.mean(lengths)) if lengths else None,
+    }
+
+
+def train_env(
+    config: EnvTrainConfig, out: str | Path, resume: bool = False, progress_bar: bool = True
+) -> dict[str, Any]:
+    """Train (or resume) a run on ``config.env_id``; returns ``metrics.json``'s contents."""
+    run = Path(out)
+    torch.set_num_threads(config.torch_threads)
+    checkpoint = open_run(run, resume, dump_env_config(config))
+    if checkpoint is not None:
+        config = load_env_config(run / "config.yaml")
+    env = normalized(_make_vec(config), config, checkpoint)
+    if checkpoint is not None:
+        model = SwitchPPO.load(
+            checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
+        )
+    else:
+        model = build_model(config, env, run / "tb")
+
+    def save(m: EnvMonitor) -> Path:
+        return save_checkpoint(run, model, env, {"totals": m.totals})
+
+    monitor = EnvMonitor(
+        run / "progress.csv",
+        config.checkpoint_every,
+        save,
+        checkpoint["totals"] if checkpoint else None,
+    )
+    learn(model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar)
+    wall = monitor.wall_time_s
+    save_final(run, model, env)
+    started = time.perf_counter()
+    evaluation: dict[str, Any] = {}
+    if config.eval_episodes:
+        policy = load_policy(run)
+        eval_env = make_supervised_env(
+            config.env_id, config.switching, config.penalty, **config.env_kwargs
+        )
+        evaluation = run_episodes(eval_env, policy.act_one, config.eval_episodes, config.eval_seed)
+        eval_env.close()
+    t = monitor.totals
+    metrics: dict[str, Any] = {
+        "env_id": config.env_id,
+        "switching": config.switching,
+        "timesteps": int(model.num_timesteps),
+        "wall_time_s": round(wall, 2),
+        "steps_per_s": round(model.num_timesteps / max(wall, 1e-9), 1),
+        "n_envs": config.n_envs,
+        "torch_threads": config.torch_threads,
+        "seed": config.seed,
+        "training": {
+            "collisions": int(t["collisions"]),
+            "safety_activation_steps": int(t["safety_steps"]),
+            "episodes": int(t["episodes"]),
+            "steps": int(t["steps"]),
+        },
+        "evaluation": {
+            "seed": config.eval_seed,
+            **evaluation,
+            "wall_time_s": round(time.perf_counter() - started, 2),
+        },
+    }
+    write_json(run / "metrics.json", metrics)
+    return metrics
