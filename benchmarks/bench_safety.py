@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import _common
-from safeswitch.evaluation.adversaries import catalogue, noisy_cruise
+from safeswitch.evaluation.adversaries import catalogue, noisy_cruise, with_invalid
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.scenarios import Scenarios, scenario_grid
@@ -67,6 +67,35 @@ def adversarial_table(random_count: int) -> list[dict[str, object]]:
                 f"grid cells",
                 file=sys.stderr,
             )
+    return rows
+
+
+def invalid_actions(count: int) -> list[dict[str, object]]:
+    """Each adversary with and without NaN on 30 % of its ticks (the rest of its behaviour
+    unchanged), in both learned-controller scopes, under each logic: the invalid ticks must
+    add no collisions (the pedals are held in their place; braking there instead stopped the
+    car in the north car's path)."""
+    rows = []
+    for scope in ("window", "episode"):
+        for switching in SWITCHINGS:
+            task = LeftTurnTask(
+                resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
+            )
+            scenarios = task.draw_scenarios(99, np.arange(count), np.zeros(count, int))
+            for name in ("uniform", "bang_bang", "creep", "noisy_cruise", "zero_throttle"):
+                alone = rollout(task, scenarios, catalogue(task, count, 5)[name]())
+                broken = with_invalid(catalogue(task, count, 5)[name](), np.random.default_rng(3))
+                invalid = rollout(task, scenarios, broken)
+                rows.append(
+                    {
+                        "scope": scope,
+                        "switching": switching,
+                        "adversary": name,
+                        "episodes": count,
+                        "collisions": int(alone.collision.sum()),
+                        "collisions_with_30pct_nan": int(invalid.collision.sum()),
+                    }
+                )
     return rows
 
 
@@ -203,6 +232,7 @@ def main(argv: list[str] | None = None) -> int:
         "benchmark": "safety",
         **_common.machine(),
         "adversarial": adversarial_table(args.random),
+        "invalid_actions": invalid_actions(2500),
         "sensible_drivers": sensible_drivers(2000),
         "assumption_breaks": assumption_breaks(2000),
         "cost_at_4096_envs": cost(),
@@ -226,6 +256,14 @@ def main(argv: list[str] | None = None) -> int:
             f"{r['random_episodes']:,} | {r['grid_collisions']} / {r['grid_episodes']} | "
             f"{100 * r['random_intervention_episodes'] / r['random_episodes']:.1f} % | "
             f"{r['random_intervention_ticks_per_episode']:.1f} |"
+        )
+    print()
+    print("| scope | switching | adversary | collisions | with 30 % NaN ticks |")
+    print("| --- | --- | --- | ---: | ---: |")
+    for r in result["invalid_actions"]:
+        print(
+            f"| {r['scope']} | {r['switching']} | {r['adversary']} | {r['collisions']} / "
+            f"{r['episodes']} | {r['collisions_with_30pct_nan']} |"
         )
     print()
     for r in result["sensible_drivers"]:

@@ -59,19 +59,49 @@ def test_invalid_configuration_names_the_bad_value(kwargs, named):
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
-def test_a_nan_or_inf_action_never_reaches_the_plant_the_rule_proposes_instead(bad):
-    env = LeftTurnEnv(scenario="cut", config={"episode": {"learned_scope": "episode"}})
+def test_a_nan_or_inf_action_never_reaches_the_plant_the_pedals_are_held(bad):
+    env = LeftTurnEnv(scenario="cut", learned_scope="episode")
     env.reset(seed=0)
+    for _ in range(30):
+        env.step(np.array([0.4], dtype=np.float32))
+    held = env.state.world.vehicles.throttle[0, 0], env.state.world.vehicles.brake[0, 0]
     obs, _, _, _, info = env.step(np.array([bad], dtype=np.float32))
     assert info["safety_active"] and info["reason"] == "invalid_learned_action"
     assert info["reward_terms"]["adas"] == -25.0  # an invalid action is penalised like a switch
-    # PID_th's proposal ran in its place (far from the conflict, the paper logic accepts it)
-    rule = LeftTurnEnv(scenario="cut", config={"episode": {"learned_scope": "never"}})
-    rule.reset(seed=0)
-    *_, rule_info = rule.step(np.array([0.0], dtype=np.float32))
-    assert info["controller"] == "rule" and rule_info["controller"] == "rule"
-    assert info["throttle"] == rule_info["throttle"] > 0 and info["brake"] == 0.0
+    # the pedals stay where they were (far from the conflict, the paper logic accepts it)
+    assert info["controller"] == "rule"
+    assert (info["throttle"], info["brake"]) == held and held[0] > 0.6
     assert np.isfinite(obs).all()
+
+
+def test_learned_scope_is_a_keyword_and_bad_actions_are_named():
+    env = gym.make(safeswitch.ENV_ID, learned_scope="episode")
+    assert env.unwrapped.config.episode.learned_scope == "episode"
+    with pytest.raises(ConfigError, match="always"):
+        gym.make(safeswitch.ENV_ID, learned_scope="always")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="the action is None"):
+        env.step(None)
+    with pytest.raises(ValueError, match="2 action value"):
+        env.step(np.zeros(2, dtype=np.float32))
+    *_, info = env.step(np.array([5.0], dtype=np.float32))
+    assert info["action_clipped"] and info["learned_throttle"] == 3.0 and info["throttle"] == 1.0
+    *_, info = env.step(np.array([0.5], dtype=np.float32))
+    assert not info["action_clipped"]
+
+
+def test_human_rendering_opens_a_window_or_says_why_not(monkeypatch):
+    pytest.importorskip("pygame")
+    monkeypatch.setenv("SDL_VIDEODRIVER", "offscreen")  # a display pygame can always open
+    env = LeftTurnEnv(render_mode="human")
+    env.reset(seed=0)
+    env.step(np.zeros(1, dtype=np.float32))
+    assert env._window is not None and env._window.get_size() == (480, 480)
+    env.close()
+    monkeypatch.setenv("SDL_VIDEODRIVER", "no-such-driver")  # as on a machine without one
+    env = LeftTurnEnv(render_mode="human")
+    with pytest.raises(RuntimeError, match="needs a display and none can be opened here"):
+        env.reset(seed=0)
 
 
 def test_out_of_range_actions_are_clipped():

@@ -138,7 +138,7 @@ def test_the_task_switches_exactly_as_supervise_with_the_registered_logic(switch
             columns(zeros, record.safety_brake),
             0.0,
             1.0,
-            fallback=columns(rule, zeros),
+            fallback=columns(state.world.vehicles.throttle[:, 0], state.world.vehicles.brake[:, 0]),
         )
         np.testing.assert_array_equal(record.both_at_intersection, conflict.both_at_intersection)
         np.testing.assert_array_equal(record.throttle, sup.executed[:, 0])

@@ -19,7 +19,7 @@ from safeswitch.io import prepare_output_dir, write_json
 from safeswitch.leftturn.config import SCENARIO_NAMES, LeftTurnConfig
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.progress import Progress
-from safeswitch.training.config import load_config
+from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
 
 #: Every ``--controller``.
@@ -38,7 +38,12 @@ def controller_setup(
         if model is None:
             raise ValueError("--controller learned needs --model (a run directory or 'shipped')")
         trained = load_policy(model)
-        env_config = load_config(trained.path / "config.yaml").env
+        if not isinstance(trained.config, TrainConfig):
+            raise ValueError(
+                f"the policy in {trained.path} was trained on {trained.config.env_id}; "
+                f"evaluate it with --env {trained.config.env_id}"
+            )
+        env_config = trained.config.env
         if switching is not None:
             env_config = replace(env_config, switching=switching)
         return replace(env_config, scenario=None), trained.as_policy()

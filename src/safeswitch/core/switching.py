@@ -10,10 +10,10 @@ logic's own backups), and why.
 switching through it. It wraps any logic with the checks that must hold whatever the logic does:
 
 * a learned action with a NaN or infinite component is never executed. In its place the
-  *fallback* action is proposed — by default the Safety controller's, but a task can name a
-  better one (the left turn proposes its rule-based ``PID_th``: braking wherever the car
-  happens to be can stop it in the other car's path) — and the logic decides about it as about
-  any proposal. The tick counts as an intervention (``safety_active``; reason
+  *fallback* action is proposed — by default the Safety controller's; the wrappers and the left
+  turn hold the last command instead (a zero-order hold: braking wherever the car happens to
+  be can stop it in the other car's path) — and the logic decides about it as about any
+  proposal. The tick counts as an intervention (``safety_active``; reason
   ``invalid_learned_action``): the learned controller was not used;
 * finite learned actions are clipped to the input bounds *before* the logic sees them, so the
   logic judges exactly what would be executed;

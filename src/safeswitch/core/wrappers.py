@@ -15,6 +15,10 @@ decision in ``info``:
 * ``learned_action``, ``executed_action`` (arrays) — what the agent asked for, what ran;
 * ``action_clipped`` (bool) — the learned action lay outside the action space and was clipped.
 
+A learned action with a NaN or infinite component is never executed: the last executed action
+is proposed in its place (a zero-order hold; the Safety controller's action on an episode's
+first step) and the logic judges it like any proposal; the step counts as an intervention.
+
 An SB3 ``Monitor`` placed *outside* the wrapper logs returns with the penalty, one inside
 without it.
 """
@@ -102,7 +106,9 @@ class _Supervisor:
             )
         return learned.reshape(batch, self.dim)
 
-    def step(self, state: Any, actions: Any, batch: int) -> Supervision:
+    def step(self, state: Any, actions: Any, batch: int, held: FloatArray | None) -> Supervision:
+        """One supervised step; ``held``: the last executed actions ``[B, A]`` (the fallback
+        for an invalid learned action; ``None`` or NaN rows: the safety action)."""
         learned = self.learned(actions, batch)
         safe = np.asarray(self.safety_controller(state), dtype=np.float64)
         if safe.shape != (batch, self.dim):
@@ -110,7 +116,8 @@ class _Supervisor:
                 f"the Safety controller returned shape {safe.shape}; expected {(batch, self.dim)}"
                 " (actions [B, A])"
             )
-        return supervise(self.logic, state, learned, safe, self.low, self.high)
+        fallback = safe if held is None else np.where(np.isfinite(held), held, safe)
+        return supervise(self.logic, state, learned, safe, self.low, self.high, fallback)
 
     def executed(self, sup: Supervision) -> NDArray[Any]:
         """The executed actions in the space's dtype and shape, bounds kept after the cast."""
@@ -164,6 +171,7 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
         )
         self.state_fn = state_fn
         self._observation: Any = None
+        self._held: FloatArray | None = None
         self.last_supervision: Supervision | None = None
 
     @property
@@ -181,11 +189,13 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
         self._observation = observation
+        self._held = None
         return observation, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        sup = self.supervisor.step(self.state(), action, 1)
+        sup = self.supervisor.step(self.state(), action, 1, self._held)
         self.last_supervision = sup
+        self._held = sup.executed
         observation, reward, terminated, truncated, info = self.env.step(
             self.supervisor.executed(sup)[0]
         )
@@ -228,6 +238,7 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         )
         self.state_fn = state_fn
         self._observation: Any = None
+        self._held: FloatArray | None = None
         self._pending: Supervision | None = None
         self.last_supervision: Supervision | None = None
 
@@ -246,10 +257,11 @@ class SafeSwitchVecEnv(VecEnvWrapper):
     def reset(self) -> VecEnvObs:
         observation = self.venv.reset()
         self._observation = observation
+        self._held = None
         return observation
 
     def step_async(self, actions: np.ndarray) -> None:
-        sup = self.supervisor.step(self.state(), actions, self.num_envs)
+        sup = self.supervisor.step(self.state(), actions, self.num_envs, self._held)
         self._pending = sup
         self.venv.step_async(self.supervisor.executed(sup))
 
@@ -261,6 +273,8 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         self.last_supervision = sup
         observation, rewards, dones, infos = self.venv.step_wait()
         self._observation = observation
+        # hold the executed actions; an environment that starts a new episode has none
+        self._held = np.where(dones[:, None], np.nan, sup.executed)
         rewards = rewards + np.where(sup.safety_active, self.supervisor.penalty, 0.0).astype(
             rewards.dtype
         )

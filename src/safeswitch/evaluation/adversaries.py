@@ -86,6 +86,18 @@ def broken(rng: np.random.Generator, p_invalid: float = 0.3) -> Policy:
     return policy
 
 
+def with_invalid(policy: Policy, rng: np.random.Generator, p_invalid: float = 0.3) -> Policy:
+    """``policy`` with NaN in place of its action on a random ``p_invalid`` of ticks (a broken
+    network or sensor pipeline); the rest of its behaviour unchanged."""
+
+    def broken_policy(obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
+        action = np.array(policy(obs, state, tick), dtype=np.float64)
+        action[rng.random(action.shape[0]) < p_invalid] = np.nan
+        return action
+
+    return broken_policy
+
+
 def noisy_cruise(task: LeftTurnTask, rng: np.random.Generator, sigma: float = 0.5) -> Policy:
     """A sensible driver (P control to the speed limit) with Gaussian action noise."""
     target = task.config.controllers.speed_limit

@@ -32,15 +32,17 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         config: Full configuration (a :class:`LeftTurnConfig` or a dict). The three arguments
             above override its fields when given; left out, the configuration's values hold
             (by default ``"paper"``, ``True`` and ``None``).
-        render_mode: ``None`` or ``"rgb_array"`` (``"human"`` is refused: no window is
-            opened; see ``safeswitch render``).
+        render_mode: ``None``, ``"rgb_array"`` (``render()`` returns the picture) or
+            ``"human"`` (a window, drawn on every step; needs ``pygame`` and a display — where
+            there is none, the first frame raises an error saying so; ``safeswitch render``
+            writes a GIF instead).
         env_index: Which stream of scenarios this environment draws from.
         learned_scope: ``"window"`` (Algorithm 1: the learned controller drives while both cars
             are at the intersection), ``"episode"`` (throughout) or ``"never"``; left out, the
             configuration's (``"window"`` by default).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 50}  # noqa: RUF012 (gym API)
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}  # noqa: RUF012
 
     def __init__(
         self,
@@ -90,6 +92,8 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._state = self.task.initial(scenarios)
         self._record = None
         info = {"scenario": scenario_info(self._state.scenarios, 0)}
+        if self.render_mode == "human":
+            self.render()
         return self.task.observe(self._state)[0], info
 
     def step(
@@ -97,6 +101,8 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         self._state, record = self.task.step(self.state, learned_actions(action, 1))
         self._record = record
+        if self.render_mode == "human":
+            self.render()
         return (
             record.observation[0],
             float(record.reward[0]),
@@ -107,8 +113,49 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:
-            gym.logger.warn("render() called without render_mode='rgb_array'")
+            gym.logger.warn("render() called without render_mode='rgb_array' or 'human'")
             return None
         from safeswitch.leftturn.render import render_scene
 
-        return render_scene(self.task, self.state, 0, self._record)
+        frame = render_scene(self.task, self.state, 0, self._record)
+        if self.render_mode == "rgb_array":
+            return frame
+        self._window = show_frame(frame, getattr(self, "_window", None))
+        return None
+
+    def close(self) -> None:
+        window = getattr(self, "_window", None)
+        if window is not None:
+            import pygame
+
+            pygame.display.quit()
+            self._window = None
+
+
+def show_frame(frame: NDArray[np.uint8], window: Any) -> Any:
+    """Draw ``frame`` in a pygame window (opened on the first call); returns the window.
+
+    Raises:
+        RuntimeError: pygame is missing, or there is no display to open a window on.
+    """
+    try:
+        import pygame
+    except ImportError as exc:
+        raise RuntimeError(
+            "render_mode='human' needs pygame (pip install pygame-ce); or use "
+            "render_mode='rgb_array', or `safeswitch render --out episode.gif`"
+        ) from exc
+    if window is None:
+        try:
+            pygame.display.init()
+            window = pygame.display.set_mode(frame.shape[1::-1])
+        except pygame.error as exc:
+            raise RuntimeError(
+                f"render_mode='human' needs a display and none can be opened here ({exc}); use "
+                "render_mode='rgb_array', or `safeswitch render --out episode.gif`"
+            ) from exc
+        pygame.display.set_caption("safeswitch/LeftTurn-v0")
+    pygame.surfarray.blit_array(window, frame.swapaxes(0, 1))
+    pygame.event.pump()
+    pygame.display.flip()
+    return window

@@ -12,8 +12,9 @@ One tick (paper Fig. 3 and Algorithm 1):
    intersection (or always, with ``learned_scope="episode"``), ``PID_th`` otherwise.
 3. The switching logic — the registered logic named by ``config.switching`` — decides through
    the framework's one supervision step, :func:`safeswitch.core.switching.supervise`: a NaN/inf
-   learned action is never executed (``PID_th``'s throttle is proposed in its place), and the
-   proposal or the safety action reaches the plant.
+   learned action is never executed — the pedals are held where they are (a zero-order hold of
+   the last command, as the actuators have it) and the logic judges that as any proposal —
+   and the proposal or the safety action reaches the plant.
 4. The plant advances 20 ms; the five reward terms are computed from the new state.
 
 Steps 1, 4 and the bookkeeping are loops compiled with numba over the episodes
@@ -346,7 +347,7 @@ class LeftTurnTask:
             self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
             self._layout, self._scope_code, learned_throttle,
             v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress, state.accel_lon,
-            state.scenarios.north_speed,
+            state.scenarios.north_speed, (v.throttle, v.brake),
             tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
             (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
             one, two, flags,
@@ -362,7 +363,10 @@ class LeftTurnTask:
         both, in_charge = flags
         # 2. The switching logic decides through the framework's one supervision step: the
         # proposal (learned while in charge, else PID_th), PID_b's brake as the safety action,
-        # and PID_th's throttle in place of an invalid learned action.
+        # and the pedals held where they are in place of an invalid learned action (braking
+        # instead, wherever the car is, stopped it in the north car's path: 266 collisions in
+        # 2,500 random episodes with 30 % NaN ticks under the paper logic; holding, 1 — as many
+        # as without the NaN ticks).
         conflict = ConflictState(
             ego_to_conflict=ego_to_conflict,
             ego_to_stop=ego_to_stop,
@@ -471,12 +475,7 @@ def build_task(
     constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`;
     ``learned_scope`` sets ``episode.learned_scope``)."""
     if render_mode not in (None, "rgb_array", "human"):
-        raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-    if render_mode == "human":
-        raise ValueError(
-            "render_mode='human' needs a window, which safeswitch does not open (it draws with "
-            "Pillow, headless); use render_mode='rgb_array', or `safeswitch render --out x.gif`"
-        )
+        raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
     resolved = resolve_config(config, **overrides)
     if learned_scope is not FROM_CONFIG:
         episode = {**to_dict(resolved.episode), "learned_scope": learned_scope}
@@ -541,14 +540,15 @@ def _controllers(
     base: IntArray, layout: ConflictLayout, scope: int, learned_throttle: FloatArray,
     x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, speed: FloatArray,
     progress: FloatArray, accel_lon: FloatArray, north_target: FloatArray,
-    pids: tuple[FloatArray, ...], lane: tuple[FloatArray, ...],
-    one: FloatArray, two: FloatArray, flags: BoolArray,
+    pedals: tuple[FloatArray, FloatArray], pids: tuple[FloatArray, ...],
+    lane: tuple[FloatArray, ...], one: FloatArray, two: FloatArray, flags: BoolArray,
 ) -> None:  # fmt: skip
     """Step 1 of the tick for every episode: ``PID_th`` on ``v_lim − v``, ``PID_b`` on
     ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, the
     north car's autopilot (feed-forward throttle for its target speed plus a speed PID); then
     who proposes the ego's pedals (``scope`` codes :data:`LEARNED_SCOPES`: the learned throttle
-    while in charge, else ``PID_th``'s) and the distances the switching logic reads.
+    while in charge, else ``PID_th``'s), the fallback for an invalid learned action (the
+    ``pedals`` — actual throttle and brake — held) and the distances the switching logic reads.
 
     ``pids`` holds (integral, previous error, derivative) of PID_th, PID_b and the autopilot's
     PID, ``[B]`` each; ``lane`` those of PID_lka, ``[B, 2]``. Written (by row): ``one``
@@ -600,7 +600,7 @@ def _controllers(
         flags[0, b], flags[1, b] = at, in_charge
         two[4, b, 0], two[4, b, 1] = (learned_throttle[b] if in_charge else rule), 0.0
         two[5, b, 0], two[5, b, 1] = 0.0, one[1, b]
-        two[6, b, 0], two[6, b, 1] = rule, 0.0
+        two[6, b, 0], two[6, b, 1] = pedals[0][b, 0], pedals[1][b, 0]
 
 
 @jit

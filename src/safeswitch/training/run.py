@@ -209,7 +209,8 @@ def learn(
         path = save()
         print(
             f"\ninterrupted at {model.num_timesteps:,} timesteps; checkpoint {path}; "
-            f"continue with: safeswitch train --resume --out {run}"
+            f"continue with: safeswitch train --resume --out {run}",
+            file=sys.stderr,
         )
         raise
 

@@ -1,0 +1,165 @@
+"""What a new user meets on the command line: help, version, errors that name the problem
+(exit 2, one line, nothing lost), rounded output, strict JSON, configs by name, checkpoints."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from safeswitch import __version__
+from safeswitch.cli import DEFAULT_CONFIG, main
+from safeswitch.training.config import TrainConfig, load_config, packaged_config_names
+from safeswitch.training.policies import SHIPPED_DIR
+
+EVAL = ["evaluate", "--controller", "learned", "--scenarios", "random", "--episodes", "6"]
+
+
+def error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err  # one line, no traceback
+    return err[0]
+
+
+def test_no_arguments_prints_help_and_version_and_module_entry_work(capsys):
+    assert main([]) == 0
+    assert "usage: safeswitch" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0 and capsys.readouterr().out.strip() == f"safeswitch {__version__}"
+    ran = subprocess.run(
+        [sys.executable, "-m", "safeswitch", "--version"], capture_output=True, text=True
+    )
+    assert ran.returncode == 0 and ran.stdout.strip() == f"safeswitch {__version__}"
+
+
+def test_packaged_configs_by_name_and_the_default_is_the_papers_recipe(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # from any directory
+    assert {"paper", "paper_scratch", "certified", "none", "no_adas"} <= set(
+        packaged_config_names()
+    )
+    paper = load_config("paper")
+    assert paper.env.switching == "paper" and paper.env.adas_penalty
+    default = load_config(DEFAULT_CONFIG)
+    assert default.env.episode.learned_scope == "episode"  # not the env's comfort-breaking window
+    assert default.ppo.learning_rate == 2.5e-4 and default.timesteps == 1_200_000  # Table II
+    assert default != TrainConfig()
+
+
+def test_bad_configs_are_refused_by_name(tmp_path, capsys):
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("# nothing here\n")
+    assert main(["train", "--config", str(empty), "--out", str(tmp_path / "r1")]) == 2
+    assert "empty.yaml is empty" in error_line(capsys)
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("ppo: {gamma: [0.9\n")
+    assert main(["train", "--config", str(broken), "--out", str(tmp_path / "r2")]) == 2
+    assert "broken.yaml is not valid YAML" in error_line(capsys)
+    assert main(["train", "--config", "no_such_config", "--out", str(tmp_path / "r3")]) == 2
+    assert "no configuration 'no_such_config'" in error_line(capsys)
+    assert not (tmp_path / "r1").exists() and not (tmp_path / "r2").exists()
+
+
+def test_out_that_is_a_file_or_a_used_folder_is_refused_and_nothing_is_lost(tmp_path, capsys):
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep me")
+    for args in (
+        ["train", "--out", str(precious), "--timesteps", "10"],
+        [*EVAL, "--model", "shipped", "--out", str(precious)],
+        ["reproduce", "--quick", "--out", str(precious)],
+    ):
+        assert main(args) == 2
+        assert "is a file" in error_line(capsys)
+    assert precious.read_text() == "keep me"
+    used = tmp_path / "used"
+    used.mkdir()
+    (used / "summary.json").write_text("{}")
+    assert main([*EVAL, "--model", "shipped", "--out", str(used)]) == 2
+    assert "--overwrite" in error_line(capsys)
+    assert (used / "summary.json").read_text() == "{}"
+    assert main([*EVAL, "--model", "shipped", "--out", str(used), "--overwrite"]) == 0
+    summary = (used / "summary.json").read_text()
+    assert summary.endswith("}\n") and json.loads(summary)["episodes"] == 6
+
+
+def test_a_baseline_with_a_model_is_refused(capsys):
+    args = ["evaluate", "--controller", "rule", "--model", "shipped", "--episodes", "2"]
+    assert main(args) == 2
+    assert "--controller rule does not use one" in error_line(capsys)
+
+
+def test_a_policy_without_its_observation_statistics_is_refused(tmp_path, capsys):
+    run = tmp_path / "run"
+    shutil.copytree(SHIPPED_DIR / "paper", run)
+    (run / "vecnormalize.pkl").unlink()
+    assert main([*EVAL, "--model", str(run)]) == 2
+    assert "vecnormalize.pkl is missing" in error_line(capsys)
+    (run / "vecnormalize.pkl").write_bytes(
+        (SHIPPED_DIR / "paper" / "vecnormalize.pkl").read_bytes()[:50]
+    )
+    assert main([*EVAL, "--model", str(run)]) == 2
+    assert "vecnormalize.pkl is truncated or corrupt" in error_line(capsys)
+    (run / "vecnormalize.pkl").unlink()
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    config["ppo"]["normalize_observations"] = False  # a run trained without normalisation
+    (run / "config.yaml").write_text(yaml.safe_dump(config))
+    assert main([*EVAL, "--model", str(run), "--json"]) == 0
+    capsys.readouterr()
+    (run / "model.zip").write_bytes(b"not a zip file")
+    assert main([*EVAL, "--model", str(run)]) == 2
+    line = error_line(capsys)
+    assert "model.zip is not a readable SB3 model" in line and "Error: Error" not in line
+    assert line.count("error:") == 1
+
+
+def test_json_is_strict_and_a_policy_that_never_clears_says_so(capsys):
+    assert main([*EVAL, "--model", "certified", "--json"]) == 0
+    out = capsys.readouterr().out
+    assert out.endswith("}\n")
+    summary = json.loads(out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
+    assert summary["cleared_episodes"] == 0 and summary["mean_time_to_clear_s"] is None
+
+
+def test_human_readable_output_is_rounded_without_python_reprs(capsys):
+    assert main([*EVAL, "--model", "shipped"]) == 0
+    out = capsys.readouterr().out
+    assert "{" not in out and "'" not in out
+    for line in out.splitlines():
+        value = line.split(":", 1)[1].strip()
+        if value.replace(".", "").replace(",", "").isdigit() and "." in value:
+            assert len(value.split(".")[1]) <= 4, line
+
+
+def test_a_checkpoint_and_an_interrupted_run_can_be_evaluated(
+    tmp_path, interrupted_training, capsys
+):
+    config = TrainConfig(
+        timesteps=8192, n_envs=8, checkpoint_every=2048, eval_episodes=0, torch_threads=1, seed=2
+    )
+    run = tmp_path / "run"
+    interrupted_training(config, run, at=4096)
+    checkpoint = sorted((run / "checkpoints").glob("step_*"))[-1]
+    assert main([*EVAL, "--model", str(checkpoint), "--json"]) == 0
+    from_checkpoint = json.loads(capsys.readouterr().out)
+    assert main([*EVAL, "--model", str(run), "--json"]) == 0  # the run's latest checkpoint
+    from_run = json.loads(capsys.readouterr().out)
+    assert from_run["episodes"] == from_checkpoint["episodes"] == 6
+    assert from_run["mean_return"] == from_checkpoint["mean_return"]
+
+
+def test_render_writes_an_animation_of_one_episode(tmp_path, capsys):
+    from PIL import Image
+
+    out = tmp_path / "episode.gif"
+    assert main(["render", "--model", "shipped", "--scenario", "yield1", "--out", str(out)]) == 0
+    with Image.open(out) as gif:
+        assert gif.n_frames >= 50
+    assert main(["render", "--model", "shipped", "--scenario", "sideways", "--out",
+                 str(tmp_path / "x.gif")]) == 2  # fmt: skip
+    assert "'sideways' is not one of cut, yield1, yield2 or random:K" in error_line(capsys)
+    assert (
+        main(["render", "--controller", "rule", "--scenario", "random:3", "--out", str(out)]) == 2
+    )
+    assert "--overwrite" in error_line(capsys)
