@@ -33,6 +33,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from safeswitch.core.arrays import clamp
 from safeswitch.core.registry import LogicContextError
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.core.wrappers import SafeSwitch
@@ -192,11 +193,11 @@ class HighwaySafetyController:
         short = short < 2 * r.min_gap + speed * r.decision_period
         # never command more braking than stops the car within one decision period
         brake = np.minimum(r.ego_max_brake, speed / r.decision_period)
-        accel = np.where(short, -brake, 0.0)
         steer = -r.lateral_gain * lateral - r.heading_gain * heading
-        return np.stack(
-            [np.clip(accel / ACCEL_RANGE, -1, 1), np.clip(steer / STEER_RANGE, -1, 1)], axis=1
-        )
+        out = np.empty((state.shape[0], 2))
+        out[:, 0] = np.where(short, -brake / ACCEL_RANGE, 0.0)
+        out[:, 1] = clamp(steer / STEER_RANGE, -1.0, 1.0)
+        return out
 
 
 class TimeToCollisionLogic:

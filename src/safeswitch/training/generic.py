@@ -230,9 +230,14 @@ def run_episodes(
 
 
 def train_env(
-    config: EnvTrainConfig, out: str | Path, resume: bool = False, progress_bar: bool = True
+    config: EnvTrainConfig,
+    out: str | Path,
+    resume: bool = False,
+    progress_bar: bool = True,
+    callbacks: list[BaseCallback] | None = None,
 ) -> dict[str, Any]:
-    """Train (or resume) a run on ``config.env_id``; returns ``metrics.json``'s contents."""
+    """Train (or resume) a run on ``config.env_id``; returns ``metrics.json``'s contents.
+    ``callbacks``: further SB3 callbacks (e.g. a benchmark's own recording)."""
     run = Path(out)
     torch.set_num_threads(config.torch_threads)
     checkpoint = open_run(run, resume, dump_env_config(config))
@@ -255,7 +260,10 @@ def train_env(
         save,
         checkpoint["totals"] if checkpoint else None,
     )
-    learn(model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar)
+    learn(
+        model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar,
+        callbacks,
+    )  # fmt: skip
     wall = monitor.wall_time_s
     save_final(run, model, env)
     started = time.perf_counter()

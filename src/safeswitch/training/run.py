@@ -186,13 +186,14 @@ def learn(
     save: Any,
     resume: bool,
     progress_bar: bool,
+    extra: list[BaseCallback] | None = None,
 ) -> None:
     """PPO up to ``timesteps``; on Ctrl-C a checkpoint first (``save()``), then the
     interrupt goes on. ``progress_bar``: SB3's bar on a terminal, a plain line every 15 s
-    otherwise (a log never stays silent for minutes)."""
+    otherwise (a log never stays silent for minutes). ``extra``: further callbacks."""
     remaining = timesteps - model.num_timesteps
     terminal = sys.stderr.isatty()
-    callbacks: list[BaseCallback] = [monitor]
+    callbacks: list[BaseCallback] = [monitor, *(extra or [])]
     if progress_bar and not terminal:
         callbacks.append(ProgressLines(remaining, f"train {run.name}"))
     try:

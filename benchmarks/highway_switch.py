@@ -1,0 +1,241 @@
+"""The paper's claim on a second plant: PPO on highway-env with and without the switch.
+
+``safeswitch/Highway-v0`` (highway-env's ``highway-fast-v0``, continuous acceleration and
+steering) is trained with PPO (the paper's Table II, 4 environments) under the ``ttc`` switching
+logic with ``R_ADAS = -1`` and without any logic, with the same seeds. Reported per run: crashes
+and off-road departures during training, the share of steps on which the Safety controller acted
+(early vs late in training: the penalty should teach the policy not to need it), episode returns,
+and a final deterministic evaluation. Then the wrapper's own cost on a highway-env step.
+
+Run: ``python benchmarks/highway_switch.py [--timesteps N] [--seeds 1 2] [--json]``; writes
+``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+
+import _common
+import safeswitch
+from safeswitch.io import write_json
+from safeswitch.training.config import EnvTrainConfig, PPOConfig
+from safeswitch.training.generic import train_env
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results" / "highway.json"
+FIGURE = ROOT / "docs" / "highway_training.png"
+
+
+class Episodes(BaseCallback):
+    """Every finished episode of a run: timestep, return, crash, off-road, safety steps."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.rows: list[dict[str, float]] = []
+        self._safety: np.ndarray | None = None
+
+    def _on_step(self) -> bool:
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        if self._safety is None:
+            self._safety = np.zeros(len(infos))
+        for i, info in enumerate(infos):
+            self._safety[i] += bool(info.get("safety_active", False))
+            if dones[i]:
+                self.rows.append(
+                    {
+                        "timestep": self.num_timesteps,
+                        "return": float(info["episode"]["r"]),
+                        "length": int(info["episode"]["l"]),
+                        "crashed": bool(info.get("crashed", False)),
+                        "off_road": info["rewards"]["on_road_reward"] == 0,
+                        "safety_steps": float(self._safety[i]),
+                    }
+                )
+                self._safety[i] = 0
+        return True
+
+
+def train_one(switching: str, seed: int, timesteps: int) -> dict[str, object]:
+    config = EnvTrainConfig(
+        env_id=safeswitch.HIGHWAY_ENV_ID,
+        switching=switching,
+        penalty=-1.0,
+        timesteps=timesteps,
+        n_envs=4,
+        seed=seed,
+        torch_threads=1,
+        checkpoint_every=10 * timesteps,
+        eval_episodes=20,
+        ppo=PPOConfig(),
+    )
+    episodes = Episodes()
+    with tempfile.TemporaryDirectory() as tmp:
+        metrics = train_env(config, Path(tmp) / "run", progress_bar=False, callbacks=[episodes])
+    rows = episodes.rows
+    steps = np.array([r["length"] for r in rows], dtype=float)
+    safety = np.array([r["safety_steps"] for r in rows])
+    when = np.array([r["timestep"] for r in rows])
+    early, late = when <= 0.2 * timesteps, when > 0.8 * timesteps
+
+    def rate(mask: np.ndarray) -> float:
+        return float(safety[mask].sum() / max(steps[mask].sum(), 1))
+
+    def mean_return(mask: np.ndarray) -> float:
+        return float(np.mean([r["return"] for r, m in zip(rows, mask, strict=True) if m]))
+
+    return {
+        "switching": switching,
+        "seed": seed,
+        "timesteps": metrics["timesteps"],
+        "wall_time_s": metrics["wall_time_s"],
+        "episodes": len(rows),
+        "crashes": int(sum(r["crashed"] for r in rows)),
+        "off_road": int(sum(r["off_road"] for r in rows)),
+        "safety_rate_first_20pct": rate(early),
+        "safety_rate_last_20pct": rate(late),
+        "return_first_20pct": mean_return(early),
+        "return_last_20pct": mean_return(late),
+        "evaluation": metrics["evaluation"],
+        "curve": [
+            {
+                "timestep": int(r["timestep"]),
+                "return": r["return"],
+                "safety_rate": r["safety_steps"] / max(r["length"], 1),
+                "failure": bool(r["crashed"] or r["off_road"]),
+            }
+            for r in rows
+        ],
+    }
+
+
+def wrapper_overhead(steps: int = 600, rounds: int = 5) -> dict[str, float]:
+    """Time per step of the raw highway-env environment and of the same environment inside
+    SafeSwitch with the ``none`` logic (same trajectory: state read-out, Safety controller and
+    supervision are the overhead) and with ``ttc``; interleaved rounds, medians."""
+    import highway_env  # noqa: F401
+
+    from safeswitch.examples.highway import HIGHWAY_CONFIG
+
+    actions = np.random.default_rng(0).uniform(-1, 1, (steps, 2)).astype(np.float32)
+    makers = {
+        "raw": lambda: gym.make("highway-fast-v0", config=HIGHWAY_CONFIG),
+        "safeswitch_none": lambda: gym.make(safeswitch.HIGHWAY_ENV_ID, switching="none"),
+        "safeswitch_ttc": lambda: gym.make(safeswitch.HIGHWAY_ENV_ID, switching="ttc"),
+    }
+    times: dict[str, list[float]] = {name: [] for name in makers}
+    for _ in range(rounds):
+        for name, make in makers.items():
+            env = make()
+            env.reset(seed=0)
+            start = time.perf_counter()
+            for action in actions:
+                *_, terminated, truncated, _ = env.step(action)
+                if terminated or truncated:
+                    env.reset(seed=0)
+            times[name].append((time.perf_counter() - start) / steps)
+            env.close()
+    out = {f"{name}_ms_per_step": 1e3 * statistics.median(v) for name, v in times.items()}
+    paired = [w / r for w, r in zip(times["safeswitch_none"], times["raw"], strict=True)]
+    out["none_over_raw"] = statistics.median(paired) - 1.0
+    return out
+
+
+def figure(runs: list[dict[str, object]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4), constrained_layout=True)
+    colours = {"ttc": "tab:blue", "none": "tab:red"}
+    for run in runs:
+        curve = run["curve"]
+        assert isinstance(curve, list)
+        t = np.array([c["timestep"] for c in curve])
+        label = f"{run['switching']} (seed {run['seed']})"
+        style = {"color": colours[str(run["switching"])], "alpha": 0.8, "label": label}
+        window = 25
+        for ax, key in ((axes[0], "safety_rate"), (axes[1], "return"), (axes[2], "failure")):
+            values = np.array([float(c[key]) for c in curve])
+            if values.size >= window:
+                smooth = np.convolve(values, np.ones(window) / window, mode="valid")
+                ax.plot(t[window - 1 :], smooth, **style)
+    axes[0].set_ylabel("share of steps the Safety controller acted")
+    axes[1].set_ylabel("episode return (penalty included)")
+    axes[2].set_ylabel("episodes ending in a crash or off the road")
+    for ax in axes:
+        ax.set_xlabel("training timesteps")
+        ax.legend(fontsize=7)
+    fig.suptitle(
+        f"PPO on {safeswitch.HIGHWAY_ENV_ID}: with the ttc switch vs without (25-episode means)"
+    )
+    path.parent.mkdir(exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--timesteps", type=int, default=30_000)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    runs = []
+    for seed in args.seeds:
+        for switching in ("ttc", "none"):
+            run = train_one(switching, seed, args.timesteps)
+            runs.append(run)
+            print(
+                f"{switching:5} seed {seed}: {run['episodes']} episodes, crashes {run['crashes']},"
+                f" off road {run['off_road']}, safety rate {run['safety_rate_first_20pct']:.3f} →"
+                f" {run['safety_rate_last_20pct']:.3f}, return {run['return_first_20pct']:.1f} →"
+                f" {run['return_last_20pct']:.1f} ({run['wall_time_s']:.0f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
+    result = {
+        "benchmark": "highway_switch",
+        **_common.machine(),
+        "timesteps": args.timesteps,
+        "runs": runs,
+        "wrapper_overhead": wrapper_overhead(),
+    }
+    write_json(RESULTS, result)
+    figure(runs, FIGURE)
+    if args.json:
+        _common.emit({k: v for k, v in result.items() if k != "runs"}, True)
+        return 0
+    print("| logic | seed | crashes in training | off road | episodes | safety rate first → "
+          "last 20 % | return first → last 20 % | evaluation: crashes / 20 |")  # fmt: skip
+    print("| --- | ---: | ---: | ---: | ---: | --- | --- | ---: |")
+    for r in runs:
+        e = r["evaluation"]
+        assert isinstance(e, dict)
+        print(
+            f"| {r['switching']} | {r['seed']} | {r['crashes']} | {r['off_road']} | "
+            f"{r['episodes']} | {r['safety_rate_first_20pct']:.3f} → "
+            f"{r['safety_rate_last_20pct']:.3f} | {r['return_first_20pct']:.1f} → "
+            f"{r['return_last_20pct']:.1f} | {e['collisions']} |"
+        )
+    o = result["wrapper_overhead"]
+    print(
+        f"step: raw {o['raw_ms_per_step']:.2f} ms, SafeSwitch(none) "
+        f"{o['safeswitch_none_ms_per_step']:.2f} ms ({100 * o['none_over_raw']:+.1f} %), "
+        f"SafeSwitch(ttc) {o['safeswitch_ttc_ms_per_step']:.2f} ms"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

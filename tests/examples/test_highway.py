@@ -1,0 +1,94 @@
+"""The framework on highway-env (a plant nobody here wrote): SafeSwitch with the ``ttc`` logic,
+and ``train``/``evaluate --env`` for any registered environment."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import safeswitch
+from safeswitch.cli import main
+from safeswitch.core.registry import register_safety_controller
+
+pytest.importorskip("highway_env")
+
+
+def run_random(switching, episodes, seed=0):
+    env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching=switching)
+    rng = np.random.default_rng(seed)
+    crashes = off_road = steps = safety = 0
+    reasons = set()
+    for k in range(episodes):
+        env.reset(seed=seed + k)
+        done = False
+        while not done:
+            *_, terminated, truncated, info = env.step(rng.uniform(-1, 1, 2))
+            steps += 1
+            safety += info["safety_active"]
+            reasons.add(info["reason"])
+            done = terminated or truncated
+        crashes += info["crashed"]
+        off_road += info["rewards"]["on_road_reward"] == 0
+    env.close()
+    return crashes, off_road, steps, safety, reasons
+
+
+def test_ttc_keeps_a_random_driver_on_the_road_and_out_of_other_cars():
+    crashes, off_road, steps, safety, reasons = run_random("ttc", 5)
+    assert crashes == 0 and off_road == 0
+    assert steps >= 5 * 150  # every episode ran its whole 30 s
+    assert safety > 0.2 * steps and {"learned", "off_road"} <= reasons
+    # without the switch the same random driver leaves the road in nearly every episode
+    crashes, off_road, steps, safety, _ = run_random("none", 5)
+    assert crashes + off_road >= 4 and safety == 0
+
+
+def test_the_wrapper_records_and_penalises_every_safety_step():
+    env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching="ttc", penalty=-2.0)
+    env.reset(seed=3)
+    for _ in range(40):
+        _, reward, _, _, info = env.step(np.array([1.0, 1.0], dtype=np.float32))  # hard left
+        assert info["cost"] == float(info["safety_active"])
+        if info["safety_active"]:
+            assert reward < 0  # the penalty outweighs highway-env's [0, 1] reward
+            assert not np.array_equal(info["executed_action"], info["learned_action"])
+    assert env.unwrapped.vehicle.on_road
+
+
+def test_train_and_evaluate_any_registered_env(tmp_path, capsys):
+    run = tmp_path / "run"
+    args = ["train", "--env", safeswitch.HIGHWAY_ENV_ID, "--switching", "ttc", "--timesteps",
+            "256", "--n-envs", "1", "--out", str(run), "--no-progress"]  # fmt: skip
+    assert main(args) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["env_id"] == safeswitch.HIGHWAY_ENV_ID and metrics["timesteps"] >= 256
+    assert metrics["training"]["collisions"] == 0
+    capsys.readouterr()
+    args = ["evaluate", "--env", safeswitch.HIGHWAY_ENV_ID, "--model", str(run), "--episodes",
+            "2", "--json"]  # fmt: skip
+    assert main(args) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["episodes"] == 2 and summary["switching"] == "ttc"
+    assert summary["collisions"] == 0
+
+
+def test_an_env_with_a_registered_safety_controller_trains_through_safeswitch(tmp_path):
+    from tests.core.plants import BrakingEnvelope, Follow, full_brake
+
+    env_id = "tests/Follow-v0"
+    if env_id not in gym.registry:
+        gym.register(env_id, entry_point=Follow, kwargs={"horizon": 50})
+    register_safety_controller(env_id, lambda env: full_brake)
+    safeswitch.register_logic("braking-envelope", lambda env: BrakingEnvelope(), replace=True)
+    run = tmp_path / "run"
+    args = ["train", "--env", env_id, "--switching", "braking-envelope", "--timesteps", "512",
+            "--n-envs", "2", "--out", str(run), "--no-progress"]  # fmt: skip
+    assert main(args) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    training = metrics["training"]
+    assert training["collisions"] == 0 and training["safety_activation_steps"] > 0
+    with pytest.raises(Exception, match="no Safety controller is registered"):
+        from safeswitch.training.generic import make_supervised_env
+
+        make_supervised_env("CartPole-v1", "none")
