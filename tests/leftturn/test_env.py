@@ -286,3 +286,54 @@ def test_vec_env_follows_the_dummy_vec_env_contract():
     as_list = list(infos)
     assert len(as_list) == 3 and all(isinstance(i["reason"], str) for i in as_list)
     assert "terminal_observation" in infos[0] and infos[-1] is infos[2]
+
+
+def test_a_decision_holds_the_action_for_decision_interval_ticks():
+    """With decision_interval 5 one step is 5 ticks of the same action: the same trajectory
+    and summed reward as five 1-tick steps; the VecEnv agrees with the Env; episodes still
+    end on the tick they end."""
+    base = {"episode": {"learned_scope": "episode"}}
+    fine = LeftTurnEnv(config=base, switching="none")
+    held = {"episode": {"learned_scope": "episode", "decision_interval": 5}}
+    coarse = LeftTurnEnv(config=held, switching="none")
+    fine.reset(seed=4)
+    coarse.reset(seed=4)
+    actions = np.random.default_rng(0).uniform(-1, 1, 200)
+    for a in actions:
+        total, done = 0.0, False
+        for _ in range(5):
+            obs_f, r, term_f, trunc_f, _ = fine.step(np.array([a], dtype=np.float32))
+            total += r
+            if term_f or trunc_f:
+                done = True
+                break
+        obs_c, reward, term_c, trunc_c, _ = coarse.step(np.array([a], dtype=np.float32))
+        np.testing.assert_array_equal(obs_c, obs_f)
+        assert reward == pytest.approx(total) and (term_c, trunc_c) == (term_f, trunc_f)
+        if done:
+            break
+    assert done and (term_c or trunc_c)  # the episode's end was reached, on the same tick
+    held = {"episode": {"learned_scope": "episode", "decision_interval": 5}}
+    vec = make_vec_env(1, seed=4, switching="none", config=held)
+    vec.reset()
+    coarse.reset(seed=4)
+    for a in actions[:30]:
+        obs_v, reward_v, _, _ = vec.step(np.array([[a]], dtype=np.float32))
+        obs_c, reward_c, *_ = coarse.step(np.array([a], dtype=np.float32))
+        np.testing.assert_array_equal(obs_v[0], obs_c)
+        assert reward_v[0] == pytest.approx(reward_c, rel=1e-6)
+
+
+def test_rollouts_ask_the_policy_once_per_decision():
+    from safeswitch.evaluation.rollout import rollout
+    from safeswitch.leftturn.task import LeftTurnTask
+
+    task = LeftTurnTask(resolve_config({"episode": {"decision_interval": 4}}))
+    asked = []
+
+    def policy(obs, state, tick):
+        asked.append(tick)
+        return np.zeros(obs.shape[0])
+
+    rollout(task, task.draw_scenarios(0, np.arange(3), np.zeros(3, int)), policy)
+    assert asked == list(range(0, task.config.episode.horizon_ticks, 4))

@@ -81,8 +81,11 @@ def rollout(
     ended_outcome = np.zeros(batch, dtype=np.int8)
     observation = task.observe(state)
     invalid_code = task.reasons.index("invalid_learned_action")
+    interval = config.episode.decision_interval
+    actions = np.zeros(batch)
     for tick in range(config.episode.horizon_ticks):
-        actions = policy(observation, state, tick)
+        if tick % interval == 0:  # the learned controller decides every decision_interval ticks
+            actions = policy(observation, state, tick)
         state, record = task.step(state, actions)
         # Ended episodes keep stepping (no reset) but no longer count.
         stats.update(record, config, live)

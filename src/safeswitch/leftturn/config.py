@@ -394,6 +394,11 @@ class EpisodeConfig:
             still applies).
         conflict_margin_m: Clearance added to both footprints when the conflict zones are
             computed [m] (ours).
+        decision_interval: Ticks for which the learned controller's action is held: one
+            environment step of the Gymnasium ``Env`` and the ``VecEnv`` is this many ticks
+            (ours; 1 = a decision every 20 ms tick, the paper's rate). The plant, the
+            rule-based controllers and the switching logic keep their 50 Hz: the safety net
+            acts on every tick.
     """
 
     dt: float = 0.02
@@ -401,6 +406,7 @@ class EpisodeConfig:
     approach_distance_m: float = 30.0
     learned_scope: LearnedScope = "window"
     conflict_margin_m: float = 0.3
+    decision_interval: int = 1
 
     def __post_init__(self) -> None:
         o = "episode"
@@ -419,6 +425,13 @@ class EpisodeConfig:
             "conflict_margin_m",
             self.conflict_margin_m,
             "must be in [0, 2] m",
+        )
+        check(
+            1 <= self.decision_interval <= 50,
+            o,
+            "decision_interval",
+            self.decision_interval,
+            "must be in [1, 50] ticks",
         )
 
     @property

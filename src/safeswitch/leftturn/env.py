@@ -99,7 +99,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        self._state, record = self.task.step(self.state, learned_actions(action, 1))
+        self._state, record = self.task.hold(self.state, learned_actions(action, 1))
         self._record = record
         if self.render_mode == "human":
             self.render()

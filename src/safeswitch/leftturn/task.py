@@ -26,7 +26,8 @@ the batch size, so the Gymnasium ``Env`` is fast too.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
 from typing import Any, NamedTuple, cast
 
 import numpy as np
@@ -319,6 +320,37 @@ class LeftTurnTask:
             ego_brake=v.brake[:, 0],
         )
 
+    def hold(
+        self,
+        state: TaskState,
+        action: FloatArray,
+        on_tick: Callable[[StepRecord, BoolArray], None] | None = None,
+    ) -> tuple[TaskState, StepRecord]:
+        """One decision of the learned controller: ``episode.decision_interval`` ticks with
+        ``action`` held, stopping early once every episode has ended. The record merges the
+        ticks (see :func:`merge_tick`): an episode's reward and reward terms are summed over
+        its ticks up to the one it ended on; collision, safety activation and clipping hold if
+        they held on any of them; the rest is the last tick's (the ending one for an episode
+        that ended). ``on_tick(record, live)`` sees every tick with the episodes still live."""
+        ticks = self.config.episode.decision_interval
+        state, record = self.step(state, action)
+        live = np.ones(state.batch_size, dtype=np.bool_)
+        if on_tick is not None:
+            on_tick(record, live)
+        if ticks == 1:
+            return state, record
+        merged = replace(record, terms=dict(record.terms))
+        live = live & ~(record.terminated | record.truncated)
+        for _ in range(ticks - 1):
+            if not live.any():
+                break
+            state, record = self.step(state, action)
+            if on_tick is not None:
+                on_tick(record, live)
+            merge_tick(merged, record, live)
+            live = live & ~(record.terminated | record.truncated)
+        return state, merged
+
     def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
         """Advance every episode by one tick.
 
@@ -442,6 +474,29 @@ class LeftTurnTask:
             ego_cleared=ego_cleared,
         )
         return new_state, record
+
+
+#: How :meth:`LeftTurnTask.hold` merges the records of the ticks of one decision: summed over
+#: the episode's ticks, true if on any of them; every other field is the last tick's.
+_SUMMED = ("reward",)
+_ANY = ("collision", "safety_active", "action_clipped")
+
+
+def merge_tick(merged: StepRecord, record: StepRecord, live: BoolArray) -> None:
+    """Fold one more tick's ``record`` into ``merged`` for the episodes that were ``live``
+    during it (in place)."""
+    merged.reward = merged.reward + np.where(live, record.reward, 0.0)
+    merged.terms = {
+        name: merged.terms[name] + np.where(live, record.terms[name], 0.0) for name in merged.terms
+    }
+    for name in _ANY:
+        setattr(merged, name, getattr(merged, name) | (getattr(record, name) & live))
+    for f in fields(StepRecord):
+        if f.name in (*_SUMMED, *_ANY, "terms"):
+            continue
+        new, old = getattr(record, f.name), getattr(merged, f.name)
+        mask = live[:, None] if new.ndim == 2 else live
+        setattr(merged, f.name, np.where(mask, new, old))
 
 
 def learned_actions(action: Any, batch: int) -> FloatArray:

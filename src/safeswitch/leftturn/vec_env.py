@@ -220,9 +220,12 @@ class LeftTurnVecEnv(VecEnv):
     def step_wait(self) -> VecEnvStepReturn:
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
-        self._state, record = self.task.step(self.state, self._actions)
+        self._state, record = self.task.hold(
+            self.state,
+            self._actions,
+            lambda tick, live: self._stats.update(tick, self.config, live),
+        )
         self._actions = None
-        self._stats.update(record, self.config)
         done = record.terminated | record.truncated
         observation = record.observation
         ended = np.flatnonzero(done)
