@@ -23,11 +23,15 @@ class UsageError(ValueError):
 def _errors() -> tuple[type[BaseException], ...]:
     """What a command reports as one line and exit code 2 (imported lazily: the heavy
     modules load only for the command that needs them)."""
+    from safeswitch.app.distributed import DistributedError
     from safeswitch.core.config import ConfigError
     from safeswitch.core.switching import SwitchingError
     from safeswitch.io import OutputDirectoryError
 
-    return (ConfigError, SwitchingError, OutputDirectoryError, ValueError, FileNotFoundError)
+    return (
+        ConfigError, SwitchingError, OutputDirectoryError, DistributedError, ValueError,
+        FileNotFoundError,
+    )  # fmt: skip
 
 
 def _run(command: str, body: Callable[[], int]) -> int:
@@ -47,7 +51,9 @@ def _run(command: str, body: Callable[[], int]) -> int:
 def _number(value: Any) -> str:
     if value is None:
         return "–"
-    if isinstance(value, int):  # bool included
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
         return f"{value:,}"
     if isinstance(value, float):
         return f"{value:,.4g}" if abs(value) < 1e4 else f"{value:,.0f}"
@@ -247,6 +253,103 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cells(args: argparse.Namespace) -> list[Any]:
+    """The campaign's cells: every ``--controller`` × ``--model`` (learned only) ×
+    ``--switching`` (``None``: each controller's own logic)."""
+    from safeswitch.app.campaign import Cell
+
+    models = args.model or [None]
+    switchings = args.switching or [None]
+    cells = []
+    for controller in args.controller:
+        for model in models if controller == "learned" else [None]:
+            if controller == "learned" and model is None:
+                raise UsageError("--controller learned needs --model")
+            for switching in switchings:
+                cells.append(Cell(controller, model, switching))
+    return cells
+
+
+def _campaign(args: argparse.Namespace) -> int:
+    from safeswitch.app.campaign import Grid, Space, campaign
+
+    if args.scenarios == "grid":
+        grid = Grid.parse(args.grid or [])
+        space = Space("grid", grid.size, args.seed, grid)
+    elif args.grid:
+        raise UsageError("--grid needs --scenarios grid")
+    elif args.scenarios == "paper":
+        space = Space("paper", 3, args.seed)
+    else:
+        if args.episodes < 1:
+            raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+        space = Space("random", args.episodes, args.seed)
+    quiet = args.no_progress or args.json
+    result = campaign(
+        _cells(args), space, args.out, workers=args.workers, address=args.address,
+        resume=args.resume, shard_size=args.shard_size, progress=not quiet,
+    )  # fmt: skip
+    if args.json:
+        from safeswitch.io import to_json
+
+        sys.stdout.write(to_json(result.summary))
+    else:
+        for key, cell in result.summary["cells"].items():
+            print(f"{key}:")
+            print_summary({k: v for k, v in cell.items() if k not in ("controller", "model")})
+    for failure in result.failures:
+        print(
+            f"safeswitch campaign: shard {failure.shard} of {failure.cell} (episodes "
+            f"{failure.episodes[0]}–{failure.episodes[1]}, seed {failure.seed}) failed: "
+            f"{failure.error}",
+            file=sys.stderr,
+        )
+    return 1 if result.failures else 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from safeswitch.app.sweep import sweep
+
+    summary = sweep(
+        args.config, args.seeds, args.set or [], args.out, workers=args.workers,
+        address=args.address, timesteps=args.timesteps,
+    )  # fmt: skip
+    from safeswitch.app.sweep import table
+
+    print(table(summary))
+    return 1 if any("error" in r for r in summary["runs"].values()) else 0
+
+
+def _falsify(args: argparse.Namespace) -> int:
+    from safeswitch.app.falsify import Target, falsify
+
+    summary = falsify(
+        Target(args.controller, args.model, args.switching), args.out, budget=args.budget,
+        generation=args.generation, seed=args.seed, failure=args.failure, workers=args.workers,
+        address=args.address, overwrite=args.overwrite, progress=not args.no_progress,
+    )  # fmt: skip
+    for method, m in summary["methods"].items():
+        print(
+            f"{method:>14}: {m['failures']:,} {summary['failure']} failures in {m['episodes']:,} "
+            f"episodes ({m['failures_per_1000']:.2f} per 1,000); smallest separation "
+            f"{m['min_separation_m']:.3f} m"
+        )
+    ratio = summary["search_over_random"]
+    print("search / random: " + (f"{ratio:.1f}×" if ratio is not None else "random found none"))
+    print(f"folder: {args.out}")
+    return 0
+
+
+def _distributed(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--workers", type=int, default=2,
+        help="CPUs of a local Ray cluster started for this run (0: no Ray, one process)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--address", help="join an existing Ray cluster at host:port instead of a local one"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     from safeswitch.core.registry import logic_names
 
@@ -328,6 +431,61 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--out", required=True, help="the GIF to write (e.g. episode.gif)")
     render.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     render.set_defaults(func=_render)
+
+    camp = sub.add_parser(
+        "campaign", help="an evaluation campaign in shards on Ray (local or a cluster)"
+    )
+    camp.add_argument(
+        "--controller", nargs="+", default=["learned"],
+        choices=("learned", "rule", "planner", "oracle"), help="one or more controllers",
+    )  # fmt: skip
+    camp.add_argument("--model", nargs="+", help="trained policies (for --controller learned)")
+    camp.add_argument("--switching", nargs="+", choices=logics, help="logics (default: each's own)")
+    camp.add_argument("--scenarios", choices=("random", "grid", "paper"), default="random")
+    camp.add_argument("--episodes", type=int, default=100_000, help="random scenarios")
+    camp.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
+    camp.add_argument(
+        "--grid", nargs="+", metavar="NAME=SPEC",
+        help="grid axes: arrival_offset_s=-3:5:0.25 north_speed_kmh=20,26,32 "
+        "ego_speed_kmh=18:25:1 ego_start_distance_m=36 (stop included)",
+    )  # fmt: skip
+    camp.add_argument("--shard-size", type=int, default=10_000, help="episodes per Ray task")
+    camp.add_argument("--out", required=True, help="campaign folder")
+    camp.add_argument("--resume", action="store_true", help="skip the shards already done")
+    camp.add_argument("--json", action="store_true", help="print the summary as JSON")
+    camp.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
+    _distributed(camp)
+    camp.set_defaults(func=_campaign)
+
+    swp = sub.add_parser("sweep", help="train several seeds or settings of a config on Ray")
+    swp.add_argument("--config", default=DEFAULT_CONFIG, help="a configuration (name or file)")
+    swp.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    swp.add_argument(
+        "--set", nargs="+", metavar="KEY=V1,V2", help="vary a key, e.g. ppo.gamma=0.99,0.995"
+    )
+    swp.add_argument("--timesteps", type=int, help="override the config's training steps")
+    swp.add_argument("--out", required=True, help="folder of the runs")
+    _distributed(swp)
+    swp.set_defaults(func=_sweep)
+
+    fal = sub.add_parser(
+        "falsify", help="search the scenario space for failures (cross-entropy, on Ray)"
+    )
+    fal.add_argument(
+        "--controller", default="rule",
+        help="rule, planner, learned (with --model) or adversary:NAME (e.g. adversary:creep)",
+    )  # fmt: skip
+    fal.add_argument("--model", help="a trained policy (for --controller learned)")
+    fal.add_argument("--switching", choices=logics, help="the logic (default: the controller's)")
+    fal.add_argument("--failure", choices=("collision", "safety"), default="collision")
+    fal.add_argument("--budget", type=int, default=20_000, help="episodes per method")
+    fal.add_argument("--generation", type=int, default=500, help="episodes per generation")
+    fal.add_argument("--seed", type=int, default=0)
+    fal.add_argument("--out", required=True, help="output folder")
+    fal.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
+    fal.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
+    _distributed(fal)
+    fal.set_defaults(func=_falsify)
 
     bench = sub.add_parser("bench", help="throughput figures of the simulator and environments")
     bench.add_argument("--json", action="store_true", help="print one JSON object")

@@ -89,7 +89,7 @@ def evaluate(
     bar = Progress(total, f"evaluate {controller}", enabled=progress)
     try:
         for names, batch in chunks:
-            result, plan = run_controller(task, policy, batch)
+            result, plan = run_controller(task, policy, batch, trace=False)
             accumulator.add(result, plan.time_to_clear, env_config.episode.horizon_s)
             if writer is not None:
                 writer.write(names, batch, result, plan.time_to_clear)

@@ -82,15 +82,31 @@ def run_controller(
     batch: Scenarios,
     on_tick: Callable[[TaskState, StepRecord, int], None] | None = None,
     plan: OraclePlan | None = None,
+    trace: bool = True,
 ) -> tuple[RolloutResult, OraclePlan]:
     """One episode per scenario (the oracle's plan when ``policy`` is None), and the oracle's
-    plan of the same scenarios (``plan``, if already made for this road and these scenarios)."""
-    if plan is None or policy is None:
-        oracle = Oracle(task)
+    plan of the same scenarios (``plan``, if already made for this road and these scenarios).
+    The oracle reuses the rollout's north car (it never reacts to the ego) instead of
+    simulating it again; ``trace=False`` keeps only its times to clear and outcomes (no
+    per-tick arrays: what an evaluation's summary needs)."""
+    oracle = Oracle(task) if plan is None or policy is None else None
+    if policy is None:
+        assert oracle is not None
         plan = plan or oracle.plan(batch)
-        if policy is None:
-            return oracle.as_rollout(plan), plan
-    return rollout(task, batch, policy, on_tick), plan
+        return oracle.as_rollout(plan), plan
+    north: list[FloatArray] = [task.initial(batch).world.progress[:, 1].copy()]
+
+    def record(state: TaskState, step: StepRecord, tick: int) -> None:
+        north.append(state.world.progress[:, 1].copy())
+        if on_tick is not None:
+            on_tick(state, step, tick)
+
+    result = rollout(task, batch, policy, record)
+    if plan is None:
+        assert oracle is not None
+        complete = len(north) == task.config.episode.horizon_ticks + 1
+        plan = oracle.plan(batch, np.stack(north, axis=1) if complete else None, full=trace)
+    return result, plan
 
 
 def summary_against_oracle(

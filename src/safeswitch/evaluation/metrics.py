@@ -126,6 +126,29 @@ class SummaryAccumulator:
             self.maxima[key] = max(self.maxima[key], other.maxima[key])
         self.with_oracle |= other.with_oracle
 
+    def state(self) -> dict[str, Any]:
+        """Everything the accumulator holds, as plain JSON-able data (:meth:`from_state`
+        restores it: a campaign's shards travel as this)."""
+        return {
+            "counts": dict(self.counts),
+            "sums": {k: list(v) for k, v in self.sums.items()},
+            "term_sums": {k: list(v) for k, v in self.term_sums.items()},
+            "maxima": {k: (None if v == -math.inf else v) for k, v in self.maxima.items()},
+            "with_oracle": self.with_oracle,
+        }
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> SummaryAccumulator:
+        accumulator = cls()
+        accumulator.counts.update(state["counts"])
+        accumulator.sums = {k: list(v) for k, v in state["sums"].items()}
+        accumulator.term_sums = {k: list(v) for k, v in state["term_sums"].items()}
+        accumulator.maxima = {
+            k: (-math.inf if v is None else v) for k, v in state["maxima"].items()
+        }
+        accumulator.with_oracle = bool(state["with_oracle"])
+        return accumulator
+
     def summary(self) -> dict[str, Any]:
         """The summary (see the module docstring); undefined means are ``None``."""
         c, n = self.counts, self.counts["episodes"]

@@ -27,12 +27,15 @@ monotonically with ``θ``). All of it runs batched over scenarios, on the simula
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import jit
 from safeswitch.evaluation.rollout import RolloutResult
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
@@ -40,7 +43,14 @@ from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.sim.collision import rectangle_separation
 from safeswitch.sim.geometry import FloatArray
-from safeswitch.sim.vehicle import available_drive_force, driving_resistance
+from safeswitch.sim.vehicle import (
+    VehicleConstants,
+    available_drive_force,
+    drive_force,
+    driving_resistance,
+    resistance,
+    vehicle_constants,
+)
 
 #: Bisection steps on the braking time θ (resolution horizon / 2**steps, well below a tick).
 _BISECTION_STEPS = 16
@@ -136,6 +146,8 @@ class Oracle:
         for i in range(len(w_sq) - 2, -1, -1):
             w_sq[i] = min(w_sq[i], w_sq[i + 1] + step[i])
         self._w_sq = w_sq
+        #: The plant's force model (the oracle's engine and resistance).
+        self._plant = vehicle_constants(task.config.vehicle, task.config.episode.dt)
 
     @property
     def grid(self) -> FloatArray:
@@ -229,45 +241,84 @@ class Oracle:
 
         return self.integrate(start, law, ticks)
 
-    def plan(self, scenarios: Scenarios) -> OraclePlan:
-        """The minimum-time crossing of each scenario."""
+    @property
+    def kernel_constants(self) -> OracleConstants:
+        """What the compiled planner reads."""
+        geo, config, lim = self.task.conflict, self.task.config, self.limits
+        return OracleConstants(
+            dt=config.episode.dt,
+            max_decel=lim.max_decel,
+            accel_lon=lim.accel_lon,
+            mass=config.vehicle.mass,
+            zone_entry=geo.zone_a[0],
+            zone_exit=geo.zone_a[1],
+            horizon=config.episode.horizon_ticks,
+        )
+
+    def plan(
+        self, scenarios: Scenarios, north: FloatArray | None = None, full: bool = True
+    ) -> OraclePlan:
+        """The minimum-time crossing of each scenario. ``north``: the north car's arc length on
+        every tick ``[B, H + 1]``, if already simulated (it never reacts to the ego, so any
+        rollout of the same scenarios has it); simulated here otherwise. ``full=False`` skips
+        the per-tick arrays (progress, speed, accelerations, separation come back empty
+        ``[B, 0]``): what an evaluation needs is the time to clear and the outcome."""
         task = self.task
         geo = task.conflict
-        dt = task.config.episode.dt
         horizon = task.config.episode.horizon_ticks
-        north, start = self.north_progress(scenarios)
+        if north is None:
+            north, start = self.north_progress(scenarios)
+        else:
+            state = task.initial(scenarios)
+            start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], 1)
         batch = north.shape[0]
         north_in = (north >= geo.zone_b[0]) & (north <= geo.zone_b[1])
         # Last tick the north car is in its zone (-1: never; horizon + 1: still in at the end).
         north_last = np.max(np.where(north_in, np.arange(horizon + 1), -1), axis=1)
         north_last = np.where(north_in[:, -1], horizon + 1, north_last)
+        # Pass first if the free drive never shares the zone with the north car; else yield:
+        # bisection on θ for the first entry after the north car's last tick in its zone
+        # (compiled, scenario by scenario; the same arithmetic as :meth:`integrate`).
+        c, k = self.kernel_constants, self._plant
+        brake_time = np.empty(batch)
+        _plan_brake_times(
+            np.ascontiguousarray(start), north_in, north_last.astype(np.int64), c, k,
+            self._grid, self._w_sq, brake_time,
+        )  # fmt: skip
+        if not full:
+            ego_clears = np.empty(batch)
+            _clear_ticks(start, brake_time, c, k, self._grid, self._w_sq, ego_clears)
+            return self._finish(north, None, None, ego_clears, brake_time)
+        progress, speed = np.empty((batch, horizon + 1)), np.empty((batch, horizon + 1))
+        _drive_batch(start, brake_time, horizon, c, k, self._grid, self._w_sq, progress, speed)
+        return self._finish(
+            north, progress, speed, _first_tick(progress > geo.zone_a[1], np.inf), brake_time
+        )
 
-        def shares(progress: FloatArray) -> NDArray[np.bool_]:
-            ego_in = (progress >= geo.zone_a[0]) & (progress <= geo.zone_a[1])
-            return np.any(ego_in & north_in, axis=1)
-
-        free_s, _ = self._drive(start, np.zeros(batch))
-        cut_ok = ~shares(free_s)
-        # Yield: bisection on θ for the first entry after the north car's last tick in its zone.
-        low, high = np.zeros(batch), np.full(batch, horizon * dt)
-        needed = int(np.clip(north_last.max() + 1, 1, horizon))  # ticks that decide the entry
-        for _ in range(_BISECTION_STEPS):
-            mid = 0.5 * (low + high)
-            s_mid, _ = self._drive(start, mid, needed)
-            late_enough = _first_tick(s_mid >= geo.zone_a[0], horizon + 1) > north_last
-            high = np.where(late_enough, mid, high)
-            low = np.where(late_enough, low, mid)
-        brake_time = np.where(cut_ok, 0.0, high)
-        progress, speed = self._drive(start, brake_time)
-
+    def _finish(
+        self,
+        north: FloatArray,
+        progress: FloatArray | None,
+        speed: FloatArray | None,
+        ego_clears: FloatArray,
+        brake_time: FloatArray,
+    ) -> OraclePlan:
+        """The plan from the ego's drive (``None``: not kept) and its first tick past the zone
+        (``inf``: not within the horizon)."""
+        geo = self.task.conflict
+        dt = self.task.config.episode.dt
+        batch = north.shape[0]
         # Who cleared first, coded as the task's outcome (0: the ego not within the horizon).
-        ego_clears = _first_tick(progress > geo.zone_a[1], np.inf)
         north_clears = _first_tick(north > geo.zone_b[1], np.inf)
         outcome = np.where(
             np.isinf(ego_clears), 0, np.where(ego_clears < north_clears, 1, 2)
         ).astype(np.int8)
         time_to_clear = np.where(np.isinf(ego_clears), np.nan, ego_clears * dt)
-
+        if progress is None or speed is None:
+            empty = np.empty((batch, 0))
+            return OraclePlan(
+                empty, empty, empty, empty, north, empty, time_to_clear, outcome, brake_time
+            )
         accel_lon = np.diff(speed, axis=1) / dt
         curvature = np.interp(progress[:, 1:], self._grid, self._curvature)
         accel_lat = speed[:, 1:] ** 2 * curvature
@@ -340,3 +391,145 @@ def efficiency(oracle_time: FloatArray, time: FloatArray, horizon_s: float) -> F
     t = np.where(np.isfinite(time), time, horizon_s)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.asarray(oracle_time, dtype=np.float64) / np.maximum(t, 1e-9)
+
+
+class OracleConstants(NamedTuple):
+    """The scalars the compiled planner reads.
+
+    Attributes:
+        dt: Tick [s].
+        max_decel: Braking ``d`` [m/s²].
+        accel_lon: Longitudinal comfort limit [m/s²].
+        mass: Ego mass [kg].
+        zone_entry: Entry of the ego's conflict zone [m].
+        zone_exit: Exit of the ego's conflict zone [m].
+        horizon: Episode length [ticks].
+    """
+
+    dt: float
+    max_decel: float
+    accel_lon: float
+    mass: float
+    zone_entry: float
+    zone_exit: float
+    horizon: int
+
+
+@jit
+def _interp(x: float, points: FloatArray, values: FloatArray) -> float:
+    """``np.interp`` for one value on a sorted grid, with its arithmetic (binary search)."""
+    last = points.shape[0] - 1
+    if x <= points[0]:
+        return values[0]
+    if x >= points[last]:
+        return values[last]
+    j = np.searchsorted(points, x, side="right") - 1
+    slope = (values[j + 1] - values[j]) / (points[j + 1] - points[j])
+    return slope * (x - points[j]) + values[j]
+
+
+@jit
+def _max_accel(v: float, c: OracleConstants, k: VehicleConstants) -> float:
+    """:meth:`Oracle.max_accel` for one speed."""
+    return min((drive_force(v, k) - resistance(v, k)) / c.mass, c.accel_lon)
+
+
+@jit
+def _fastest_one(
+    s: float, v: float, c: OracleConstants, k: VehicleConstants, grid: FloatArray,
+    w_sq: FloatArray,
+) -> float:  # fmt: skip
+    """:meth:`Oracle._fastest` for one state."""
+    dt = c.dt
+    a = _max_accel(v, c, k)
+    for _ in range(3):
+        s_next = s + v * dt + 0.5 * a * dt * dt
+        w = math.sqrt(max(_interp(s_next, grid, w_sq), 0.0))
+        a = min(a, (w - v) / dt)
+    return max(a, -c.max_decel)
+
+
+@jit
+def _drive_one(
+    s: float, v: float, brake_time: float, ticks: int, c: OracleConstants, k: VehicleConstants,
+    grid: FloatArray, w_sq: FloatArray, s_out: FloatArray, v_out: FloatArray,
+) -> None:  # fmt: skip
+    """:meth:`Oracle._drive` for one scenario: ``ticks + 1`` states into ``s_out``, ``v_out``."""
+    dt, d = c.dt, c.max_decel
+    s_out[0], v_out[0] = s, v
+    for tick in range(ticks):
+        law = -d if tick * dt < brake_time - 1e-9 else _fastest_one(s, v, c, k, grid, w_sq)
+        a = min(max(law, -d), _max_accel(v, c, k))
+        if v + a * dt < 0.0:  # braking to rest within the tick
+            s = s + v * v / (2.0 * d)
+            v = 0.0
+        else:
+            s = s + v * dt + 0.5 * a * dt * dt
+            v = v + a * dt
+        s_out[tick + 1], v_out[tick + 1] = s, v
+
+
+@jit
+def _drive_batch(
+    start: FloatArray, brake_time: FloatArray, ticks: int, c: OracleConstants,
+    k: VehicleConstants, grid: FloatArray, w_sq: FloatArray, s_out: FloatArray,
+    v_out: FloatArray,
+) -> None:  # fmt: skip
+    for b in range(start.shape[0]):
+        _drive_one(
+            start[b, 0], start[b, 1], brake_time[b], ticks, c, k, grid, w_sq, s_out[b], v_out[b]
+        )
+
+
+@jit
+def _plan_brake_times(
+    start: FloatArray, north_in: NDArray[np.bool_], north_last: NDArray[np.int64],
+    c: OracleConstants, k: VehicleConstants, grid: FloatArray, w_sq: FloatArray,
+    out: FloatArray,
+) -> None:  # fmt: skip
+    """The bang-bang braking time θ of each scenario (0 when passing first is possible)."""
+    horizon = c.horizon
+    s_buf, v_buf = np.empty(horizon + 1), np.empty(horizon + 1)
+    for b in range(start.shape[0]):
+        _drive_one(start[b, 0], start[b, 1], 0.0, horizon, c, k, grid, w_sq, s_buf, v_buf)
+        shares = False
+        for t in range(horizon + 1):
+            if north_in[b, t] and c.zone_entry <= s_buf[t] <= c.zone_exit:
+                shares = True
+                break
+        if not shares:
+            out[b] = 0.0
+            continue
+        low, high = 0.0, horizon * c.dt
+        needed = min(max(north_last[b] + 1, 1), horizon)  # ticks that decide the entry
+        for _ in range(_BISECTION_STEPS):
+            mid = 0.5 * (low + high)
+            _drive_one(start[b, 0], start[b, 1], mid, needed, c, k, grid, w_sq, s_buf, v_buf)
+            first = horizon + 1
+            for t in range(needed + 1):
+                if s_buf[t] >= c.zone_entry:
+                    first = t
+                    break
+            if first > north_last[b]:
+                high = mid
+            else:
+                low = mid
+        out[b] = high
+
+
+@jit
+def _clear_ticks(
+    start: FloatArray, brake_time: FloatArray, c: OracleConstants, k: VehicleConstants,
+    grid: FloatArray, w_sq: FloatArray, out: FloatArray,
+) -> None:  # fmt: skip
+    """First tick of each planned drive past the zone (``inf``: not within the horizon)."""
+    horizon = c.horizon
+    s_buf, v_buf = np.empty(horizon + 1), np.empty(horizon + 1)
+    for b in range(start.shape[0]):
+        _drive_one(start[b, 0], start[b, 1], brake_time[b], horizon, c, k, grid, w_sq, s_buf,
+                   v_buf)  # fmt: skip
+        out[b] = math.inf
+        for t in range(horizon + 1):
+            if s_buf[t] > c.zone_exit:
+                out[b] = t
+                break

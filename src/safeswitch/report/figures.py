@@ -292,3 +292,45 @@ def frames_strip(trace: Trace, episode: int, count: int = 6) -> Image.Image:
     for j, k in enumerate(picks):
         strip.paste(frames[k], (j * width, 0))
     return strip
+
+
+def falsification_figure(
+    runs: list[tuple[str, NDArray[np.float64], NDArray[np.float64]]],
+    ranges: NDArray[np.float64],
+    failure: str,
+    path: Path,
+) -> None:
+    """Where the failures are: every simulated scenario in the (arrival offset, north speed)
+    plane, coloured by its smallest footprint separation, failures as red crosses; one panel
+    for uniform random sampling and one for the cross-entropy search. ``runs``: (method,
+    normalised parameters ``[N, 4]``, outcome ``[N, 3]`` = separation, collision, safety ticks).
+    Saved as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods = ("random", "cross-entropy")
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharex=True, sharey=True,
+                             constrained_layout=True)  # fmt: skip
+    span = ranges[:, 1] - ranges[:, 0]
+    scatter = None
+    for ax, method in zip(axes, methods, strict=True):
+        units = np.concatenate([u for m, u, _ in runs if m == method])
+        outcome = np.concatenate([o for m, _, o in runs if m == method])
+        values = ranges[:, 0] + units * span
+        failed = outcome[:, 1] > 0 if failure == "collision" else outcome[:, 2] > 0
+        scatter = ax.scatter(
+            values[:, 3], values[:, 2], c=np.clip(outcome[:, 0], 0, 5), s=4, cmap="viridis",
+            vmin=0, vmax=5,
+        )  # fmt: skip
+        ax.scatter(values[failed, 3], values[failed, 2], marker="x", s=30, color="red",
+                   label=f"{failure} ({int(failed.sum())} of {failed.size})")  # fmt: skip
+        ax.set_title(f"{method}: {1000 * failed.mean():.1f} failures per 1,000 episodes")
+        ax.set_xlabel("north arrival − ego arrival at cruise [s]")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[0].set_ylabel("north car speed [km/h]")
+    if scatter is not None:
+        fig.colorbar(scatter, ax=axes, label="smallest separation [m] (clipped at 5)")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)

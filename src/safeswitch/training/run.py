@@ -29,8 +29,7 @@ import torch
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import VecNormalize
 
-from safeswitch.evaluation.metrics import summarize
-from safeswitch.evaluation.rollout import rollout
+from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.io import write_atomic
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
@@ -219,10 +218,12 @@ def learn(
 def evaluate_trained(
     policy: TrainedPolicy, config: TrainConfig, episodes: int, seed: int
 ) -> dict[str, Any]:
-    """Deterministic evaluation on ``episodes`` random scenarios drawn with ``seed``."""
+    """Deterministic evaluation on ``episodes`` random scenarios drawn with ``seed``, with the
+    oracle's efficiency (``safeswitch evaluate``'s fields)."""
     task = LeftTurnTask(config.env)
     scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
-    return summarize(rollout(task, scenarios, policy.as_policy()))
+    result, plan = run_controller(task, policy.as_policy(), scenarios, trace=False)
+    return summary_against_oracle(result, plan, config.env.episode.horizon_s)
 
 
 def train(

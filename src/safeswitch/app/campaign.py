@@ -1,0 +1,370 @@
+"""``safeswitch campaign``: an evaluation campaign over a scenario space × controllers ×
+switching logics, split into shards that run as Ray tasks.
+
+A *cell* is one controller (a baseline or a trained policy) under one switching logic; every
+cell runs the same scenarios: random draws (a pure function of ``--seed`` and the scenario's
+index), a grid over the scenario parameters, or the paper's three. Each cell's scenarios are cut
+into shards of ``--shard-size`` episodes; a shard is one task: it simulates its episodes in
+chunks on the batched task, writes one row per episode (Parquet with pyarrow, else CSV) and its
+summary accumulator, each into a temporary file renamed into place — so a shard is on disk
+whole or not at all. The summaries merge in shard order into the fields of ``safeswitch
+evaluate`` (``summary.json``); they depend only on the seed and the shard size, never on how
+many workers ran them. ``--resume`` skips the shards already on disk; a shard that fails is
+reported with its cell and episode range, and the rest are kept.
+
+Folder::
+
+    campaign.json             what was asked (a resume must ask the same)
+    shards/<cell>/<i>.parquet  the episodes of shard i (or .csv)
+    shards/<cell>/<i>.json     its summary accumulator (written last)
+    summary.json              per cell, and the failures
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from safeswitch.app.distributed import cluster
+from safeswitch.io import write_json
+from safeswitch.progress import Progress
+
+#: Scenario parameters a grid may span, with their unit conversion to the task's SI values.
+GRID_PARAMETERS = {
+    "ego_start_distance_m": ("ego_start_distance", 1.0),
+    "ego_speed_kmh": ("ego_speed", 1 / 3.6),
+    "north_speed_kmh": ("north_speed", 1 / 3.6),
+    "arrival_offset_s": ("arrival_offset", 1.0),
+}
+#: Defaults of the parameters a grid leaves out (the paper's scenarios' values).
+GRID_DEFAULTS = {
+    "ego_start_distance_m": 36.0,
+    "ego_speed_kmh": 25.0,
+    "north_speed_kmh": 29.0,
+    "arrival_offset_s": 0.0,
+}
+#: The largest grid accepted (episodes).
+MAX_GRID = 100_000_000
+
+
+class CampaignError(ValueError):
+    """A campaign cannot run as asked; the message names the problem."""
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A grid over the scenario parameters, generated lazily by index.
+
+    Attributes:
+        axes: Parameter name → its values (see :data:`GRID_PARAMETERS`), in order.
+    """
+
+    axes: tuple[tuple[str, tuple[float, ...]], ...]
+
+    @classmethod
+    def parse(cls, specs: list[str]) -> Grid:
+        """From ``name=start:stop:step`` (stop included), ``name=a,b,c`` or ``name=value``.
+
+        Raises:
+            CampaignError: An unknown parameter, a malformed range, an empty or too large grid.
+        """
+        axes: dict[str, tuple[float, ...]] = {}
+        for spec in specs:
+            name, _, values = spec.partition("=")
+            if name not in GRID_PARAMETERS:
+                raise CampaignError(
+                    f"grid parameter {name!r} is not one of {', '.join(GRID_PARAMETERS)}"
+                )
+            try:
+                if ":" in values:
+                    start, stop, step = (float(v) for v in values.split(":"))
+                    if step <= 0:
+                        raise ValueError
+                    count = math.floor((stop - start) / step + 1e-9) + 1
+                    axes[name] = tuple(start + step * np.arange(max(count, 0)))
+                else:
+                    axes[name] = tuple(float(v) for v in values.split(","))
+            except ValueError:
+                raise CampaignError(
+                    f"grid {spec!r}: expected name=start:stop:step (step > 0), name=a,b,c or "
+                    "name=value"
+                ) from None
+        for name, default in GRID_DEFAULTS.items():
+            axes.setdefault(name, (default,))
+        grid = cls(tuple((name, axes[name]) for name in GRID_PARAMETERS))
+        if grid.size == 0:
+            empty = [n for n, v in grid.axes if not v]
+            raise CampaignError(f"the grid is empty (no values for {', '.join(empty)})")
+        if grid.size > MAX_GRID:
+            raise CampaignError(
+                f"the grid has {grid.size:,} scenarios, more than the {MAX_GRID:,} a campaign "
+                "takes; use coarser steps"
+            )
+        return grid
+
+    @property
+    def size(self) -> int:
+        return math.prod(len(v) for _, v in self.axes)
+
+    def scenarios(self, start: int, stop: int) -> Any:
+        """Scenarios ``start`` to ``stop`` of the grid (row-major over :attr:`axes`)."""
+        from safeswitch.leftturn.scenarios import Scenarios
+
+        index = np.unravel_index(np.arange(start, stop), [len(v) for _, v in self.axes])
+        values = {
+            GRID_PARAMETERS[name][0]: np.asarray(axis)[i] * GRID_PARAMETERS[name][1]
+            for (name, axis), i in zip(self.axes, index, strict=True)
+        }
+        return Scenarios(**values)
+
+
+@dataclass(frozen=True)
+class Space:
+    """The scenarios every cell runs.
+
+    Attributes:
+        kind: ``random``, ``grid`` or ``paper``.
+        episodes: How many (random); the grid's size; 3 for the paper's.
+        seed: Seed of the random scenarios.
+        grid: The grid (``kind == "grid"``).
+    """
+
+    kind: str
+    episodes: int
+    seed: int
+    grid: Grid | None = None
+
+    def chunk(self, task: Any, start: int, stop: int) -> tuple[list[str], Any]:
+        from safeswitch.evaluation.evaluate import scenario_set
+
+        if self.kind == "random":
+            ids = np.arange(start, stop)
+            return [f"random-{i}" for i in ids], task.draw_scenarios(
+                self.seed, ids, np.zeros(ids.size, dtype=int)
+            )
+        if self.kind == "grid":
+            assert self.grid is not None
+            return [f"grid-{i}" for i in range(start, stop)], self.grid.scenarios(start, stop)
+        scenarios, names = scenario_set(task, "paper", 3, 0)
+        return names[start:stop], scenarios.take(np.arange(start, stop))
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One controller under one switching logic (``switching=None``: its own)."""
+
+    controller: str
+    model: str | None = None
+    switching: str | None = None
+
+    @property
+    def key(self) -> str:
+        parts = [self.controller]
+        if self.model:
+            parts.append(Path(self.model).name or self.model)
+        if self.switching:
+            parts.append(self.switching)
+        return "-".join(p.replace("/", "_") for p in parts)
+
+
+@dataclass(frozen=True)
+class Shard:
+    cell: Cell
+    index: int
+    start: int
+    stop: int
+
+
+@dataclass
+class Failure:
+    cell: str
+    shard: int
+    episodes: tuple[int, int]
+    seed: int
+    error: str
+
+
+@dataclass
+class CampaignResult:
+    summary: dict[str, Any]
+    failures: list[Failure] = field(default_factory=list)
+
+
+def run_shard(shard: Shard, space: Space, folder: str) -> dict[str, Any]:
+    """Evaluate one shard (in a worker): its episodes' rows and its accumulator, each written
+    whole; returns the accumulator's state."""
+    import torch
+
+    from safeswitch.app.evaluate import controller_setup
+    from safeswitch.evaluation.evaluate import CHUNK, CSV_COLUMNS, episode_rows, run_controller
+    from safeswitch.evaluation.metrics import SummaryAccumulator
+    from safeswitch.leftturn.task import LeftTurnTask
+
+    torch.set_num_threads(1)
+    cell = shard.cell
+    config, policy = controller_setup(cell.controller, cell.model, cell.switching)
+    task = LeftTurnTask(config)
+    accumulator = SummaryAccumulator()
+    rows: list[list[Any]] = []
+    for start in range(shard.start, shard.stop, CHUNK):
+        names, batch = space.chunk(task, start, min(start + CHUNK, shard.stop))
+        result, plan = run_controller(task, policy, batch, trace=False)
+        accumulator.add(result, plan.time_to_clear, config.episode.horizon_s)
+        rows.extend(episode_rows(names, batch, result, plan.time_to_clear))
+    out = Path(folder) / "shards" / cell.key
+    out.mkdir(parents=True, exist_ok=True)
+    _write_rows(out / f"{shard.index:06d}", CSV_COLUMNS, rows)
+    state = accumulator.state()
+    tmp = out / f".{shard.index:06d}.json.tmp"
+    tmp.write_text(json.dumps(state), encoding="utf-8")
+    os.replace(tmp, out / f"{shard.index:06d}.json")
+    return state
+
+
+def _write_rows(stem: Path, columns: tuple[str, ...], rows: list[list[Any]]) -> None:
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        import csv
+
+        tmp = stem.with_name(f".{stem.name}.csv.tmp")
+        with open(tmp, "w", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(columns)
+            writer.writerows(rows)
+        os.replace(tmp, stem.with_suffix(".csv"))
+        return
+    table = pa.table({name: [row[j] for row in rows] for j, name in enumerate(columns)})
+    tmp = stem.with_name(f".{stem.name}.parquet.tmp")
+    pq.write_table(table, tmp)
+    os.replace(tmp, stem.with_suffix(".parquet"))
+
+
+def plan_shards(cells: list[Cell], space: Space, shard_size: int) -> list[Shard]:
+    if shard_size < 1:
+        raise CampaignError(f"--shard-size must be >= 1, got {shard_size}")
+    return [
+        Shard(cell, k, start, min(start + shard_size, space.episodes))
+        for cell in cells
+        for k, start in enumerate(range(0, space.episodes, shard_size))
+    ]
+
+
+def campaign(
+    cells: list[Cell],
+    space: Space,
+    out: str | Path,
+    workers: int = 2,
+    address: str | None = None,
+    resume: bool = False,
+    shard_size: int = 10_000,
+    progress: bool = True,
+) -> CampaignResult:
+    """Run (or resume) a campaign and write its folder (see the module docstring).
+
+    Raises:
+        CampaignError: The folder holds another campaign, or a new one without ``resume``.
+        DistributedError: Ray is missing or ``address`` is unreachable.
+    """
+    from safeswitch.evaluation.metrics import SummaryAccumulator
+
+    folder = Path(out)
+    if not cells:
+        raise CampaignError("a campaign needs at least one controller")
+    asked = {
+        "cells": [asdict(c) for c in cells],
+        "space": {
+            "kind": space.kind,
+            "episodes": space.episodes,
+            "seed": space.seed,
+            "grid": [list(a) for a in space.grid.axes] if space.grid else None,
+        },
+        "shard_size": shard_size,
+    }
+    record = folder / "campaign.json"
+    if folder.exists() and not folder.is_dir():
+        raise CampaignError(f"--out {folder} is a file, not a folder")
+    if record.is_file():
+        if not resume:
+            raise CampaignError(f"{folder} holds a campaign; --resume it or choose another --out")
+        if json.loads(record.read_text(encoding="utf-8")) != json.loads(json.dumps(asked)):
+            raise CampaignError(f"{folder} holds a different campaign; --resume must ask the same")
+    elif folder.is_dir() and any(folder.iterdir()):
+        raise CampaignError(f"--out {folder} is not empty and holds no campaign")
+    folder.mkdir(parents=True, exist_ok=True)
+    write_json(record, asked)
+
+    shards = plan_shards(cells, space, shard_size)
+    done: dict[int, dict[str, Any]] = {}
+    for i, shard in enumerate(shards):
+        path = folder / "shards" / shard.cell.key / f"{shard.index:06d}.json"
+        if path.is_file():
+            done[i] = json.loads(path.read_text(encoding="utf-8"))
+    todo = [i for i in range(len(shards)) if i not in done]
+    failures: list[Failure] = []
+    bar = Progress(
+        sum(shards[i].stop - shards[i].start for i in todo), "campaign", enabled=progress
+    )
+    began = time.perf_counter()
+    with cluster(workers, address) as where:
+
+        def finished(j: int, state: dict[str, Any]) -> None:
+            done[todo[j]] = state
+            bar.update(shards[todo[j]].stop - shards[todo[j]].start)
+
+        def failed(j: int, error: BaseException) -> None:
+            s = shards[todo[j]]
+            failures.append(
+                Failure(s.cell.key, s.index, (s.start, s.stop), space.seed, _one_line(error))
+            )
+            bar.update(s.stop - s.start)
+
+        where.map(run_shard, [(shards[i], space, str(folder)) for i in todo], finished, failed)
+        startup = where.startup_s
+    bar.close()
+    per_cell: dict[str, Any] = {}
+    for cell in cells:
+        accumulator = SummaryAccumulator()
+        complete = True
+        for i, shard in enumerate(shards):
+            if shard.cell != cell:
+                continue
+            if i in done:
+                accumulator.merge(SummaryAccumulator.from_state(done[i]))
+            else:
+                complete = False
+        per_cell[cell.key] = {
+            **asdict(cell),
+            "scenarios": space.kind,
+            "seed": space.seed,
+            "complete": complete,
+            **accumulator.summary(),
+        }
+    summary = {
+        "cells": per_cell,
+        "failures": [asdict(f) for f in failures],
+        "shards": len(shards),
+        "shards_run_now": len(todo),
+        "workers": workers if address is None else None,
+        "address": address,
+        "ray_startup_s": round(startup, 2),
+        "wall_time_s": round(time.perf_counter() - began, 2),
+    }
+    write_json(folder / "summary.json", summary)
+    return CampaignResult(summary, failures)
+
+
+def _one_line(error: BaseException) -> str:
+    text = str(error).strip().splitlines()
+    cause = getattr(error, "cause", None)  # RayTaskError keeps the task's own exception
+    if cause is not None:
+        return f"{type(cause).__name__}: {str(cause).strip().splitlines()[-1]}"
+    return f"{type(error).__name__}: {text[-1] if text else ''}"
