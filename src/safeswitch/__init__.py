@@ -21,8 +21,17 @@ ENV_ID = "safeswitch/LeftTurn-v0"
 #: ``highway-env`` package; see :mod:`safeswitch.examples.highway`).
 HIGHWAY_ENV_ID = "safeswitch/Highway-v0"
 
+#: The left turn among traffic from every leg (``traffic=`` a preset or settings).
+TRAFFIC_ENV_ID = "safeswitch/LeftTurnTraffic-v0"
+
 if ENV_ID not in _gym.registry:
     _gym.register(id=ENV_ID, entry_point="safeswitch.leftturn.env:LeftTurnEnv")
+if TRAFFIC_ENV_ID not in _gym.registry:
+    _gym.register(
+        id=TRAFFIC_ENV_ID,
+        entry_point="safeswitch.leftturn.env:LeftTurnEnv",
+        kwargs={"traffic": "medium"},
+    )
 if HIGHWAY_ENV_ID not in _gym.registry:
     _gym.register(id=HIGHWAY_ENV_ID, entry_point="safeswitch.examples.highway:make_highway_env")
 
@@ -43,6 +52,7 @@ _EXPORTS = {
 __all__ = [
     "ENV_ID",
     "HIGHWAY_ENV_ID",
+    "TRAFFIC_ENV_ID",
     "Decision",
     "NeverSwitch",
     "SafeSwitch",

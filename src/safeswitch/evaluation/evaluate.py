@@ -156,6 +156,8 @@ CSV_COLUMNS = (
     "max_lateral_m",
     "return",
     "oracle_time_to_clear_s",
+    "min_ttc_s",
+    "min_pet_s",
 )
 
 
@@ -186,6 +188,8 @@ def episode_rows(
             _number(r.max_lateral[i]),
             _number(r.episode_return[i]),
             _number(oracle_time[i]),
+            _number(r.min_ttc[i]),
+            _number(r.min_pet[i]),
         ]
 
 

@@ -19,6 +19,11 @@ Fields:
     max_accel_lon / max_accel_lat: Largest |a_lon| and |a_lat| of any episode [m/s²].
     max_lateral_deviation_m: Largest distance from the route's centre line [m].
     ticks: Ticks simulated (all episodes).
+    ttc_conflict_episodes: Episodes whose smallest time to collision at a conflict zone was at
+        most 1.5 s (a *conflict* by SSAM's threshold; see :mod:`safeswitch.evaluation.surrogate`).
+    mean_min_ttc_s: Mean smallest TTC over the episodes that were ever on a collision course.
+    pet_below_1s_episodes: Episodes with a post-encroachment time below 1 s.
+    mean_min_pet_s: Mean smallest PET over the episodes with an encroachment.
     mean_oracle_time_to_clear_s: The oracle's mean time to clear over the same scenarios [s]
         (with an oracle).
     mean_efficiency: Mean over scenarios of the oracle's time to clear divided by the
@@ -38,6 +43,7 @@ import numpy as np
 
 from safeswitch.evaluation.oracle import efficiency
 from safeswitch.evaluation.rollout import RolloutResult
+from safeswitch.evaluation.surrogate import TTC_CONFLICT_S
 from safeswitch.sim.geometry import FloatArray
 
 #: Speed below which the ego counts as stopped [m/s].
@@ -60,8 +66,13 @@ class SummaryAccumulator:
         "ticks",
         "oracle_cleared",
         "efficiency_count",
+        "collision_course_episodes",
+        "ttc_conflict_episodes",
+        "encroachment_episodes",
+        "pet_below_1s_episodes",
     )
-    _SUMS = ("time_to_clear", "return", "min_speed", "oracle_time", "efficiency")
+    _SUMS = ("time_to_clear", "return", "min_speed", "oracle_time", "efficiency", "min_ttc",
+             "min_pet")  # fmt: skip
     _MAXIMA = ("max_accel_lon", "max_accel_lat", "max_lateral_deviation_m")
 
     def __init__(self) -> None:
@@ -93,6 +104,13 @@ class SummaryAccumulator:
         s["time_to_clear"].append(float(r.time_to_clear[cleared].sum()))
         s["return"].append(float(r.episode_return.sum()))
         s["min_speed"].append(float(r.min_speed.sum()))
+        course, encroached = np.isfinite(r.min_ttc), np.isfinite(r.min_pet)
+        c["collision_course_episodes"] += int(course.sum())
+        c["ttc_conflict_episodes"] += int((r.min_ttc <= TTC_CONFLICT_S).sum())
+        c["encroachment_episodes"] += int(encroached.sum())
+        c["pet_below_1s_episodes"] += int((r.min_pet[encroached] < 1.0).sum())
+        s["min_ttc"].append(float(r.min_ttc[course].sum()))
+        s["min_pet"].append(float(r.min_pet[encroached].sum()))
         for name, values in r.terms.items():
             self.term_sums.setdefault(name, []).append(float(values.sum()))
         if r.collision.size:
@@ -141,7 +159,7 @@ class SummaryAccumulator:
     def from_state(cls, state: dict[str, Any]) -> SummaryAccumulator:
         accumulator = cls()
         accumulator.counts.update(state["counts"])
-        accumulator.sums = {k: list(v) for k, v in state["sums"].items()}
+        accumulator.sums.update({k: list(v) for k, v in state["sums"].items()})
         accumulator.term_sums = {k: list(v) for k, v in state["term_sums"].items()}
         accumulator.maxima = {
             k: (-math.inf if v is None else v) for k, v in state["maxima"].items()
@@ -180,6 +198,10 @@ class SummaryAccumulator:
             "max_accel_lat": largest("max_accel_lat"),
             "max_lateral_deviation_m": largest("max_lateral_deviation_m"),
             "ticks": c["ticks"],
+            "ttc_conflict_episodes": c["ttc_conflict_episodes"],
+            "mean_min_ttc_s": mean("min_ttc", c["collision_course_episodes"]),
+            "pet_below_1s_episodes": c["pet_below_1s_episodes"],
+            "mean_min_pet_s": mean("min_pet", c["encroachment_episodes"]),
         }
         if self.with_oracle:
             out["mean_oracle_time_to_clear_s"] = mean("oracle_time", c["oracle_cleared"])

@@ -40,7 +40,7 @@ from safeswitch.evaluation.rollout import RolloutResult
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
 from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.task import ConflictArrays, LeftTurnTask
 from safeswitch.sim.collision import rectangle_separation
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import (
@@ -266,6 +266,10 @@ class Oracle:
         task = self.task
         geo = task.conflict
         horizon = task.config.episode.horizon_ticks
+        others = getattr(task, "others_without_ego", None)
+        occupied = None
+        if others is not None:  # in traffic: every movement that crosses the ego's
+            north, occupied = others(scenarios)
         if north is None:
             north, start = self.north_progress(scenarios)
         else:
@@ -273,18 +277,30 @@ class Oracle:
             start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], 1)
         batch = north.shape[0]
         north_in = (north >= geo.zone_b[0]) & (north <= geo.zone_b[1])
-        # Last tick the north car is in its zone (-1: never; horizon + 1: still in at the end).
-        north_last = np.max(np.where(north_in, np.arange(horizon + 1), -1), axis=1)
-        north_last = np.where(north_in[:, -1], horizon + 1, north_last)
-        # Pass first if the free drive never shares the zone with the north car; else yield:
-        # bisection on θ for the first entry after the north car's last tick in its zone
-        # (compiled, scenario by scenario; the same arithmetic as :meth:`integrate`).
         c, k = self.kernel_constants, self._plant
         brake_time = np.empty(batch)
-        _plan_brake_times(
-            np.ascontiguousarray(start), north_in, north_last.astype(np.int64), c, k,
-            self._grid, self._w_sq, brake_time,
-        )  # fmt: skip
+        if occupied is not None:
+            # The north car's zone and every crossing movement's: the smallest θ that keeps
+            # the ego out of each while it is occupied (grid, then bisection).
+            zones = np.concatenate(
+                [np.asarray([geo.zone_a], dtype=np.float64),
+                 task.network.conflicts[task.ego_route]]  # type: ignore[attr-defined]
+            )  # fmt: skip
+            _plan_brake_times_many(
+                np.ascontiguousarray(start), np.concatenate([north_in[:, None], occupied], 1),
+                zones, c, k, self._grid, self._w_sq, brake_time,
+            )  # fmt: skip
+        else:
+            # Last tick the north car is in its zone (-1: never; horizon + 1: still in at the
+            # end). Pass first if the free drive never shares the zone with the north car; else
+            # yield: bisection on θ for the first entry after the north car's last tick in its
+            # zone (compiled, scenario by scenario; the same arithmetic as :meth:`integrate`).
+            north_last = np.max(np.where(north_in, np.arange(horizon + 1), -1), axis=1)
+            north_last = np.where(north_in[:, -1], horizon + 1, north_last)
+            _plan_brake_times(
+                np.ascontiguousarray(start), north_in, north_last.astype(np.int64), c, k,
+                self._grid, self._w_sq, brake_time,
+            )  # fmt: skip
         if not full:
             ego_clears = np.empty(batch)
             _clear_ticks(start, brake_time, c, k, self._grid, self._w_sq, ego_clears)
@@ -361,6 +377,7 @@ class Oracle:
         )
         totals = {name: terms[name].sum(axis=1) for name in REWARD_TERMS}
         batch, horizon = plan.accel_lon.shape
+        min_ttc, min_pet = self.surrogate(plan)
         return RolloutResult(
             collision=np.any(plan.separation <= 0.0, axis=1),
             safety_steps=np.zeros(batch, dtype=np.int64),
@@ -376,7 +393,33 @@ class Oracle:
             max_accel_lat=np.abs(plan.accel_lat).max(axis=1),
             max_lateral=np.zeros(batch),
             terms=totals,
+            min_ttc=min_ttc,
+            min_pet=min_pet,
         )
+
+    def surrogate(self, plan: OraclePlan) -> tuple[FloatArray, FloatArray]:
+        """The plan's smallest TTC and PET per scenario (:mod:`~safeswitch.evaluation.surrogate`;
+        the north car's speed from its arc lengths)."""
+        from safeswitch.evaluation.surrogate import SurrogateTracker
+
+        geo, dt = self.task.conflict, self.task.config.episode.dt
+        batch, ticks = plan.progress.shape[0], plan.progress.shape[1] - 1
+        north_speed = np.diff(plan.north_progress, axis=1, prepend=plan.north_progress[:, :1]) / dt
+        present = np.ones((batch, 1), dtype=np.bool_)
+        ego_zone = np.broadcast_to(np.asarray(geo.zone_a, dtype=np.float64), (batch, 1, 2))
+        other_zone = np.broadcast_to(np.asarray(geo.zone_b, dtype=np.float64), (batch, 1, 2))
+
+        def at(t: int) -> ConflictArrays:
+            return ConflictArrays(
+                plan.progress[:, t], plan.speed[:, t], present, ego_zone,
+                plan.north_progress[:, t : t + 1], north_speed[:, t : t + 1], other_zone,
+            )  # fmt: skip
+
+        tracker = SurrogateTracker(at(0), dt)
+        live = np.ones(batch, dtype=np.bool_)
+        for t in range(ticks):
+            tracker.update(at(t + 1), live, t)
+        return tracker.min_ttc, tracker.min_pet
 
 
 def _first_tick(mask: NDArray[np.bool_], never: float) -> FloatArray:
@@ -455,18 +498,24 @@ def _drive_one(
     grid: FloatArray, w_sq: FloatArray, s_out: FloatArray, v_out: FloatArray,
 ) -> None:  # fmt: skip
     """:meth:`Oracle._drive` for one scenario: ``ticks + 1`` states into ``s_out``, ``v_out``."""
-    dt, d = c.dt, c.max_decel
     s_out[0], v_out[0] = s, v
     for tick in range(ticks):
-        law = -d if tick * dt < brake_time - 1e-9 else _fastest_one(s, v, c, k, grid, w_sq)
-        a = min(max(law, -d), _max_accel(v, c, k))
-        if v + a * dt < 0.0:  # braking to rest within the tick
-            s = s + v * v / (2.0 * d)
-            v = 0.0
-        else:
-            s = s + v * dt + 0.5 * a * dt * dt
-            v = v + a * dt
+        s, v = _advance(s, v, tick, brake_time, c, k, grid, w_sq)
         s_out[tick + 1], v_out[tick + 1] = s, v
+
+
+@jit
+def _advance(
+    s: float, v: float, tick: int, brake_time: float, c: OracleConstants, k: VehicleConstants,
+    grid: FloatArray, w_sq: FloatArray,
+) -> tuple[float, float]:  # fmt: skip
+    """One tick of :meth:`Oracle._drive`: the state after tick ``tick``."""
+    dt, d = c.dt, c.max_decel
+    law = -d if tick * dt < brake_time - 1e-9 else _fastest_one(s, v, c, k, grid, w_sq)
+    a = min(max(law, -d), _max_accel(v, c, k))
+    if v + a * dt < 0.0:  # braking to rest within the tick
+        return s + v * v / (2.0 * d), 0.0
+    return s + v * dt + 0.5 * a * dt * dt, v + a * dt
 
 
 @jit
@@ -533,3 +582,58 @@ def _clear_ticks(
             if s_buf[t] > c.zone_exit:
                 out[b] = t
                 break
+
+
+#: Grid step of the braking time θ before bisection, with several conflicts [s].
+_THETA_STEP = 0.1
+
+
+@jit
+def _free_of(
+    s: float, v: float, brake_time: float, occupied: NDArray[np.bool_], zones: FloatArray,
+    c: OracleConstants, k: VehicleConstants, grid: FloatArray, w_sq: FloatArray,
+) -> bool:  # fmt: skip
+    """Whether the drive braking for ``brake_time`` keeps the ego out of every zone
+    ``zones[j]`` on the ticks ``occupied[j]`` marks, until it has passed them all."""
+    last = -math.inf
+    for j in range(zones.shape[0]):
+        if not math.isnan(zones[j, 1]):
+            last = max(last, zones[j, 1])
+    for tick in range(c.horizon + 1):
+        if tick:
+            s, v = _advance(s, v, tick - 1, brake_time, c, k, grid, w_sq)
+        if s > last:
+            return True
+        for j in range(zones.shape[0]):
+            if occupied[j, tick] and zones[j, 0] <= s <= zones[j, 1]:
+                return False
+    return True
+
+
+@jit
+def _plan_brake_times_many(
+    start: FloatArray, occupied: NDArray[np.bool_], zones: FloatArray, c: OracleConstants,
+    k: VehicleConstants, grid: FloatArray, w_sq: FloatArray, out: FloatArray,
+) -> None:  # fmt: skip
+    """The smallest braking time θ of each scenario that keeps the ego out of every occupied
+    zone (``occupied`` ``[B, C, H + 1]``): the first on a grid of :data:`_THETA_STEP`, then
+    bisection down to the last infeasible grid point (``inf``: none within the horizon)."""
+    longest = c.horizon * c.dt
+    for b in range(start.shape[0]):
+        s0, v0 = start[b, 0], start[b, 1]
+        low, high = -1.0, math.inf
+        theta = 0.0
+        while theta <= longest + 1e-9:
+            if _free_of(s0, v0, theta, occupied[b], zones, c, k, grid, w_sq):
+                high = theta
+                break
+            low = theta
+            theta += _THETA_STEP
+        if low >= 0.0 and not math.isinf(high):
+            for _ in range(_BISECTION_STEPS // 2):
+                mid = 0.5 * (low + high)
+                if _free_of(s0, v0, mid, occupied[b], zones, c, k, grid, w_sq):
+                    high = mid
+                else:
+                    low = mid
+        out[b] = high

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.evaluation.surrogate import SurrogateTracker
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
@@ -37,6 +38,9 @@ class RolloutResult:
         max_accel_lat: Largest ``|a_lat|`` [m/s²].
         max_lateral: Largest ``|lateral deviation|`` from the route [m].
         terms: Each reward term of Eq. 5 summed over the episode, keyed by ``REWARD_TERMS``.
+        min_ttc: Smallest time to collision at a conflict zone [s] (``inf``: never on a
+            collision course; :mod:`~safeswitch.evaluation.surrogate`).
+        min_pet: Smallest post-encroachment time [s] (NaN: no encroachment).
     """
 
     collision: NDArray[np.bool_]
@@ -53,6 +57,8 @@ class RolloutResult:
     max_accel_lat: NDArray[np.float64]
     max_lateral: NDArray[np.float64]
     terms: dict[str, NDArray[np.float64]]
+    min_ttc: NDArray[np.float64]
+    min_pet: NDArray[np.float64]
 
 
 def rollout(
@@ -80,6 +86,7 @@ def rollout(
     max_lon, max_lat = np.zeros(batch), np.zeros(batch)
     ended_outcome = np.zeros(batch, dtype=np.int8)
     observation = task.observe(state)
+    surrogate = SurrogateTracker(task.conflicts(state), config.episode.dt)
     invalid_code = task.reasons.index("invalid_learned_action")
     interval = config.episode.decision_interval
     actions = np.zeros(batch)
@@ -96,6 +103,7 @@ def rollout(
         ended_outcome = np.where(live, record.outcome, ended_outcome)
         max_lon = np.where(live, np.maximum(max_lon, np.abs(record.accel_lon)), max_lon)
         max_lat = np.where(live, np.maximum(max_lat, np.abs(record.accel_lat)), max_lat)
+        surrogate.update(task.conflicts(state), live, tick)
         if on_tick is not None:
             on_tick(state, record, tick)
         live &= ~(record.terminated | record.truncated)
@@ -117,4 +125,6 @@ def rollout(
         max_accel_lat=max_lat,
         max_lateral=stats.max_lateral,
         terms=stats.terms,
+        min_ttc=surrogate.min_ttc,
+        min_pet=surrogate.min_pet,
     )

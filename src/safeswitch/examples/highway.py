@@ -12,10 +12,12 @@ with continuous acceleration and steering, wrapped in :class:`~safeswitch.core.w
   lateral offset and heading error).
 * **Switching logic** ``ttc`` (:class:`TimeToCollisionLogic`, registered by name) — executes the
   learned action unless, after one decision period of it (predicted on highway-env's own
-  kinematic bicycle), the ego would (a) close on the vehicle ahead in its corridor so that full
-  braking could no longer stop it ``min_gap`` behind a leader braking at ``lead_max_brake``
-  (the responsibility-sensitive-safety distance of Shalev-Shwartz et al., 2017), or come within
-  ``min_ttc`` seconds of it at the current closing speed; or (b) leave the road.
+  kinematic bicycle), the ego would (a) close on the vehicle ahead in any lane it may occupy so
+  that full braking could no longer stop it ``min_gap`` behind a leader braking at
+  ``lead_max_brake`` (the responsibility-sensitive-safety distance of Shalev-Shwartz et al.,
+  2017), or come within ``min_ttc`` seconds of it at the current closing speed; (b) leave the
+  road or turn more than ``max_heading`` from it; (c) come within 0.5 m of a vehicle alongside;
+  or (d) roll backwards (highway-env's vehicle reverses when braked below standstill).
 
 Other vehicles follow IDM and change lanes with MOBIL (highway-env's defaults); they may cut in
 closer than the envelope, which no rule on the ego can prevent: the benchmark
@@ -191,11 +193,12 @@ class HighwaySafetyController:
         margin = _stopping_margin(gaps, speed[:, None], leads, r)
         short = np.where(_overlapping(centres, y, y), margin, np.inf).min(axis=1)
         short = short < 2 * r.min_gap + speed * r.decision_period
-        # never command more braking than stops the car within one decision period
+        # never command more braking than stops the car within one decision period, and never
+        # reverse (highway-env's vehicle would): a car rolling backwards is brought to rest
         brake = np.minimum(r.ego_max_brake, speed / r.decision_period)
         steer = -r.lateral_gain * lateral - r.heading_gain * heading
         out = np.empty((state.shape[0], 2))
-        out[:, 0] = np.where(short, -brake / ACCEL_RANGE, 0.0)
+        out[:, 0] = np.where(short | (speed < 0), -brake / ACCEL_RANGE, 0.0)
         out[:, 1] = clamp(steer / STEER_RANGE, -1.0, 1.0)
         return out
 
@@ -213,6 +216,7 @@ class TimeToCollisionLogic:
         "time_to_collision",
         "off_road",
         "vehicle_alongside",
+        "reversing",
     )
 
     def __init__(self, rules: HighwayRules | None = None) -> None:
@@ -233,7 +237,7 @@ class TimeToCollisionLogic:
         leads_travelled = 0.5 * (leads + leads_next) * dt
         return (
             gaps - travelled[:, None] + leads_travelled,
-            np.maximum(speed + accel * dt, 0.0),
+            speed + accel * dt,
             leads_next,
             y + speed * np.sin(heading + slip) * dt,
             heading + speed * np.sin(slip) / (0.5 * VEHICLE_LENGTH) * dt,
@@ -242,6 +246,10 @@ class TimeToCollisionLogic:
     def decide(self, state: FloatArray, learned: FloatArray, safe: FloatArray) -> Decision:
         r = self.rules
         gaps1, speed1, leads1, y1, heading1 = self.predict(state, learned)
+        # highway-env's vehicle reverses when braked below standstill; the lane keeper (and
+        # the road) assume it goes forward
+        reversing = speed1 < 0
+        speed1 = np.maximum(speed1, 0.0)
         # where the car can get to while the lane keeper turns it back: two more periods of
         # its lateral drift
         drift = 2 * speed1 * np.sin(heading1) * r.decision_period
@@ -262,7 +270,7 @@ class TimeToCollisionLogic:
         alongside = (reach_high - y > state[:, 6] - SIDE_MARGIN) | (
             y - reach_low > state[:, 7] - SIDE_MARGIN
         )
-        reason = np.select([envelope, too_soon, off_road, alongside], [1, 2, 3, 4], 0)
+        reason = np.select([reversing, envelope, too_soon, off_road, alongside], [5, 1, 2, 3, 4], 0)
         reason = reason.astype(np.int8)
         return Decision(reason > 0, reason, safe)
 

@@ -692,6 +692,14 @@ def certified_logic(task: LeftTurnTask) -> CertifiedSwitching:
             f"{type(task).__name__}"
         )
     c = task.config
+    from safeswitch.leftturn.traffic import LeftTurnTrafficTask
+
+    if isinstance(task, LeftTurnTrafficTask):  # in traffic: every conflicting vehicle
+        from safeswitch.leftturn.traffic_logics import CertifiedTrafficSwitching
+
+        return CertifiedTrafficSwitching(
+            c.certified, c.vehicle, c.episode.dt, task.switching_zones(), task.crossing_zones()
+        )
     footprint = (c.vehicle.length, c.vehicle.width)
     ego_route, north_route = task.world.routes
     zones = conflict_geometry(

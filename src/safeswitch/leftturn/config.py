@@ -374,6 +374,120 @@ class ScenarioConfig:
 
 
 @dataclass(frozen=True)
+class TrafficConfig:
+    """Traffic from every leg (ours: the paper's scene has one other car). Each scene draws its
+    flows, its share of non-yielding drivers and every driver's desired speed uniformly within
+    these ranges.
+
+    The north–south road has the right of way; the east–west road gives way (see
+    :mod:`safeswitch.sim.network`). The paper's north car stays (its arrival set by the
+    scenario); the others come as Poisson streams (headways ``min_headway_s`` plus an
+    exponential) on every approach, followers behind the ego included.
+
+    Attributes:
+        main_flow_veh_h: Flow on each main-road approach (north, south) [veh/h].
+        minor_flow_veh_h: Flow on each minor-road approach (east, west) [veh/h].
+        non_yielding_share: Share of drivers who ignore the automated ego at conflicts (the
+            paper's north car never yields); the others give way to it by the rules.
+        speed_kmh: Desired speeds of the other drivers [km/h].
+        turn_shares: Shares of (straight, right, left) of every stream.
+        min_headway_s: Smallest time headway in a stream [s].
+        patience_s: How long a yielding driver waits for an ego that is waiting too before it
+            goes first (:mod:`safeswitch.sim.streams`) [s].
+        exit_distance_m: A vehicle leaves the scene this far past the box [m].
+        horizon_s: Episode length in traffic [s], in place of ``episode.horizon_s`` (waiting
+            for a gap takes longer than the paper's 12 s); ``None`` keeps the episode's.
+        max_vehicles: Slots for other vehicles per scene (besides the paper's north car): the
+            streams' farthest vehicles are dropped beyond it at the start, and a vehicle due
+            to enter waits outside while every slot is taken.
+        observed: How many other vehicles the observation holds (``K``, nearest first).
+    """
+
+    main_flow_veh_h: tuple[float, float] = (300.0, 450.0)
+    minor_flow_veh_h: tuple[float, float] = (150.0, 250.0)
+    non_yielding_share: tuple[float, float] = (0.0, 0.5)
+    speed_kmh: tuple[float, float] = (25.0, 40.0)
+    turn_shares: tuple[float, float, float] = (0.7, 0.2, 0.1)
+    min_headway_s: float = 1.5
+    patience_s: float = 2.0
+    exit_distance_m: float = 40.0
+    horizon_s: float | None = 30.0
+    max_vehicles: int = 12
+    observed: int = 4
+
+    def __post_init__(self) -> None:
+        o = "traffic"
+        for name in ("main_flow_veh_h", "minor_flow_veh_h"):
+            low, high = getattr(self, name)
+            check(0 <= low <= high <= 3000, o, name, (low, high),
+                  "must be 0 <= low <= high <= 3000 veh/h")  # fmt: skip
+        low, high = self.non_yielding_share
+        check(0 <= low <= high <= 1, o, "non_yielding_share", (low, high),
+              "must be 0 <= low <= high <= 1")  # fmt: skip
+        low, high = self.speed_kmh
+        check(5 <= low <= high <= 80, o, "speed_kmh", (low, high), "must be within [5, 80] km/h")
+        check(
+            len(self.turn_shares) == 3 and min(self.turn_shares) >= 0
+            and abs(sum(self.turn_shares) - 1.0) < 1e-6,
+            o, "turn_shares", self.turn_shares, "must be 3 non-negative shares summing to 1",
+        )  # fmt: skip
+        check(0.5 <= self.min_headway_s <= 10, o, "min_headway_s", self.min_headway_s,
+              "must be in [0.5, 10] s")  # fmt: skip
+        check(0 <= self.patience_s <= 60, o, "patience_s", self.patience_s,
+              "must be in [0, 60] s")  # fmt: skip
+        if self.horizon_s is not None:
+            check(1 <= self.horizon_s <= 120, o, "horizon_s", self.horizon_s,
+                  "must be in [1, 120] s or null")  # fmt: skip
+        check(10 <= self.exit_distance_m <= 100, o, "exit_distance_m", self.exit_distance_m,
+              "must be in [10, 100] m")  # fmt: skip
+        check(1 <= self.max_vehicles <= 32, o, "max_vehicles", self.max_vehicles,
+              "must be in [1, 32]")  # fmt: skip
+        check(0 <= self.observed <= self.max_vehicles + 1, o, "observed", self.observed,
+              f"must be in [0, max_vehicles + 1 = {self.max_vehicles + 1}]")  # fmt: skip
+
+
+#: Named traffic settings: densities from light to heavy, and a train/test split of the space
+#: (the test family is denser and less courteous than anything trained on).
+TRAFFIC_PRESETS: dict[str, dict[str, Any]] = {
+    "light": {"main_flow_veh_h": (100.0, 200.0), "minor_flow_veh_h": (50.0, 100.0)},
+    "medium": {"main_flow_veh_h": (300.0, 450.0), "minor_flow_veh_h": (150.0, 250.0)},
+    "heavy": {"main_flow_veh_h": (600.0, 800.0), "minor_flow_veh_h": (300.0, 400.0),
+              "max_vehicles": 14},
+    "train": {"main_flow_veh_h": (100.0, 500.0), "minor_flow_veh_h": (50.0, 250.0),
+              "non_yielding_share": (0.0, 0.5)},
+    "test": {"main_flow_veh_h": (500.0, 800.0), "minor_flow_veh_h": (250.0, 400.0),
+             "non_yielding_share": (0.5, 1.0), "max_vehicles": 14},
+}  # fmt: skip
+
+
+def traffic_config(traffic: TrafficConfig | str | dict[str, Any] | None) -> TrafficConfig | None:
+    """A :class:`TrafficConfig` from itself, a preset's name, a dict (a preset may be named
+    under ``preset``, the other keys override it) or ``None`` (no traffic: the paper's scene).
+
+    Raises:
+        ConfigError: An unknown preset or key, or a value out of range (named).
+    """
+    if traffic is None or isinstance(traffic, TrafficConfig):
+        return traffic
+    if isinstance(traffic, str):
+        if traffic not in TRAFFIC_PRESETS:
+            raise ConfigError(
+                f"traffic={traffic!r} is not a preset ({', '.join(TRAFFIC_PRESETS)}) or a dict"
+            )
+        return from_dict(TrafficConfig, TRAFFIC_PRESETS[traffic], where="traffic")
+    if isinstance(traffic, dict):
+        data = dict(traffic)
+        preset = data.pop("preset", None)
+        if preset is not None:
+            if preset not in TRAFFIC_PRESETS:
+                known = list(TRAFFIC_PRESETS)
+                raise ConfigError(f"traffic.preset={preset!r} is not one of {known}")
+            data = {**TRAFFIC_PRESETS[preset], **data}
+        return from_dict(TrafficConfig, data, where="traffic")
+    raise ConfigError(f"traffic must be None, a preset name or a dict, got {traffic!r}")
+
+
+@dataclass(frozen=True)
 class EpisodeConfig:
     """Episode timing and who drives when.
 

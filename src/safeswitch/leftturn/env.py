@@ -40,6 +40,12 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         learned_scope: ``"window"`` (Algorithm 1: the learned controller drives while both cars
             are at the intersection), ``"episode"`` (throughout) or ``"never"``; left out, the
             configuration's (``"window"`` by default).
+        traffic: ``None`` (the paper's scene), a preset (``"light"``, ``"medium"``,
+            ``"heavy"``, ``"train"``, ``"test"``), a dict of
+            :class:`~safeswitch.leftturn.config.TrafficConfig` settings (``preset`` to start
+            from one) or a ``TrafficConfig``: other vehicles on every approach
+            (:mod:`safeswitch.leftturn.traffic`; ``safeswitch/LeftTurnTraffic-v0`` defaults to
+            ``"medium"``).
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}  # noqa: RUF012
@@ -53,14 +59,15 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         render_mode: str | None = None,
         env_index: int = 0,
         learned_scope: str = FROM_CONFIG,
+        traffic: Any = None,
     ) -> None:
         self.task = build_task(
-            render_mode, config, learned_scope, switching=switching, adas_penalty=adas_penalty,
-            scenario=scenario,
+            render_mode, config, learned_scope, traffic, switching=switching,
+            adas_penalty=adas_penalty, scenario=scenario,
         )  # fmt: skip
         self.config = self.task.config
         self.render_mode = render_mode
-        self.observation_space = observation_space()  # type: ignore[assignment]
+        self.observation_space = observation_space(self.task)  # type: ignore[assignment]
         self.action_space = action_space()  # type: ignore[assignment]
         self.env_index = int(env_index)
         self._seed: int | None = None

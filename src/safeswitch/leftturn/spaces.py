@@ -13,9 +13,13 @@ from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import VehicleParams, steady_state_throttle
 
 
-def observation_space() -> spaces.Box:
-    """``(x_e, y_e, v_e, x_n, y_n, v_n)`` [m, m, m/s, m, m, m/s], float32."""
-    return spaces.Box(OBSERVATION_LOW, OBSERVATION_HIGH, dtype=np.float32)
+def observation_space(task: Any = None) -> spaces.Box:
+    """``(x_e, y_e, v_e, x_n, y_n, v_n)`` [m, m, m/s, m, m, m/s], float32 — followed, for a
+    task in traffic, by its nearest other vehicles (``task.observation_bounds``)."""
+    if task is None:
+        return spaces.Box(OBSERVATION_LOW, OBSERVATION_HIGH, dtype=np.float32)
+    low, high = task.observation_bounds
+    return spaces.Box(low, high, dtype=np.float32)
 
 
 def action_space() -> spaces.Box:

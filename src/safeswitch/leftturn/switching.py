@@ -185,4 +185,12 @@ def paper_logic(task: LeftTurnTask) -> PaperSwitching:
         raise LogicContextError(
             f"the 'paper' switching logic supervises the left-turn task, not {type(task).__name__}"
         )
+    from safeswitch.leftturn.traffic import LeftTurnTrafficTask
+
+    if isinstance(task, LeftTurnTrafficTask):  # in traffic: every conflicting vehicle
+        from safeswitch.leftturn.traffic_logics import PaperTrafficSwitching
+
+        return PaperTrafficSwitching(
+            paper, task.config.controllers.emergency_decel, task.config.episode.approach_distance_m
+        )
     return PaperSwitching(paper, task.config.controllers.emergency_decel)

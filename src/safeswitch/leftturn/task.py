@@ -38,7 +38,12 @@ from safeswitch.core.config import to_dict
 from safeswitch.core.pid import PIDKernel, PIDState, pid_tick
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
-from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig, resolve_config
+from safeswitch.leftturn.config import (
+    FROM_CONFIG,
+    LeftTurnConfig,
+    resolve_config,
+    traffic_config,
+)
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
@@ -121,6 +126,31 @@ def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> 
             mine[index] = theirs
         else:
             _replace_arrays(mine, index, theirs)
+
+
+@dataclass
+class ConflictArrays:
+    """The ego's conflict zones with every other vehicle, for measures taken at them
+    (:mod:`safeswitch.evaluation.surrogate`); ``C`` conflicts per episode.
+
+    Attributes:
+        ego_progress: Ego's arc length [m] ``[B]``.
+        ego_speed: Ego's speed [m/s] ``[B]``.
+        present: The conflict exists (its vehicle is there and crosses the ego's route)
+            ``[B, C]``.
+        ego_zone: The ego's conflict zone ``(enter, exit)`` [m] ``[B, C, 2]``.
+        other_progress: The other vehicle's arc length [m] ``[B, C]``.
+        other_speed: Its speed [m/s] ``[B, C]``.
+        other_zone: Its conflict zone [m] ``[B, C, 2]``.
+    """
+
+    ego_progress: FloatArray
+    ego_speed: FloatArray
+    present: BoolArray
+    ego_zone: FloatArray
+    other_progress: FloatArray
+    other_speed: FloatArray
+    other_zone: FloatArray
 
 
 @dataclass
@@ -288,6 +318,11 @@ class LeftTurnTask:
         ki = c.controllers.brake_pid.ki
         return min(brake, 1.0) / ki if ki > 0 else 0.0
 
+    @property
+    def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Lower and upper bounds of :meth:`observe`'s values."""
+        return OBSERVATION_LOW, OBSERVATION_HIGH
+
     def observe(self, state: TaskState) -> NDArray[np.float32]:
         """The paper's state ``s = (x_e, y_e, v_e, x_n, y_n, v_n)``, ``[B, 6]`` float32."""
         v = state.world.vehicles
@@ -320,6 +355,20 @@ class LeftTurnTask:
             ego_brake=v.brake[:, 0],
         )
 
+    def conflicts(self, state: TaskState) -> ConflictArrays:
+        """The ego's conflict with every other vehicle: here the north car's (one column)."""
+        batch, geo = state.batch_size, self.conflict
+        v = state.world.vehicles
+        return ConflictArrays(
+            ego_progress=state.world.progress[:, 0].copy(),
+            ego_speed=v.speed[:, 0].copy(),
+            present=np.ones((batch, 1), dtype=np.bool_),
+            ego_zone=np.broadcast_to(np.asarray(geo.zone_a, dtype=np.float64), (batch, 1, 2)),
+            other_progress=state.world.progress[:, 1:2].copy(),
+            other_speed=v.speed[:, 1:2].copy(),
+            other_zone=np.broadcast_to(np.asarray(geo.zone_b, dtype=np.float64), (batch, 1, 2)),
+        )
+
     def hold(
         self,
         state: TaskState,
@@ -350,6 +399,29 @@ class LeftTurnTask:
             merge_tick(merged, record, live)
             live = live & ~(record.terminated | record.truncated)
         return state, merged
+
+    # -- hooks of a task with more traffic (LeftTurnTrafficTask overrides them) ----------------
+
+    def logic_view(self, state: TaskState, conflict: ConflictState) -> Any:
+        """What the switching logic sees: here the north car's conflict."""
+        return conflict
+
+    def advance_others(
+        self, state: TaskState, new_world: WorldState, separation: FloatArray
+    ) -> tuple[Any, FloatArray]:
+        """Advance any other traffic over the tick; returns its new state and the ego's
+        separation from the nearest vehicle of all [m]. Here there is none."""
+        return None, separation
+
+    def make_state(self, base: TaskState, others: Any) -> TaskState:
+        """The next state from its plant part and the other traffic's."""
+        return base
+
+    def extend_observation(
+        self, state: TaskState, observation: NDArray[np.float32]
+    ) -> NDArray[np.float32]:
+        """The observation from the plant's six values: here exactly those."""
+        return observation
 
     def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
         """Advance every episode by one tick.
@@ -411,13 +483,15 @@ class LeftTurnTask:
             ego_throttle=v.throttle[:, 0],
             ego_brake=v.brake[:, 0],
         )
-        sup = supervise(self.switching, conflict, proposed, safe, 0.0, 1.0, fallback)
+        view = self.logic_view(state, conflict)
+        sup = supervise(self.switching, view, proposed, safe, 0.0, 1.0, fallback)
         throttle, brake = sup.executed[:, 0], sup.executed[:, 1]
 
-        # 4. The plant.
+        # 4. The plant (and, in traffic, the other vehicles).
         new_world, outputs, separation = self.world.step(
             world, columns(throttle, north_throttle), columns(brake, north_brake), steer
         )
+        others, separation = self.advance_others(state, new_world, separation)
         speed = new_world.vehicles.speed
         terms_out = tuple(np.empty(batch) for _ in REWARD_TERMS)
         reward, tick = np.empty(batch), np.empty(batch, dtype=np.int64)
@@ -437,19 +511,22 @@ class LeftTurnTask:
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
         collision, terminated, truncated, ego_cleared = ends
 
-        new_state = TaskState(
-            new_world,
-            state.scenarios,
-            pid_throttle,
-            pid_brake,
-            pid_lane,
-            pid_north,
-            outputs.accel_lon[:, 0],
-            tick,
-            outcome,
+        new_state = self.make_state(
+            TaskState(
+                new_world,
+                state.scenarios,
+                pid_throttle,
+                pid_brake,
+                pid_lane,
+                pid_north,
+                outputs.accel_lon[:, 0],
+                tick,
+                outcome,
+            ),
+            others,
         )
         record = StepRecord(
-            observation=observation,
+            observation=self.extend_observation(new_state, observation),
             reward=reward,
             terms=terms,
             terminated=terminated,
@@ -524,18 +601,28 @@ def build_task(
     render_mode: str | None,
     config: LeftTurnConfig | dict[str, Any] | None,
     learned_scope: str = FROM_CONFIG,
+    traffic: Any = None,
     **overrides: Any,
 ) -> LeftTurnTask:
     """The task behind an environment: ``render_mode`` checked, ``config`` resolved with the
     constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`;
-    ``learned_scope`` sets ``episode.learned_scope``)."""
+    ``learned_scope`` sets ``episode.learned_scope``); with ``traffic`` (a preset's name, a dict
+    or a :class:`~safeswitch.leftturn.config.TrafficConfig`) the task in traffic."""
     if render_mode not in (None, "rgb_array", "human"):
         raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
     resolved = resolve_config(config, **overrides)
     if learned_scope is not FROM_CONFIG:
         episode = {**to_dict(resolved.episode), "learned_scope": learned_scope}
         resolved = resolve_config(resolved, episode=episode)
-    return LeftTurnTask(resolved)
+    settings = traffic_config(traffic)
+    if settings is None:
+        return LeftTurnTask(resolved)
+    if settings.horizon_s is not None:
+        episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
+        resolved = resolve_config(resolved, episode=episode)
+    from safeswitch.leftturn.traffic import LeftTurnTrafficTask
+
+    return LeftTurnTrafficTask(resolved, settings)
 
 
 class ControllerGains(NamedTuple):

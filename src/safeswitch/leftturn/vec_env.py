@@ -138,6 +138,8 @@ class LeftTurnVecEnv(VecEnv):
         seed: Base seed; ``None`` draws one from the operating system.
         render_mode: ``None`` or ``"rgb_array"``.
         learned_scope: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv`.
+        traffic: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv` (``None``: the paper's
+            scene, bit for bit).
     """
 
     def __init__(
@@ -150,16 +152,17 @@ class LeftTurnVecEnv(VecEnv):
         seed: int | None = None,
         render_mode: str | None = None,
         learned_scope: str = FROM_CONFIG,
+        traffic: Any = None,
     ) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.task = build_task(
-            render_mode, config, learned_scope, switching=switching, adas_penalty=adas_penalty,
-            scenario=scenario,
+            render_mode, config, learned_scope, traffic, switching=switching,
+            adas_penalty=adas_penalty, scenario=scenario,
         )  # fmt: skip
         self.config = self.task.config
         self.render_mode = render_mode
-        super().__init__(int(num_envs), observation_space(), action_space())
+        super().__init__(int(num_envs), observation_space(self.task), action_space())
         self._seed = _fresh_seed() if seed is None else int(seed)
         self._env_ids = np.arange(self.num_envs, dtype=np.int64)
         self._episodes = np.zeros(self.num_envs, dtype=np.int64)

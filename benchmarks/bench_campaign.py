@@ -1,0 +1,96 @@
+"""Campaign throughput on Ray: scaling from 1 to 2 workers, Ray's start-up, and a million
+episodes of the shipped policy.
+
+1. Ray's start-up: a local cluster started and shut down, nothing run (median of 3).
+2. Scaling: the same campaign (``--episodes`` of a controller under ``paper``, shards of
+   10,000) with 1 and with 2 workers, in one run; the ratio of their work times (start-up
+   excluded; the machine has 2 cores).
+3. ``--million``: 1,000,000 episodes of the shipped policy under ``paper`` with 2 workers.
+
+Run: ``python benchmarks/bench_campaign.py [--episodes 100000] [--controller rule] [--million]
+[--json]``; writes ``benchmarks/results/campaign.json``. Run it on an otherwise idle machine:
+a second job on one of the two cores halves what two workers can give.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import _common
+from safeswitch.app.campaign import Cell, Space, campaign
+from safeswitch.app.distributed import cluster
+from safeswitch.io import write_json
+
+RESULTS = Path(__file__).resolve().parent / "results" / "campaign.json"
+
+
+def startup(rounds: int = 3) -> float:
+    times = []
+    for _ in range(rounds):
+        began = time.perf_counter()
+        with cluster(2):
+            pass
+        times.append(time.perf_counter() - began)
+    return statistics.median(times)
+
+
+def timed(cell: Cell, episodes: int, workers: int, seed: int) -> dict[str, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        result = campaign(
+            [cell], Space("random", episodes, seed), Path(tmp) / "c", workers=workers,
+            shard_size=10_000, progress=False,
+        )  # fmt: skip
+    s = result.summary
+    work = s["wall_time_s"] - s["ray_startup_s"]
+    return {
+        "workers": workers,
+        "episodes": episodes,
+        "wall_time_s": s["wall_time_s"],
+        "ray_startup_s": s["ray_startup_s"],
+        "work_s": work,
+        "episodes_per_s": episodes / work,
+        "collisions": s["cells"][cell.key]["collisions"],
+        "mean_efficiency": s["cells"][cell.key]["mean_efficiency"],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=100_000)
+    parser.add_argument("--controller", default="rule")
+    parser.add_argument("--million", action="store_true", help="also 1 M shipped-policy episodes")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    cell = Cell(args.controller, "shipped" if args.controller == "learned" else None)
+    result: dict[str, object] = {"benchmark": "campaign", **_common.machine(), "threads": 2}
+    result["ray_startup_s"] = startup()
+    one = timed(cell, args.episodes, 1, 5)
+    two = timed(cell, args.episodes, 2, 5)
+    result["scaling"] = {"one_worker": one, "two_workers": two,
+                         "speedup": one["work_s"] / two["work_s"]}  # fmt: skip
+    print(
+        f"Ray start-up {result['ray_startup_s']:.1f} s; {args.episodes:,} episodes of "
+        f"{cell.key}: 1 worker {one['work_s']:.0f} s, 2 workers {two['work_s']:.0f} s — "
+        f"{one['work_s'] / two['work_s']:.2f}×",
+        file=sys.stderr,
+    )
+    if args.million:
+        million = timed(Cell("learned", "shipped"), 1_000_000, 2, 7)
+        result["million_shipped"] = million
+        print(
+            f"1,000,000 episodes of the shipped policy, 2 workers: {million['wall_time_s']:.0f} s "
+            f"({million['episodes_per_s']:,.0f} episodes/s), {million['collisions']} collisions",
+            file=sys.stderr,
+        )
+    write_json(RESULTS, result)
+    _common.emit(result, args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

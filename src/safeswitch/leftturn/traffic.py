@@ -1,0 +1,552 @@
+"""The left turn among many vehicles (``safeswitch/LeftTurnTraffic-v0``): the paper's scene plus
+streams on every approach (:mod:`safeswitch.sim.streams`).
+
+:class:`LeftTurnTrafficTask` is the left-turn task with its hooks filled in: the paper's north
+car stays as it is (plant, autopilot, never yields; its arrival set by the scenario), the other
+vehicles follow the traffic rules and their own car-following, and
+
+* the switching logic sees every vehicle whose route conflicts with the ego's
+  (:class:`TrafficConflictState`; the ``paper`` and ``certified`` logics generalised in
+  :mod:`safeswitch.leftturn.traffic_logics`);
+* a collision with any vehicle ends the episode; collisions among the others are counted
+  (:attr:`TrafficTaskState.npc_collisions`; they must stay 0);
+* the observation is the paper's six values followed by the ``K`` nearest other vehicles
+  (:data:`OBSERVED_FEATURES` each, nearest first, zeros and ``present = 0`` where there are
+  fewer).
+
+With ``traffic=None`` none of this exists: the environments build the plain
+:class:`~safeswitch.leftturn.task.LeftTurnTask` (bit-identical to the paper's scene).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.core.arrays import jit
+from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
+from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
+from safeswitch.leftturn.switching import ConflictState
+from safeswitch.leftturn.task import ConflictArrays, LeftTurnTask, TaskState
+from safeswitch.sim.geometry import FloatArray
+from safeswitch.sim.idm import IDMParams
+from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
+from safeswitch.sim.road import LEG_DIRECTIONS
+from safeswitch.sim.streams import (
+    ArrivalSchedule,
+    RightOfWay,
+    TrafficState,
+    network_tables,
+    npc_separations,
+    place,
+    spawn,
+    traffic_tick,
+)
+from safeswitch.sim.world import WorldState
+
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+#: The ego's top speed as the other drivers estimate its earliest arrival [m/s].
+EGO_TOP_SPEED = 15.0
+#: Per observed vehicle: present (1/0), x [m], y [m], speed [m/s], heading cos, heading sin.
+OBSERVED_FEATURES = ("present", "x", "y", "speed", "cos_yaw", "sin_yaw")
+#: Candidates drawn per approach before the nearest ``max_vehicles`` are kept.
+_PER_LEG = 8
+#: Uniforms per candidate: headway, turn, desired speed, yielding.
+_DRAWS = 4
+
+
+@dataclass
+class TrafficScenarios(Scenarios):
+    """The paper's scenario parameters plus the other vehicles' initial placement.
+
+    Attributes:
+        traffic: The other vehicles at the start ``[B, N]``.
+    """
+
+    traffic: TrafficState
+
+
+@dataclass
+class TrafficTaskState(TaskState):
+    """:class:`TaskState` plus the other vehicles.
+
+    Attributes:
+        traffic: The other vehicles ``[B, N]``.
+        npc_collisions: Pairs of other vehicles that overlapped, summed over the episode ``[B]``.
+    """
+
+    traffic: TrafficState
+    npc_collisions: NDArray[np.int64]
+
+
+@dataclass
+class TrafficConflictState(ConflictState):
+    """:class:`ConflictState` (the north car's conflict) plus every conflict with the ego,
+    arrays ``[B, C]`` (column 0 the north car, then the other vehicles' slots).
+
+    Attributes:
+        present: The vehicle exists and its route conflicts with the ego's.
+        ego_point: The conflict point on the ego's route [m] (the zone's middle for the others).
+        ego_zone: ``[B, C, 2]`` the ego's conflict zone (paper margin) [m].
+        ego_cert_zone: ``[B, C, 2]`` the same with the certified logic's margin [m].
+        other_progress: The vehicle's arc length [m].
+        other_point: Its conflict point [m].
+        other_zone: ``[B, C, 2]`` its conflict zone (paper margin) [m].
+        other_cert_zone: ``[B, C, 2]`` with the certified margin [m].
+        other_speed: Its speed [m/s].
+        other_top: Its top speed [m/s] (the scenario's; the certificate assumes more).
+    """
+
+    present: BoolArray
+    ego_point: FloatArray
+    ego_zone: FloatArray
+    ego_cert_zone: FloatArray
+    other_progress: FloatArray
+    other_point: FloatArray
+    other_zone: FloatArray
+    other_cert_zone: FloatArray
+    other_speed: FloatArray
+    other_top: FloatArray
+
+
+class LeftTurnTrafficTask(LeftTurnTask):
+    """The left-turn task in traffic (see the module docstring).
+
+    Args:
+        config: The task's configuration.
+        traffic: The traffic.
+    """
+
+    def __init__(self, config: LeftTurnConfig, traffic: TrafficConfig) -> None:
+        self.traffic = traffic
+        footprint = (config.vehicle.length, config.vehicle.width)
+        #: The movements with the paper logic's conflict margin, and with the certified one's.
+        self.network = RoadNetwork(config.geometry, footprint, config.episode.conflict_margin_m)
+        self.cert_network = RoadNetwork(config.geometry, footprint, config.certified.zone_margin_m)
+        self.tables = network_tables(self.network)
+        self.ego_route = self.network.index("south", "west")
+        self.north_route = self.network.index("north", "south")
+        self.idm = IDMParams()
+        self.rules = RightOfWay(
+            gap_time=1.0, go_accel=1.0, stop_buffer=0.5, ego_accel=3.0, ego_rank=1,
+            length=config.vehicle.length, patience=traffic.patience_s, slow_speed=1.0,
+        )  # fmt: skip
+        super().__init__(config)
+        self._ghost_ego = False
+        self._point = _zone_middles(self.network)
+        #: Where a vehicle leaves the scene, per movement [m].
+        self._exit_at = np.minimum(
+            self.network.box_exits + traffic.exit_distance_m, self.network.lengths - 1.0
+        )
+        # Per ordered pair of movements: the first's zone, its certified zone (the logic view's
+        # table, [2, R, R, 2]).
+        self._pair_zones = np.ascontiguousarray(
+            np.stack([self.network.conflicts, self.cert_network.conflicts])
+        )
+        self._observed_low = np.tile(
+            np.array([0, -150, -150, 0, -1, -1], dtype=np.float32), traffic.observed
+        )
+        self._observed_high = np.tile(
+            np.array([1, 150, 150, 60, 1, 1], dtype=np.float32), traffic.observed
+        )
+
+    # -- scenarios and the start ------------------------------------------------------------
+
+    def draw_scenarios(
+        self, seed: int, env_ids: NDArray[np.int64], episodes: NDArray[np.int64]
+    ) -> TrafficScenarios:
+        base = super().draw_scenarios(seed, env_ids, episodes)
+        return self._with_traffic(base, seed, env_ids, episodes)
+
+    def named(self, name: str, batch: int, seed: int = 0) -> TrafficScenarios:
+        """A named scenario of the paper with traffic drawn around it (from ``seed``)."""
+        ids = np.arange(batch)
+        return self._with_traffic(named_scenarios(name, batch), seed, ids, np.zeros_like(ids))
+
+    @property
+    def arrivals_per_leg(self) -> int:
+        """``M``: scheduled arrivals per approach, enough for the densest flow over the
+        horizon with a wide margin (the mean plus six standard deviations, plus four)."""
+        flow = max(self.traffic.main_flow_veh_h[1], self.traffic.minor_flow_veh_h[1]) / 3600.0
+        mean = flow * self.config.episode.horizon_s
+        return math.ceil(mean + 6.0 * math.sqrt(mean) + 4.0)
+
+    def _with_traffic(
+        self, base: Scenarios, seed: int, env_ids: NDArray[np.int64], episodes: NDArray[np.int64]
+    ) -> TrafficScenarios:
+        legs = len(LEG_DIRECTIONS)
+        start = counter_uniforms(seed ^ 0x5AFE, env_ids, episodes, 3 + legs * _PER_LEG * _DRAWS)
+        later = counter_uniforms(
+            seed ^ 0xA771, env_ids, episodes, legs * self.arrivals_per_leg * _DRAWS
+        )
+        return TrafficScenarios(
+            base.ego_start_distance, base.ego_speed, base.north_speed, base.arrival_offset,
+            traffic=self._place_streams(base, start, later, self.traffic.max_vehicles),
+        )  # fmt: skip
+
+    def _place_streams(
+        self, base: Scenarios, u: FloatArray, later: FloatArray, slots: int
+    ) -> TrafficState:
+        """Poisson streams on every approach: the vehicles on the approaches at the start (the
+        nearest ``slots`` kept) and the schedule of those still to come."""
+        t, net, g = self.traffic, self.network, self.config.geometry
+        batch = u.shape[0]
+        approach = g.approach_length
+        v_lim = self.config.controllers.speed_limit
+        length = self.config.vehicle.length
+        main = t.main_flow_veh_h[0] + u[:, 0] * (t.main_flow_veh_h[1] - t.main_flow_veh_h[0])
+        minor = t.minor_flow_veh_h[0] + u[:, 1] * (t.minor_flow_veh_h[1] - t.minor_flow_veh_h[0])
+        rude = t.non_yielding_share[0] + u[:, 2] * np.ptp(t.non_yielding_share)
+        # Where each approach's stream starts, measured from its stop line outwards [m].
+        ego_to_line = base.ego_start_distance - (self.conflict.s_point_a - approach)
+        north_to_line = base.north_start_distance(v_lim) - (self.conflict.s_point_b - approach)
+        legs = list(LEG_DIRECTIONS)
+        routes = np.array([[net.index(leg, d) for d in _destinations(leg)] for leg in legs])
+        cdf = np.cumsum(t.turn_shares)
+
+        def driver(draws: FloatArray, li: int) -> tuple[IntArray, FloatArray, BoolArray]:
+            """Route, desired speed and yielding of drivers from their uniforms ``[..., 4]``."""
+            turn = np.minimum(np.searchsorted(cdf, draws[..., 1], side="right"), 2)
+            v0 = (t.speed_kmh[0] + draws[..., 2] * np.ptp(t.speed_kmh)) / 3.6
+            return (
+                routes[li][turn],
+                v0,
+                draws[..., 3] >= rude.reshape((-1,) + (1,) * (draws.ndim - 2)),
+            )
+
+        candidates = len(legs) * _PER_LEG
+        route = np.zeros((batch, candidates), dtype=np.int64)
+        distance = np.full((batch, candidates), np.inf)
+        desired = np.zeros((batch, candidates))
+        yields = np.zeros((batch, candidates), dtype=bool)
+        most = self.arrivals_per_leg
+        schedule = ArrivalSchedule(
+            time=np.full((batch, len(legs), most), np.inf),
+            route=np.zeros((batch, len(legs), most), dtype=np.int64),
+            desired=np.zeros((batch, len(legs), most)),
+            yields=np.zeros((batch, len(legs), most), dtype=bool),
+        )
+        for li, leg in enumerate(legs):
+            flow = main if leg in MAIN_ROAD else minor
+            mean_gap = np.maximum(3600.0 / np.maximum(flow, 1e-9) - t.min_headway_s, 0.1)
+            for k in range(_PER_LEG):
+                col = li * _PER_LEG + k
+                draws = u[:, 3 + col * _DRAWS : 3 + (col + 1) * _DRAWS]
+                r, v0, y = driver(draws[:, None, :], li)
+                headway = t.min_headway_s - mean_gap * np.log1p(-draws[:, 0])
+                spacing = length + v0[:, 0] * headway
+                if k == 0:
+                    if leg == "north":  # behind the paper's north car
+                        d = north_to_line + spacing
+                    elif leg == "south":  # behind the ego
+                        d = ego_to_line + spacing
+                    else:  # room to stop at the give-way line
+                        d = v0[:, 0] ** 2 / 4.0 + 5.0 + draws[:, 0] * spacing
+                else:
+                    d = distance[:, col - 1] + spacing
+                distance[:, col] = np.where(flow > 0, d, np.inf)
+                route[:, col], desired[:, col], yields[:, col] = r[:, 0], v0[:, 0], y[:, 0]
+            # Later arrivals at the start of the approach: the first after an exponential time
+            # (a Poisson stream has no memory), then minimum headway plus exponential gaps.
+            draws = later[:, li * most * _DRAWS : (li + 1) * most * _DRAWS].reshape(
+                batch, most, _DRAWS
+            )
+            gaps = -mean_gap[:, None] * np.log1p(-draws[..., 0])
+            gaps[:, 1:] += t.min_headway_s
+            times = np.cumsum(gaps, axis=1)
+            schedule.time[:, li] = np.where(flow[:, None] > 0, times, np.inf)
+            schedule.route[:, li], schedule.desired[:, li], schedule.yields[:, li] = driver(
+                draws, li
+            )
+        distance = np.where(distance <= approach - 2.0, distance, np.inf)
+        keep = np.argsort(distance, axis=1, kind="stable")[:, :slots]
+        rows = np.arange(batch)[:, None]
+        d = distance[rows, keep]
+        active = np.isfinite(d)
+        state = TrafficState(
+            route=route[rows, keep],
+            progress=np.where(active, approach - np.where(active, d, 0.0), 0.0),
+            speed=np.where(active, desired[rows, keep], 0.0),
+            desired=desired[rows, keep],
+            yields=yields[rows, keep],
+            active=active,
+            waited=np.zeros((batch, slots)),
+            x=np.zeros((batch, slots)),
+            y=np.zeros((batch, slots)),
+            cos_yaw=np.ones((batch, slots)),
+            sin_yaw=np.zeros((batch, slots)),
+            schedule=schedule,
+            entered=np.zeros((batch, len(legs)), dtype=np.int64),
+        )
+        place(self.tables, state)
+        return state
+
+    def initial(self, scenarios: Scenarios) -> TrafficTaskState:
+        if not isinstance(scenarios, TrafficScenarios):
+            raise TypeError("a traffic task starts from TrafficScenarios (draw_scenarios)")
+        base = super().initial(scenarios)
+        batch = base.batch_size
+        fields = {f: getattr(base, f) for f in base.__dataclass_fields__}
+        return TrafficTaskState(
+            **fields, traffic=scenarios.traffic.copy(schedule=True),
+            npc_collisions=np.zeros(batch, dtype=np.int64),
+        )  # fmt: skip
+
+    # -- the hooks ------------------------------------------------------------------------------
+
+    def logic_view(self, state: TaskState, conflict: ConflictState) -> TrafficConflictState:
+        assert isinstance(state, TrafficTaskState)
+        tr = state.traffic
+        batch, slots = tr.route.shape
+        c = slots + 1
+        present = np.empty((batch, c), dtype=bool)
+        zones = np.empty((4, batch, c, 2))  # ego's, ego's certified, other's, other's certified
+        points = np.empty((2, batch, c))  # ego's, other's
+        other = np.empty((3, batch, c))  # progress, speed, top speed
+        geo, cgeo = self.conflict, self.switching_zones()
+        north_zones = np.array([geo.zone_a, cgeo[0], geo.zone_b, cgeo[1]])
+        _conflict_view(
+            self.ego_route, self._pair_zones, self._point, north_zones,
+            np.array([geo.s_point_a, geo.s_point_b]), tr.route, tr.active, tr.progress,
+            tr.speed, tr.desired, conflict.north_progress, conflict.north_speed,
+            state.scenarios.north_speed, present, zones, points, other,
+        )  # fmt: skip
+        fields = {f: getattr(conflict, f) for f in conflict.__dataclass_fields__}
+        return TrafficConflictState(
+            **fields, present=present, ego_point=points[0], ego_zone=zones[0],
+            ego_cert_zone=zones[1], other_progress=other[0], other_point=points[1],
+            other_zone=zones[2], other_cert_zone=zones[3], other_speed=other[1],
+            other_top=other[2],
+        )  # fmt: skip
+
+    def conflicts(self, state: TaskState) -> ConflictArrays:
+        """The ego's conflicts with the north car and with every other vehicle."""
+        view = self.logic_view(state, self.conflict_state(state))
+        return ConflictArrays(
+            ego_progress=view.ego_progress.copy(), ego_speed=view.ego_speed.copy(),
+            present=view.present, ego_zone=view.ego_zone, other_progress=view.other_progress,
+            other_speed=view.other_speed, other_zone=view.other_zone,
+        )  # fmt: skip
+
+    def others_without_ego(self, scenarios: Scenarios) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """The other vehicles' world as if the ego were not there (nobody gives way to it or
+        follows it): the north car's arc length ``[B, H + 1]`` and, per movement, whether a
+        vehicle on it is inside its conflict zone with the ego's route ``[B, R, H + 1]`` —
+        what the oracle plans against (:mod:`safeswitch.evaluation.oracle`)."""
+        state: TaskState = self.initial(scenarios)
+        batch, horizon = state.batch_size, self.config.episode.horizon_ticks
+        zones = np.ascontiguousarray(self.network.conflicts[:, self.ego_route])
+        occupied = np.zeros((batch, len(self.network.movements), horizon + 1), dtype=np.bool_)
+        north = np.empty((batch, horizon + 1))
+        hold = np.zeros(batch)
+        self._ghost_ego = True
+        try:
+            for tick in range(horizon + 1):
+                if tick:
+                    state, _ = self.step(state, hold)
+                assert isinstance(state, TrafficTaskState)
+                north[:, tick] = state.world.progress[:, 1]
+                tr = state.traffic
+                _occupied(tr.route, tr.progress, tr.active, zones, tick, occupied)
+        finally:
+            self._ghost_ego = False
+        return north, occupied
+
+    def switching_zones(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The north car's conflict zones with the certified margin (ego's, north car's)."""
+        from safeswitch.sim.conflict import conflict_geometry
+
+        if not hasattr(self, "_cert_north"):
+            c = self.config
+            footprint = (c.vehicle.length, c.vehicle.width)
+            zones = conflict_geometry(
+                self.world.routes[0], self.world.routes[1], footprint, footprint,
+                margin=c.certified.zone_margin_m,
+            )  # fmt: skip
+            self._cert_north = (zones.zone_a, zones.zone_b)
+        return self._cert_north
+
+    def crossing_zones(self) -> tuple[FloatArray, FloatArray]:
+        """Every movement whose route crosses the ego's, with the certified margin: the ego's
+        zone with it ``[P, 2]`` and the entry of its own zone [m] ``[P]`` (the phantoms of
+        :class:`~safeswitch.leftturn.traffic_logics.CertifiedTrafficSwitching`)."""
+        cert = self.cert_network.conflicts
+        crossing = np.flatnonzero(np.isfinite(cert[self.ego_route, :, 0]))
+        return cert[self.ego_route, crossing], cert[crossing, self.ego_route, 0]
+
+    def advance_others(
+        self, state: TaskState, new_world: WorldState, separation: FloatArray
+    ) -> tuple[Any, FloatArray]:
+        assert isinstance(state, TrafficTaskState)
+        tr = state.traffic
+        v, world = state.world.vehicles, state.world
+        batch = tr.route.shape[0]
+        externals = np.empty((batch, 2), dtype=np.int64)
+        externals[:, 0], externals[:, 1] = self.ego_route, self.north_route
+        top = np.empty((batch, 2))
+        top[:, 0] = EGO_TOP_SPEED
+        top[:, 1] = state.scenarios.north_speed
+        new = tr.copy()
+        accel = np.empty(tr.route.shape)
+        ext_progress = _ghost(np.ascontiguousarray(world.progress), self._ghost_ego)
+        traffic_tick(
+            self.tables, self.rules, self.idm.kernel, self.config.episode.dt, tr.route,
+            tr.progress, tr.speed, tr.desired, tr.yields, tr.active, tr.waited, externals,
+            ext_progress, np.ascontiguousarray(v.speed), top,
+            np.array([True, False]), new.progress, new.speed, new.waited, accel,
+        )  # fmt: skip
+        spawn(
+            self.tables, self.rules, self.idm.kernel,
+            (state.tick + 1).astype(np.float64) * self.config.episode.dt,
+            tr.schedule.time, tr.schedule.route, tr.schedule.desired, tr.schedule.yields,
+            new.entered, self._exit_at, new.route, new.progress, new.speed, new.desired,
+            new.yields, new.active, new.waited, externals,
+            _ghost(np.ascontiguousarray(new_world.progress), self._ghost_ego),
+            np.ascontiguousarray(new_world.vehicles.speed),
+        )  # fmt: skip
+        place(self.tables, new)
+        nv = new_world.vehicles
+        gap = np.empty(batch)
+        collisions = np.empty(batch, dtype=np.int64)
+        p = self.config.vehicle
+        npc_separations(
+            new.x, new.y, new.cos_yaw, new.sin_yaw, new.active, p.length, p.width,
+            np.ascontiguousarray(nv.x[:, 0]), np.ascontiguousarray(nv.y[:, 0]),
+            np.ascontiguousarray(nv.cos_yaw[:, 0]), np.ascontiguousarray(nv.sin_yaw[:, 0]),
+            gap, collisions,
+        )  # fmt: skip
+        return (new, state.npc_collisions + collisions), np.minimum(separation, gap)
+
+    def make_state(self, base: TaskState, others: Any) -> TrafficTaskState:
+        traffic, collisions = others
+        fields = {f: getattr(base, f) for f in base.__dataclass_fields__}
+        return TrafficTaskState(**fields, traffic=traffic, npc_collisions=collisions)
+
+    def extend_observation(
+        self, state: TaskState, observation: NDArray[np.float32]
+    ) -> NDArray[np.float32]:
+        assert isinstance(state, TrafficTaskState)
+        k = self.traffic.observed
+        out = np.zeros((observation.shape[0], 6 + len(OBSERVED_FEATURES) * k), dtype=np.float32)
+        out[:, :6] = observation
+        tr = state.traffic
+        _nearest(
+            observation[:, 0].astype(np.float64), observation[:, 1].astype(np.float64),
+            tr.x, tr.y, tr.speed, tr.cos_yaw, tr.sin_yaw, tr.active, k, out,
+        )  # fmt: skip
+        return out
+
+    def observe(self, state: TaskState) -> NDArray[np.float32]:
+        return self.extend_observation(state, super().observe(state))
+
+    @property
+    def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        low, high = super().observation_bounds
+        return np.concatenate([low, self._observed_low]), np.concatenate(
+            [high, self._observed_high]
+        )
+
+
+def _destinations(origin: str) -> tuple[str, str, str]:
+    """The destinations of ``origin`` for (straight, right, left)."""
+    out = {turn_of(origin, d): d for d in LEG_DIRECTIONS if d != origin}
+    return out["straight"], out["right"], out["left"]
+
+
+def _zone_middles(network: RoadNetwork) -> FloatArray:
+    """Per ordered pair of movements, the middle of the first's conflict zone [m] (NaN: none):
+    the conflict point the time-to-reach of the paper's rule is measured to."""
+    z = network.conflicts
+    return 0.5 * (z[..., 0] + z[..., 1])
+
+
+@jit
+def _nearest(
+    ego_x: FloatArray, ego_y: FloatArray, x: FloatArray, y: FloatArray, speed: FloatArray,
+    cos_yaw: FloatArray, sin_yaw: FloatArray, active: BoolArray, k: int,
+    out: NDArray[np.float32],
+) -> None:  # fmt: skip
+    """The ``k`` nearest active other vehicles of every scene into ``out[:, 6:]``."""
+    slots = x.shape[1]
+    for b in range(x.shape[0]):
+        taken = np.zeros(slots, dtype=np.bool_)
+        for n in range(k):
+            best, pick = math.inf, -1
+            for i in range(slots):
+                if active[b, i] and not taken[i]:
+                    d = (x[b, i] - ego_x[b]) ** 2 + (y[b, i] - ego_y[b]) ** 2
+                    if d < best:
+                        best, pick = d, i
+            if pick < 0:
+                break
+            taken[pick] = True
+            base = 6 + 6 * n
+            out[b, base] = 1.0
+            out[b, base + 1] = x[b, pick]
+            out[b, base + 2] = y[b, pick]
+            out[b, base + 3] = speed[b, pick]
+            out[b, base + 4] = cos_yaw[b, pick]
+            out[b, base + 5] = sin_yaw[b, pick]
+
+
+@jit
+def _conflict_view(
+    ego_route: int, pair_zones: FloatArray, point: FloatArray, north_zones: FloatArray,
+    north_points: FloatArray, route: NDArray[np.int64], active: BoolArray, progress: FloatArray,
+    speed: FloatArray, desired: FloatArray, north_progress: FloatArray, north_speed: FloatArray,
+    north_top: FloatArray, present: BoolArray, zones: FloatArray, points: FloatArray,
+    other: FloatArray,
+) -> None:  # fmt: skip
+    """Fill the arrays of :class:`TrafficConflictState`: column 0 the north car, then every
+    slot (``present`` false where the slot is empty or its route does not cross the ego's)."""
+    for b in range(route.shape[0]):
+        present[b, 0] = True
+        for m in range(4):
+            zones[m, b, 0, 0], zones[m, b, 0, 1] = north_zones[m, 0], north_zones[m, 1]
+        points[0, b, 0], points[1, b, 0] = north_points[0], north_points[1]
+        other[0, b, 0], other[1, b, 0], other[2, b, 0] = (
+            north_progress[b], north_speed[b], north_top[b],
+        )  # fmt: skip
+        for i in range(route.shape[1]):
+            r, k = route[b, i], i + 1
+            for m in range(2):
+                for e in range(2):
+                    zones[m, b, k, e] = pair_zones[m, ego_route, r, e]
+                    zones[m + 2, b, k, e] = pair_zones[m, r, ego_route, e]
+            present[b, k] = active[b, i] and not math.isnan(zones[0, b, k, 0])
+            points[0, b, k], points[1, b, k] = point[ego_route, r], point[r, ego_route]
+            other[0, b, k], other[1, b, k], other[2, b, k] = (
+                progress[b, i],
+                speed[b, i],
+                desired[b, i],
+            )
+
+
+def _ghost(progress: FloatArray, ghost: bool) -> FloatArray:
+    """The plant's arc lengths with the ego's put infinitely far behind when it is a ghost."""
+    if not ghost:
+        return progress
+    out = progress.copy()
+    out[:, 0] = -np.inf
+    return out
+
+
+@jit
+def _occupied(
+    route: NDArray[np.int64], progress: FloatArray, active: BoolArray, zones: FloatArray,
+    tick: int, out: NDArray[np.bool_],
+) -> None:  # fmt: skip
+    """Mark ``out[b, r, tick]`` where an active vehicle on movement ``r`` is inside its zone
+    (``zones[r]``; NaN: the movement does not cross the ego's)."""
+    for b in range(route.shape[0]):
+        for i in range(route.shape[1]):
+            if active[b, i]:
+                r = route[b, i]
+                if zones[r, 0] <= progress[b, i] <= zones[r, 1]:
+                    out[b, r, tick] = True

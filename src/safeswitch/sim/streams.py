@@ -1,0 +1,429 @@
+"""Traffic from every leg: other vehicles on all twelve movements, batch-first.
+
+Every scene has ``N`` slots of other vehicles (a fixed maximum; unused slots are inactive). A
+vehicle drives along the centre line of its route as a point mass (what SUMO's default model
+does too), ``s' = v``, ``v' = a``, and ``a`` comes from its driver, every tick, in one compiled
+loop over the scenes:
+
+1. **Car following** — the Intelligent Driver Model (:mod:`safeswitch.sim.idm`) behind the
+   nearest vehicle ahead on the same lane: any vehicle, the automated ego included, on a shared
+   segment of the two routes (:attr:`RoadNetwork.shared`).
+2. **Right of way** — before a conflict zone with a vehicle that has the right of way (lower
+   :func:`~safeswitch.sim.network.priority_rank`; on equal rank, the one that can arrive first),
+   a driver goes only if it can clear its zone, driving on at no less than ``go_accel``,
+   ``gap_time`` before the other can possibly reach its own (accelerating at its bound up to
+   its top speed) — and, keeping the box clear, only if its leader has left room for it past
+   the zone; else it treats its zone's entry as a stopped vehicle and waits there.
+3. **Occupied zones** — nobody enters a conflict zone while a conflicting vehicle is inside its
+   own (however late that vehicle has become): the last line against collisions among them.
+
+A driver who *yields* follows 2 and 3 towards the ego too (the ego, turning left from the main
+road, has the right of way over the minor road); a *non-yielding* driver ignores the ego there
+— the paper's north car — but still keeps its distance when following it. A yielding driver
+loses patience (SUMO's ``impatience`` is the same idea): once it has waited ``patience`` seconds
+it no longer gives way to an ego that is waiting too (slower than ``slow_speed``) — without it
+a courteous driver and a cautious ego would wait for each other forever. Other vehicles never
+ignore each other, so collisions among them are impossible by these rules as long as their
+brakes can keep up (the tests count them; they must stay 0).
+
+Vehicles keep coming: each scene carries an :class:`ArrivalSchedule` per approach (drawn with
+the scene, so a scene is a pure function of its seed). A scheduled vehicle enters at the start
+of its approach once its time has come, a slot is free and the lane there has room for it
+(:func:`spawn`: it enters no faster than its leader and with the IDM's equilibrium gap);
+otherwise it waits outside the scene, as in a queue. A vehicle leaves the scene
+``exit_distance`` metres after the box, freeing its slot.
+
+The ego's own route, speed and pose come in from the plant each tick; the ego uses the network's
+``south->west`` movement.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.core.arrays import jit
+from safeswitch.sim.collision import separation
+from safeswitch.sim.geometry import FloatArray, pose
+from safeswitch.sim.idm import IDMKernel, idm_accel
+from safeswitch.sim.network import RoadNetwork
+
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+
+class RightOfWay(NamedTuple):
+    """The drivers' right-of-way rules, as compiled code reads them.
+
+    Attributes:
+        gap_time: Margin between clearing one's zone and the earliest arrival of a vehicle with
+            the right of way [s].
+        go_accel: Acceleration a driver counts on when it estimates its own clearing time (below
+            the IDM's 1.5 m/s²: the estimate is an upper bound) [m/s²].
+        stop_buffer: Distance before a zone's entry where a waiting driver stops [m].
+        ego_accel: Bound on the acceleration of a vehicle driven by the plant (the ego, the
+            paper's north car), for its earliest arrival [m/s²].
+        ego_rank: The ego's right of way (1: turning left from the main road).
+        length: Vehicle length [m] (for gaps).
+        patience: Waiting time after which a yielding driver goes before a waiting ego [s].
+        slow_speed: Below this speed a vehicle counts as waiting [m/s].
+    """
+
+    gap_time: float
+    go_accel: float
+    stop_buffer: float
+    ego_accel: float
+    ego_rank: int
+    length: float
+    patience: float
+    slow_speed: float
+
+
+class NetworkTables(NamedTuple):
+    """The network's per-movement tables, as compiled code reads them."""
+
+    shared: FloatArray  # [R, R, 2, 3]
+    conflicts: FloatArray  # [R, R, 2]
+    ranks: IntArray  # [R]
+    lengths: FloatArray  # [R]
+    box_exits: FloatArray  # [R]
+    route_tables: FloatArray  # RouteSet.tables
+    spacing: float
+    k_max: int
+    size: int
+
+
+def network_tables(network: RoadNetwork) -> NetworkTables:
+    routes = network.routes
+    return NetworkTables(
+        np.ascontiguousarray(network.shared), np.ascontiguousarray(network.conflicts),
+        network.ranks, network.lengths, network.box_exits, routes.tables, routes.spacing,
+        routes.size - 2, routes.size,
+    )  # fmt: skip
+
+
+@dataclass
+class ArrivalSchedule:
+    """The vehicles still to enter each scene, per approach leg in order of arrival, arrays
+    ``[B, L, M]`` (``L`` legs, at most ``M`` arrivals each; ``time`` is ``inf`` past the last).
+
+    Attributes:
+        time: Scene time at which it reaches the start of its approach [s].
+        route: Its movement.
+        desired: Its desired speed [m/s].
+        yields: Whether it yields to the ego.
+    """
+
+    time: FloatArray
+    route: IntArray
+    desired: FloatArray
+    yields: BoolArray
+
+
+@dataclass
+class TrafficState:
+    """The other vehicles of ``B`` scenes, ``N`` slots each, arrays ``[B, N]``, and the
+    vehicles still to come.
+
+    Attributes:
+        route: Movement index (into the network's routes).
+        progress: Arc length along the route [m].
+        speed: Speed [m/s].
+        desired: Desired speed ``v0`` [m/s].
+        yields: Whether the driver yields to the ego (else it ignores the ego at conflicts).
+        active: Whether the slot holds a vehicle.
+        waited: Time spent slower than :attr:`RightOfWay.slow_speed` before leaving the box [s].
+        x: Position east [m].
+        y: Position north [m].
+        cos_yaw: Heading cosine.
+        sin_yaw: Heading sine.
+        schedule: The vehicles still to come (read-only while a scene runs).
+        entered: How many of each leg's scheduled vehicles have entered ``[B, L]``.
+    """
+
+    route: IntArray
+    progress: FloatArray
+    speed: FloatArray
+    desired: FloatArray
+    yields: BoolArray
+    active: BoolArray
+    waited: FloatArray
+    x: FloatArray
+    y: FloatArray
+    cos_yaw: FloatArray
+    sin_yaw: FloatArray
+    schedule: ArrivalSchedule
+    entered: IntArray
+
+    @property
+    def batch_size(self) -> int:
+        return int(self.route.shape[0])
+
+    def copy(self, schedule: bool = False) -> TrafficState:
+        """A copy of the vehicles (the schedule shared unless ``schedule``: it never changes
+        while a scene runs, and copying it every tick would cost more than the tick)."""
+        values = {
+            f.name: getattr(self, f.name).copy() for f in fields(self) if f.name != "schedule"
+        }
+        plan = self.schedule
+        if schedule:
+            plan = ArrivalSchedule(*(getattr(plan, f.name).copy() for f in fields(plan)))
+        return TrafficState(**values, schedule=plan)
+
+
+def place(tables: NetworkTables, state: TrafficState) -> None:
+    """Fill the poses of ``state`` from its routes and arc lengths (in place)."""
+    _place(tables, state.route, state.progress, state.x, state.y, state.cos_yaw, state.sin_yaw)
+
+
+@jit
+def _place(
+    t: NetworkTables, route: IntArray, progress: FloatArray, x: FloatArray, y: FloatArray,
+    c: FloatArray, s: FloatArray,
+) -> None:  # fmt: skip
+    for b in range(route.shape[0]):
+        for i in range(route.shape[1]):
+            px, py, heading = pose(
+                t.route_tables, t.spacing, t.k_max, route[b, i] * t.size, progress[b, i]
+            )
+            x[b, i], y[b, i] = px, py
+            c[b, i], s[b, i] = math.cos(heading), math.sin(heading)
+
+
+@jit
+def earliest_arrival(distance: float, speed: float, accel: float, top: float) -> float:
+    """Shortest time to drive ``distance`` [m] from ``speed`` accelerating at ``accel`` up to
+    ``top`` [m/s] [s] (0 if already there)."""
+    if distance <= 0.0:
+        return 0.0
+    top = max(top, speed)
+    to_top = (top * top - speed * speed) / (2.0 * accel)
+    if distance <= to_top:
+        return (math.sqrt(speed * speed + 2.0 * accel * distance) - speed) / accel
+    return (top - speed) / accel + (distance - to_top) / top
+
+
+@jit
+def _leader(t: NetworkTables, ri: int, si: float, rj: int, sj: float) -> float:
+    """Gap along ``ri`` from a vehicle at ``si`` to one on ``rj`` at ``sj`` when they share a
+    lane there and the other is ahead (bumper to bumper needs the length subtracted), else
+    ``inf``."""
+    best = math.inf
+    for k in range(2):
+        lo, hi, off = t.shared[ri, rj, k, 0], t.shared[ri, rj, k, 1], t.shared[ri, rj, k, 2]
+        if lo > hi or si < lo - 10.0 or si > hi:
+            continue
+        mapped = sj - off  # the other's position in this route's arc length
+        if mapped >= lo - 10.0 and mapped > si:
+            best = min(best, mapped - si)
+    return best
+
+
+@jit
+def traffic_tick(
+    t: NetworkTables, rules: RightOfWay, idm: IDMKernel, dt: float,
+    route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
+    yields: BoolArray, active: BoolArray, waited: FloatArray,
+    ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
+    ext_top: FloatArray, ext_is_ego: BoolArray,
+    new_progress: FloatArray, new_speed: FloatArray, new_waited: FloatArray,
+    accel_out: FloatArray,
+) -> None:  # fmt: skip
+    """One tick of every other vehicle of every scene (see the module docstring). The
+    ``ext_*`` arrays ``[B, E]`` are vehicles driven by the plant — the ego, the paper's north
+    car — seen by the drivers as they are: their route, arc length, speed and top speed
+    [m/s]; ``ext_is_ego`` ``[E]`` marks the automated ego (a non-yielding driver ignores it at
+    conflicts; every other one is given way to by the rules)."""
+    scenes, slots = route.shape
+    externals = ext_route.shape[1]
+    for b in range(scenes):
+        for i in range(slots):
+            if not active[b, i]:
+                new_progress[b, i], new_speed[b, i], accel_out[b, i] = (
+                    progress[b, i], speed[b, i], 0.0,
+                )  # fmt: skip
+                new_waited[b, i] = waited[b, i]
+                continue
+            ri, si, vi = route[b, i], progress[b, i], speed[b, i]
+            gap, lead_v = math.inf, 0.0
+            # 1. the nearest vehicle ahead on the same lane (the ego included)
+            for e in range(externals):
+                g = _leader(t, ri, si, ext_route[b, e], ext_progress[b, e])
+                if g < gap:
+                    gap, lead_v = g, ext_speed[b, e]
+            for j in range(slots):
+                if j == i or not active[b, j]:
+                    continue
+                g = _leader(t, ri, si, route[b, j], progress[b, j])
+                if g < gap:
+                    gap, lead_v = g, speed[b, j]
+            ahead = gap  # centre to centre
+            gap = gap - rules.length
+            # 2.-3. conflict zones
+            stop_at = math.inf
+            my_rank = t.ranks[ri]
+            impatient = waited[b, i] >= rules.patience
+            for j in range(-externals, slots):
+                if j >= 0 and (j == i or not active[b, j]):
+                    continue
+                e = j + externals  # the external vehicle's index when j < 0
+                rj = ext_route[b, e] if j < 0 else route[b, j]
+                sj = ext_progress[b, e] if j < 0 else progress[b, j]
+                vj = ext_speed[b, e] if j < 0 else speed[b, j]
+                z_in, z_out = t.conflicts[ri, rj, 0], t.conflicts[ri, rj, 1]
+                if math.isnan(z_in) or si > z_out:
+                    continue
+                w_in, w_out = t.conflicts[rj, ri, 0], t.conflicts[rj, ri, 1]
+                if sj > w_out:
+                    continue  # the other has passed
+                if (
+                    j < 0
+                    and ext_is_ego[e]
+                    and (not yields[b, i] or (impatient and vj < rules.slow_speed))
+                ):
+                    continue  # a non-yielding (or impatient) driver ignores the ego
+                entry = z_in - rules.stop_buffer
+                if si > z_in:
+                    continue  # already inside its zone: drive on (it cannot undo that)
+                # 3. the other is inside its zone: wait before one's own
+                if sj >= w_in:
+                    stop_at = min(stop_at, entry)
+                    continue
+                # 2. give way if the other has the right of way
+                their_rank = t.ranks[rj]
+                if j < 0 and ext_is_ego[e]:
+                    their_rank = rules.ego_rank
+                if j < 0:
+                    their_accel, their_top = rules.ego_accel, ext_top[b, e]
+                else:
+                    their_accel, their_top = idm.max_accel, desired[b, j]
+                arrive = earliest_arrival(w_in - sj, vj, their_accel, their_top)
+                clear = earliest_arrival(z_out + rules.length - si, 0.0, rules.go_accel, 1e9)
+                if vi > 0.0:
+                    clear = min(clear, earliest_arrival(z_out + rules.length - si, vi,
+                                                        rules.go_accel, 1e9))  # fmt: skip
+                # keep the box clear: not before the leader has left room past the zone
+                if si + ahead < z_out + rules.length + idm.min_gap:
+                    clear = math.inf
+                mine = earliest_arrival(z_in - si, vi, idm.max_accel, desired[b, i])
+                priority = their_rank < my_rank or (their_rank == my_rank and arrive < mine)
+                if not priority:
+                    continue
+                # one that cannot stop before its zone any more goes on (it was allowed to)
+                if vi > rules.slow_speed and si + vi * vi / (2.0 * idm.max_brake) > entry:
+                    continue
+                if clear + rules.gap_time > arrive:
+                    stop_at = min(stop_at, entry)
+            if stop_at - si < gap:
+                # a virtual stopped vehicle whose rear is at stop_at (the real leader stays the
+                # one to follow when it is nearer: it may wait beyond that point)
+                gap, lead_v = stop_at - si, 0.0
+            a = idm_accel(vi, desired[b, i], gap if gap < 1e8 else math.inf, lead_v, idm)
+            v_next = vi + a * dt
+            if v_next < 0.0:  # stops within the tick
+                new_progress[b, i] = si + vi * vi / (2.0 * max(-a, 1e-9))
+                new_speed[b, i] = 0.0
+            else:
+                new_progress[b, i] = si + vi * dt + 0.5 * a * dt * dt
+                new_speed[b, i] = v_next
+            accel_out[b, i] = a
+            in_queue = si <= t.box_exits[ri] and new_speed[b, i] < rules.slow_speed
+            new_waited[b, i] = waited[b, i] + dt if in_queue else waited[b, i]
+
+
+@jit
+def npc_separations(
+    x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, active: BoolArray,
+    length: float, width: float, ego_x: FloatArray, ego_y: FloatArray, ego_cos: FloatArray,
+    ego_sin: FloatArray, ego_gap: FloatArray, npc_collisions: IntArray,
+) -> None:  # fmt: skip
+    """Per scene: the ego's separation from the nearest other vehicle [m] (``ego_gap``) and the
+    number of overlapping pairs of other vehicles (``npc_collisions``); a bounding-circle test
+    first, the separating-axis test only for close pairs."""
+    scenes, slots = x.shape
+    reach = length + width  # beyond this centre distance two cars cannot touch
+    for b in range(scenes):
+        best = math.inf
+        for i in range(slots):
+            if not active[b, i]:
+                continue
+            dx, dy = x[b, i] - ego_x[b], y[b, i] - ego_y[b]
+            if dx * dx + dy * dy < reach * reach:
+                gap = separation(
+                    dx, dy, ego_cos[b], ego_sin[b], length, width, cos_yaw[b, i],
+                    sin_yaw[b, i], length, width,
+                )  # fmt: skip
+                best = min(best, gap)
+            else:
+                best = min(best, math.sqrt(dx * dx + dy * dy) - reach)
+        ego_gap[b] = best
+        count = 0
+        for i in range(slots):
+            if not active[b, i]:
+                continue
+            for j in range(i + 1, slots):
+                if not active[b, j]:
+                    continue
+                dx, dy = x[b, j] - x[b, i], y[b, j] - y[b, i]
+                if dx * dx + dy * dy >= reach * reach:
+                    continue
+                if separation(dx, dy, cos_yaw[b, i], sin_yaw[b, i], length, width,
+                              cos_yaw[b, j], sin_yaw[b, j], length, width) <= 0.0:  # fmt: skip
+                    count += 1
+        npc_collisions[b] = count
+
+
+@jit
+def spawn(
+    t: NetworkTables, rules: RightOfWay, idm: IDMKernel, now: FloatArray,
+    arrive_time: FloatArray, arrive_route: IntArray, arrive_desired: FloatArray,
+    arrive_yields: BoolArray, entered: IntArray, exit_at: FloatArray,
+    route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
+    yields: BoolArray, active: BoolArray, waited: FloatArray,
+    ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
+) -> None:  # fmt: skip
+    """Retire the vehicles past their exit (``exit_at`` per movement [m]) and let in the
+    scheduled ones whose time ``now`` ``[B]`` has come (see the module docstring), in place."""
+    scenes, slots = route.shape
+    legs, most = arrive_time.shape[1], arrive_time.shape[2]
+    for b in range(scenes):
+        for i in range(slots):
+            if active[b, i] and progress[b, i] >= exit_at[route[b, i]]:
+                active[b, i] = False
+        for leg in range(legs):
+            n = entered[b, leg]
+            if n >= most or arrive_time[b, leg, n] > now[b]:
+                continue
+            free = -1
+            for i in range(slots):
+                if not active[b, i]:
+                    free = i
+                    break
+            if free < 0:
+                continue  # no slot: it waits outside the scene
+            r = arrive_route[b, leg, n]
+            gap, lead_v = math.inf, math.inf
+            for e in range(ext_route.shape[1]):
+                g = _leader(t, r, -1e-9, ext_route[b, e], ext_progress[b, e])
+                if g < gap:
+                    gap, lead_v = g, ext_speed[b, e]
+            for j in range(slots):
+                if active[b, j]:
+                    g = _leader(t, r, -1e-9, route[b, j], progress[b, j])
+                    if g < gap:
+                        gap, lead_v = g, speed[b, j]
+            v = min(arrive_desired[b, leg, n], lead_v)
+            if gap < math.inf:
+                room = gap - rules.length - idm.min_gap
+                v = min(v, room / idm.time_headway)
+                if room < 0.0 or v < 0.0:
+                    continue  # the lane is full up to its start: it waits outside
+            route[b, free], progress[b, free], speed[b, free] = r, 0.0, v
+            desired[b, free] = arrive_desired[b, leg, n]
+            yields[b, free] = arrive_yields[b, leg, n]
+            active[b, free], waited[b, free] = True, 0.0
+            entered[b, leg] = n + 1
