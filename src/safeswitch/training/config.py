@@ -50,6 +50,11 @@ class PPOConfig:
             everything, as in Table II). See :mod:`safeswitch.training.ppo`.
         actor_frozen_steps: Timesteps before the actor starts learning (value function only).
         actor_ramp_steps: Timesteps over which the actor's rate then rises from 0.
+        initial_action: The policy's mean action at the start (the bias of its output layer;
+            ``null``: SB3's initialisation, a mean near 0). Ours: an untrained policy whose mean
+            is 0 on a throttle action asks for half throttle everywhere; starting at a gentle
+            cruise (-0.3) keeps early training out of the timid and the careless basins
+            (docs/learning_experiments.md).
     """
 
     learning_rate: float = 2.5e-4
@@ -71,9 +76,13 @@ class PPOConfig:
     actor_learning_rate: float | None = None
     actor_frozen_steps: int = 0
     actor_ramp_steps: int = 0
+    initial_action: float | None = None
 
     def __post_init__(self) -> None:
         o = "ppo"
+        if self.initial_action is not None:
+            check(-1 <= self.initial_action <= 1, o, "initial_action", self.initial_action,
+                  "must be in [-1, 1] or null")  # fmt: skip
         if self.actor_learning_rate is not None:
             check(
                 0 < self.actor_learning_rate < 1,

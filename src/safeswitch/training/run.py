@@ -54,7 +54,7 @@ def build_model(
     """PPO with the configured hyper-parameters (Table II by default)."""
     ppo = config.ppo
     arch = list(ppo.net_arch)
-    return SwitchPPO(
+    model = SwitchPPO(
         "MlpPolicy",
         env,
         learning_rate=ppo.learning_rate,
@@ -81,6 +81,10 @@ def build_model(
         actor_ramp_steps=ppo.actor_ramp_steps,
         learn_log_std=ppo.learn_log_std,
     )
+    if ppo.initial_action is not None:
+        with torch.no_grad():
+            model.policy.action_net.bias.fill_(ppo.initial_action)
+    return model
 
 
 def complete_checkpoints(run: Path) -> list[Path]:
