@@ -167,6 +167,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             args.out,
             overwrite=args.overwrite,
             progress=not (args.no_progress or args.json),
+            traffic=args.traffic,
         )
     if args.json:
         from safeswitch.io import to_json
@@ -411,6 +412,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
     ev.add_argument(
         "--switching", choices=logics, help="override the switching logic it was trained with"
+    )
+    ev.add_argument(
+        "--traffic",
+        help="traffic from every leg: a preset (light, medium, heavy, train, test) or none "
+        "(default: what the policy was trained in; none for the baselines)",
     )
     ev.add_argument("--out", help="folder for episodes.csv and summary.json")
     ev.add_argument("--overwrite", action="store_true", help="replace files in a non-empty --out")

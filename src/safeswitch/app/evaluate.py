@@ -6,6 +6,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from safeswitch.evaluation.evaluate import (
     BASELINES,
     EpisodeCSV,
@@ -16,8 +19,13 @@ from safeswitch.evaluation.evaluate import (
 from safeswitch.evaluation.metrics import SummaryAccumulator
 from safeswitch.evaluation.rollout import Policy
 from safeswitch.io import prepare_output_dir, write_json
-from safeswitch.leftturn.config import SCENARIO_NAMES, LeftTurnConfig
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.config import (
+    SCENARIO_NAMES,
+    LeftTurnConfig,
+    TrafficConfig,
+    traffic_config,
+)
+from safeswitch.leftturn.task import LeftTurnTask, build_task
 from safeswitch.progress import Progress
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
@@ -59,6 +67,49 @@ def controller_setup(
     return baseline_setup(controller, switching)
 
 
+def traffic_setup(
+    controller: str, model: str | None, traffic: str | None
+) -> tuple[TrafficConfig | None, str | None]:
+    """The traffic to evaluate in and its label: ``traffic`` (a preset's name, or ``none`` for
+    the paper's scene), else the traffic a trained policy was trained in (none for the
+    baselines)."""
+    if traffic is not None:
+        settings = None if traffic == "none" else traffic_config(traffic)
+        return settings, None if settings is None else traffic
+    if controller == "learned" and model is not None:
+        trained = load_policy(model)
+        if isinstance(trained.config, TrainConfig) and trained.config.traffic is not None:
+            return trained.config.traffic_settings, str(trained.config.traffic)
+    return None, None
+
+
+def fit_observations(policy: Policy | None, model: str | None, task: LeftTurnTask) -> Policy | None:
+    """A trained policy's observations cut to what it was trained on: a policy trained in the
+    paper's scene sees the paper's six values of a scene with traffic (the other vehicles
+    reach it only through the switching logic).
+
+    Raises:
+        ValueError: The policy expects more than the task observes (trained in traffic,
+            evaluated without, or with fewer observed vehicles).
+    """
+    if policy is None or model is None:
+        return policy
+    expected = int(np.prod(load_policy(model).model.observation_space.shape or (6,)))
+    observed = int(task.observation_bounds[0].shape[0])
+    if expected == observed:
+        return policy
+    if expected > observed:
+        raise ValueError(
+            f"the policy {model} observes {expected} values but this task gives {observed}: it "
+            "was trained in traffic; evaluate it with --traffic (and the same observed count)"
+        )
+
+    def cut(obs: NDArray[np.float32], state: Any, tick: int) -> NDArray[np.float64]:
+        return policy(obs[:, :expected], state, tick)
+
+    return cut
+
+
 def evaluate(
     controller: str,
     model: str | None,
@@ -69,18 +120,21 @@ def evaluate(
     out: str | Path | None,
     overwrite: bool = False,
     progress: bool = False,
+    traffic: str | None = None,
 ) -> dict[str, Any]:
     """Run the evaluation and return its summary (see :mod:`safeswitch.evaluation.metrics` for
     the fields); with ``out``, write ``episodes.csv`` (row by row, as chunks finish) and
     ``summary.json`` there. Episodes run in chunks of
     :data:`~safeswitch.evaluation.evaluate.CHUNK`, so memory stays bounded whatever
-    ``episodes`` is.
+    ``episodes`` is. ``traffic``: see :func:`traffic_setup`.
 
     Raises:
         OutputDirectoryError: ``out`` is a file, or holds files and ``overwrite`` is off.
     """
     env_config, policy = controller_setup(controller, model, switching)
-    task = LeftTurnTask(env_config)
+    settings, traffic_label = traffic_setup(controller, model, traffic)
+    task = build_task(None, env_config, traffic=settings)
+    policy = fit_observations(policy, model if controller == "learned" else None, task)
     chunks = scenario_chunks(task, scenarios, episodes, seed)  # validates the arguments
     folder = prepare_output_dir(out, overwrite) if out is not None else None
     total = len(SCENARIO_NAMES) if scenarios == "paper" else episodes
@@ -90,7 +144,7 @@ def evaluate(
     try:
         for names, batch in chunks:
             result, plan = run_controller(task, policy, batch, trace=False)
-            accumulator.add(result, plan.time_to_clear, env_config.episode.horizon_s)
+            accumulator.add(result, plan.time_to_clear, task.config.episode.horizon_s)
             if writer is not None:
                 writer.write(names, batch, result, plan.time_to_clear)
             bar.update(len(names))
@@ -107,6 +161,7 @@ def evaluate(
         "model": str(model) if model else None,
         "switching": env_config.switching if policy is not None else None,
         "scenarios": scenarios,
+        "traffic": traffic_label,
         "seed": seed,
         **accumulator.summary(),
     }

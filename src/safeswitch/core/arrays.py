@@ -53,6 +53,19 @@ def flat(values: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:
     return np.ascontiguousarray(np.broadcast_to(array, shape)).reshape(-1)
 
 
+def concat_rows(batches: list[Any]) -> Any:
+    """Batch dataclasses of one type stacked along their first axis (recursing into dataclass
+    fields): the inverse of :func:`take_rows`."""
+    first = batches[0]
+    values = {}
+    for f in fields(first):
+        parts = [getattr(b, f.name) for b in batches]
+        values[f.name] = (
+            np.concatenate(parts) if isinstance(parts[0], np.ndarray) else concat_rows(parts)
+        )
+    return type(first)(**values)
+
+
 def take_rows(batch: Any, rows: NDArray[Any]) -> Any:
     """A copy of a batch dataclass with every array field ``f[rows]`` (indices or a mask;
     repeats allowed), recursing into dataclass fields."""

@@ -11,12 +11,13 @@ import csv
 import io
 import os
 from collections.abc import Callable, Iterator
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from safeswitch.core.arrays import concat_rows
 from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import Oracle, OraclePlan
 from safeswitch.evaluation.planner import Planner
@@ -43,11 +44,12 @@ def scenario_set(
 ) -> tuple[Scenarios, list[str]]:
     """The paper's three scenarios, or ``episodes`` random ones drawn with ``seed``."""
     if which == "paper":
-        parts = [named_scenarios(name, 1) for name in SCENARIO_NAMES]
-        merged = Scenarios(
-            *(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Scenarios))
-        )
-        return merged, list(SCENARIO_NAMES)
+        named = getattr(task, "named", None)  # in traffic: the paper's cars among others
+        parts = [
+            named(name, 1, seed) if named is not None else named_scenarios(name, 1)
+            for name in SCENARIO_NAMES
+        ]
+        return concat_rows(parts), list(SCENARIO_NAMES)
     if which != "random":
         raise ValueError(f"--scenarios must be 'paper' or 'random', got {which!r}")
     if episodes < 1:

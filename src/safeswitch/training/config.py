@@ -19,7 +19,7 @@ import yaml
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
 from safeswitch.core.registry import logic_names
 from safeswitch.evaluation.planner import PlannerConfig
-from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig, traffic_config
 
 
 @dataclass(frozen=True)
@@ -172,6 +172,9 @@ class TrainConfig:
         ppo: PPO hyper-parameters.
         warm_start: Behaviour cloning of the planner before PPO (off by default).
         env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
+        traffic: Traffic from every leg (``null``: the paper's scene): a preset's name or a
+            mapping of :class:`~safeswitch.leftturn.config.TrafficConfig` settings (``preset``
+            to start from one).
     """
 
     timesteps: int = 1_200_000
@@ -184,9 +187,11 @@ class TrainConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     warm_start: WarmStartConfig = field(default_factory=WarmStartConfig)
     env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
+    traffic: str | dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         o = "train"
+        traffic_config(self.traffic)  # validates, naming a bad value
         check(self.timesteps >= 1, o, "timesteps", self.timesteps, "must be >= 1")
         check(self.n_envs >= 1, o, "n_envs", self.n_envs, "must be >= 1")
         check(self.torch_threads >= 1, o, "torch_threads", self.torch_threads, "must be >= 1")
@@ -214,6 +219,11 @@ class TrainConfig:
     def batch_size(self) -> int:
         """SB3's minibatch size."""
         return self.ppo.n_steps * self.n_envs // self.ppo.n_minibatches
+
+    @property
+    def traffic_settings(self) -> TrafficConfig | None:
+        """:attr:`traffic` resolved."""
+        return traffic_config(self.traffic)
 
 
 #: The configurations that ship with the package, by name (``--config paper``).

@@ -31,7 +31,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.io import write_atomic
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.task import build_task
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
@@ -83,7 +83,9 @@ def build_model(
     )
     if ppo.initial_action is not None:
         with torch.no_grad():
-            model.policy.action_net.bias.fill_(ppo.initial_action)
+            head = model.policy.action_net
+            assert isinstance(head, torch.nn.Linear)
+            head.bias.fill_(ppo.initial_action)
     return model
 
 
@@ -224,10 +226,10 @@ def evaluate_trained(
 ) -> dict[str, Any]:
     """Deterministic evaluation on ``episodes`` random scenarios drawn with ``seed``, with the
     oracle's efficiency (``safeswitch evaluate``'s fields)."""
-    task = LeftTurnTask(config.env)
+    task = build_task(None, config.env, traffic=config.traffic_settings)
     scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
     result, plan = run_controller(task, policy.as_policy(), scenarios, trace=False)
-    return summary_against_oracle(result, plan, config.env.episode.horizon_s)
+    return summary_against_oracle(result, plan, task.config.episode.horizon_s)
 
 
 def train(
@@ -245,7 +247,9 @@ def train(
     checkpoint = open_run(run, resume, dump_config(config))
     if checkpoint is not None:
         config = load_config(run / "config.yaml")
-    vec = LeftTurnVecEnv(config.n_envs, config=config.env, seed=config.seed)
+    vec = LeftTurnVecEnv(
+        config.n_envs, config=config.env, seed=config.seed, traffic=config.traffic_settings
+    )
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
     env = normalized(vec, config, checkpoint)

@@ -1,0 +1,299 @@
+"""Traffic from every leg: the road network, the other drivers, the environments and both
+switching logics against every conflicting vehicle (issue #17)."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import safeswitch
+from safeswitch.evaluation.adversaries import catalogue
+from safeswitch.evaluation.oracle import Oracle
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn import make_vec_env
+from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, traffic_config
+from safeswitch.leftturn.task import LeftTurnTask, build_task
+from safeswitch.leftturn.traffic import OBSERVED_FEATURES, LeftTurnTrafficTask
+from safeswitch.sim.idm import IDMParams, idm_accel
+from safeswitch.sim.network import RoadNetwork, priority_rank
+
+ADVERSARIES = (
+    "uniform",
+    "bang_bang",
+    "full_throttle",
+    "zero_throttle",
+    "enter_then_stop",
+    "creep",
+    "nan_inf",
+    "noisy_cruise",
+)
+
+
+def traffic_task(preset="medium", switching="certified", horizon_s=None, **extra):
+    settings = {"preset": preset, **extra}
+    if horizon_s is not None:
+        settings["horizon_s"] = horizon_s
+    return build_task(
+        None, {"episode": {"learned_scope": "episode"}}, traffic=settings, switching=switching
+    )
+
+
+def scenes(task, n, seed=5):
+    return task.draw_scenarios(seed, np.arange(n), np.zeros(n, dtype=np.int64))
+
+
+# -- the road network ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def network():
+    return RoadNetwork()
+
+
+def test_twelve_movements_with_priorities(network):
+    names = {m.name for m in network.movements}
+    assert len(names) == 12
+    assert priority_rank("north", "south") == 0  # main road straight
+    assert priority_rank("south", "west") == 1  # main road left (the ego)
+    assert priority_rank("east", "west") == 2  # minor road
+
+
+def test_a_route_shares_its_whole_lane_with_itself(network):
+    r = network.index("east", "west")
+    lo, hi, offset = network.shared[r, r, 0]
+    assert lo == 0.0 and hi >= network.lengths[r] and offset == 0.0
+
+
+def test_conflict_zones_exist_exactly_for_crossing_pairs(network):
+    ego = network.index("south", "west")
+    crossing = network.index("north", "south")  # the paper's conflict
+    same_origin = network.index("south", "north")
+    parallel = network.index("north", "east")  # turns right away from the ego's path
+    z = network.conflicts
+    assert np.isfinite(z[ego, crossing]).all() and np.isfinite(z[crossing, ego]).all()
+    assert np.isnan(z[ego, same_origin]).all()  # they only follow each other
+    assert np.isnan(z[ego, parallel]).all()
+    # a zone is where both can overlap: non-empty, inside the routes
+    enter, leave = z[ego, crossing]
+    assert 0 < enter < leave < network.lengths[ego]
+
+
+# -- the other drivers -----------------------------------------------------------------------
+
+
+def test_idm_stops_behind_a_stopped_leader_without_touching_it():
+    p = IDMParams().kernel
+    s, v, dt, leader = 0.0, 12.0, 0.02, 60.0
+    for _ in range(3000):
+        a = idm_accel(v, 12.0, leader - s - 4.9, 0.0, p)
+        v_next = v + a * dt
+        if v_next < 0:
+            s, v = s + v * v / (2 * -a), 0.0
+        else:
+            s, v = s + v * dt + 0.5 * a * dt * dt, v_next
+    gap = leader - s - 4.9
+    assert v < 0.05
+    assert 0.5 < gap <= IDMParams().min_gap + 0.5
+
+
+@pytest.mark.parametrize("switching", ["none", "paper"])
+@pytest.mark.parametrize("preset", ["light", "heavy"])
+def test_other_vehicles_never_collide_with_each_other(preset, switching):
+    """Whatever the ego does — crawling through the box included — the rules keep the other
+    vehicles apart: car following, right of way, occupied zones and a clear box."""
+    task = traffic_task(preset, switching, horizon_s=20.0)
+    batch = scenes(task, 256)
+    counts = {}
+    for name in ("uniform", "creep", "full_throttle"):
+        final = {}
+        rollout(task, batch, catalogue(task, 256, 3)[name](), lambda s, r, t: final.update(s=s))
+        counts[name] = int(final["s"].npc_collisions.sum())
+    assert counts == dict.fromkeys(counts, 0)
+
+
+def test_followers_never_run_into_a_stopped_ego():
+    """The ego stands still for the whole episode with no switching logic; the vehicles
+    behind it queue up and none touches it."""
+    task = traffic_task("heavy", "none", horizon_s=20.0)
+    batch = scenes(task, 256)
+    result = rollout(task, batch, catalogue(task, 256, 3)["zero_throttle"]())
+    assert not result.collision.any()
+    # and there were vehicles behind it (the test is not vacuous)
+    south = [i for i, m in enumerate(task.network.movements) if m.origin == "south"]
+    tr = task.initial(batch).traffic
+    assert (np.isin(tr.route, south) & tr.active).any(axis=1).mean() > 0.5
+
+
+def test_vehicles_keep_arriving_and_leaving():
+    task = traffic_task("medium", "certified", horizon_s=30.0)
+    batch = scenes(task, 128)
+    final = {}
+    rollout(
+        task, batch, catalogue(task, 128, 3)["noisy_cruise"](), lambda s, r, t: final.update(s=s)
+    )
+    tr = final["s"].traffic
+    assert tr.entered.sum(axis=1).mean() > 4  # arrivals during the episode
+    start = task.initial(batch).traffic
+    assert (tr.progress[start.active] != start.progress[start.active]).all()
+
+
+def test_a_scene_is_a_pure_function_of_its_seed():
+    task = traffic_task("medium")
+    a = task.draw_scenarios(7, np.array([3, 4]), np.array([1, 2]))
+    b = task.draw_scenarios(7, np.array([4]), np.array([2]))
+    assert np.array_equal(a.traffic.route[1], b.traffic.route[0])
+    assert np.array_equal(a.traffic.schedule.time[1], b.traffic.schedule.time[0])
+
+
+# -- the environments ------------------------------------------------------------------------
+
+
+def test_no_traffic_is_the_paper_task():
+    assert type(build_task(None, None, traffic=None)) is LeftTurnTask
+
+
+def test_traffic_env_observation_has_k_padded_vehicles():
+    env = gym.make(safeswitch.TRAFFIC_ENV_ID, traffic={"preset": "light", "observed": 3})
+    obs, _ = env.reset(seed=1)
+    k = len(OBSERVED_FEATURES)
+    assert obs.shape == (6 + 3 * k,)
+    assert env.observation_space.contains(obs)
+    present = obs[6::k]
+    assert set(np.unique(present)) <= {0.0, 1.0}
+    # padding: slots after the first absent one are all zero
+    if (present == 0).any():
+        first = int(np.argmin(present))
+        assert not obs[6 + first * k :].any()
+    for _ in range(50):
+        obs, *_ = env.step(np.array([0.2], dtype=np.float32))
+    assert env.observation_space.contains(obs)
+
+
+def test_traffic_vec_env_resets_and_is_seeded():
+    def run(seed):
+        env = make_vec_env(8, traffic="medium", switching="certified", seed=seed)
+        obs = env.reset()
+        total = np.zeros(8)
+        for _ in range(300):
+            obs, reward, done, infos = env.step(np.full((8, 1), 0.3, dtype=np.float32))
+            total += reward
+        return obs, total
+
+    a, b, c = run(3), run(3), run(4)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert not np.array_equal(a[1], c[1])
+
+
+@pytest.mark.parametrize(
+    ("settings", "named"),
+    [
+        ({"main_flow_veh_h": (100.0, 5000.0)}, "main_flow_veh_h"),
+        ({"max_vehicles": 0}, "max_vehicles"),
+        ({"max_vehicles": 4, "observed": 9}, "observed"),
+        ({"preset": "rush-hour"}, "rush-hour"),
+        ({"non_yielding_share": (0.5, 0.2)}, "non_yielding_share"),
+    ],
+)
+def test_bad_traffic_settings_name_the_value(settings, named):
+    with pytest.raises(ConfigError, match=named):
+        traffic_config(settings)
+
+
+def test_unknown_preset_by_name():
+    with pytest.raises(ConfigError, match="dense"):
+        traffic_config("dense")
+
+
+# -- the switching logics --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("preset", ["light", "heavy", "test"])
+def test_certified_never_collides_in_traffic(preset):
+    """The certificate against every conflicting vehicle (and the ones still to come) holds
+    for every adversary; the paper logic, in the same episodes, does collide."""
+    collisions = {}
+    for switching in ("certified", "paper"):
+        task = traffic_task(preset, switching, horizon_s=20.0)
+        batch = scenes(task, 256, seed=11)
+        for name in ADVERSARIES:
+            result = rollout(task, batch, catalogue(task, 256, 5)[name]())
+            collisions[(switching, name)] = int(result.collision.sum())
+    assert all(collisions[("certified", name)] == 0 for name in ADVERSARIES), collisions
+    assert sum(collisions[("paper", name)] for name in ADVERSARIES) > 0
+
+
+def test_certified_accounts_for_vehicles_not_yet_in_the_scene():
+    """Without the phantoms, a vehicle appearing on a crossing route turns the place where
+    the ego waits into a conflict zone: the certificate needs them."""
+    task = traffic_task("medium", "certified", horizon_s=12.0)
+    logic = task.switching
+    logic.phantom_zones = logic.phantom_zones[:0]
+    logic.phantom_arrivals = logic.phantom_arrivals[:0]
+    batch = scenes(task, 1024)
+    result = rollout(task, batch, catalogue(task, 1024, 3)["noisy_cruise"]())
+    assert result.collision.sum() > 0
+
+
+def test_paper_logic_acts_on_a_vehicle_other_than_the_north_car():
+    """A crossing vehicle from the east stopped in the ego's path: the generalised Algorithm
+    1 brakes for it although the north car is far away."""
+    task = traffic_task("light", "paper")
+    single = LeftTurnTask(task.config)
+    batch = scenes(task, 512, seed=2)
+    traffic_result = rollout(task, batch, catalogue(task, 512, 1)["full_throttle"]())
+    plain_result = rollout(single, batch, catalogue(single, 512, 1)["full_throttle"]())
+    assert traffic_result.safety_steps.sum() > plain_result.safety_steps.sum()
+
+
+# -- evaluation in traffic -------------------------------------------------------------------
+
+
+def test_oracle_plans_around_every_crossing_vehicle():
+    task = traffic_task("medium", "certified", horizon_s=20.0)
+    batch = scenes(task, 64)
+    plan = Oracle(task).plan(batch)
+    north, occupied = task.others_without_ego(batch)
+    zones = task.network.conflicts[task.ego_route]
+    ego = plan.progress
+    for r in range(zones.shape[0]):
+        if math.isnan(zones[r, 0]):
+            continue
+        inside = (ego >= zones[r, 0]) & (ego <= zones[r, 1])
+        assert not (inside & occupied[:, r]).any()
+    assert np.isfinite(plan.time_to_clear).mean() > 0.9
+    # a careful driver is never faster than the plan by more than a tick, bar those that
+    # count on a courteous driver giving way (the oracle does not)
+    result = rollout(task, batch, catalogue(task, 64, 1)["noisy_cruise"]())
+    both = np.isfinite(result.time_to_clear) & np.isfinite(plan.time_to_clear)
+    faster = result.time_to_clear[both] < plan.time_to_clear[both] - 0.02
+    assert faster.mean() < 0.1
+
+
+def test_surrogate_measures_flag_close_calls():
+    """Without a switching logic collisions come with TTC 0; under the certified logic the
+    post-encroachment times stay above a second."""
+    for switching in ("none", "certified"):
+        task = traffic_task("medium", switching, horizon_s=20.0)
+        batch = scenes(task, 256)
+        result = rollout(task, batch, catalogue(task, 256, 3)["noisy_cruise"]())
+        if switching == "none":
+            assert result.collision.any()
+            assert (result.min_ttc[result.collision] < 0.1).all()
+        else:
+            pet = result.min_pet[np.isfinite(result.min_pet)]
+            assert pet.size > 10 and np.percentile(pet, 5) > 0.5
+
+
+def test_plain_task_surrogates_match_the_one_conflict():
+    task = LeftTurnTask(LeftTurnConfig())
+    batch = task.draw_scenarios(0, np.arange(64), np.zeros(64, dtype=np.int64))
+    result = rollout(task, batch, catalogue(task, 64, 1)["noisy_cruise"]())
+    assert result.min_ttc.shape == (64,) and result.min_pet.shape == (64,)
+    # every episode that crossed after or before the north car has a PET
+    crossed = result.outcome > 0
+    assert np.isfinite(result.min_pet[crossed]).mean() > 0.9
+
+
+def test_traffic_task_class():
+    assert isinstance(traffic_task(), LeftTurnTrafficTask)
