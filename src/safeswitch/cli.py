@@ -249,6 +249,7 @@ def _render(args: argparse.Namespace) -> int:
         args.switching,
         args.out,
         overwrite=args.overwrite,
+        traffic=args.traffic,
     )
     print(f"wrote {path}")
     return 0
@@ -434,6 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--seed", type=int, default=0, help="seed of random:K scenarios")
     render.add_argument("--switching", choices=logics, help="override the switching logic")
+    render.add_argument("--traffic", help="a traffic preset or none (as for evaluate)")
     render.add_argument("--out", required=True, help="the GIF to write (e.g. episode.gif)")
     render.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     render.set_defaults(func=_render)

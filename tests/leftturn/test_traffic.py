@@ -39,6 +39,15 @@ def traffic_task(preset="medium", switching="certified", horizon_s=None, **extra
     )
 
 
+class _Final:
+    """A rollout's ``on_tick`` keeping the last state."""
+
+    state = None
+
+    def __call__(self, state, record, tick):
+        self.state = state
+
+
 def scenes(task, n, seed=5):
     return task.draw_scenarios(seed, np.arange(n), np.zeros(n, dtype=np.int64))
 
@@ -106,9 +115,9 @@ def test_other_vehicles_never_collide_with_each_other(preset, switching):
     batch = scenes(task, 256)
     counts = {}
     for name in ("uniform", "creep", "full_throttle"):
-        final = {}
-        rollout(task, batch, catalogue(task, 256, 3)[name](), lambda s, r, t: final.update(s=s))
-        counts[name] = int(final["s"].npc_collisions.sum())
+        final = _Final()
+        rollout(task, batch, catalogue(task, 256, 3)[name](), final)
+        counts[name] = int(final.state.npc_collisions.sum())
     assert counts == dict.fromkeys(counts, 0)
 
 
@@ -128,11 +137,9 @@ def test_followers_never_run_into_a_stopped_ego():
 def test_vehicles_keep_arriving_and_leaving():
     task = traffic_task("medium", "certified", horizon_s=30.0)
     batch = scenes(task, 128)
-    final = {}
-    rollout(
-        task, batch, catalogue(task, 128, 3)["noisy_cruise"](), lambda s, r, t: final.update(s=s)
-    )
-    tr = final["s"].traffic
+    final = _Final()
+    rollout(task, batch, catalogue(task, 128, 3)["noisy_cruise"](), final)
+    tr = final.state.traffic
     assert tr.entered.sum(axis=1).mean() > 4  # arrivals during the episode
     start = task.initial(batch).traffic
     assert (tr.progress[start.active] != start.progress[start.active]).all()
@@ -176,7 +183,7 @@ def test_traffic_vec_env_resets_and_is_seeded():
         obs = env.reset()
         total = np.zeros(8)
         for _ in range(300):
-            obs, reward, done, infos = env.step(np.full((8, 1), 0.3, dtype=np.float32))
+            obs, reward, _, _ = env.step(np.full((8, 1), 0.3, dtype=np.float32))
             total += reward
         return obs, total
 
@@ -253,7 +260,7 @@ def test_oracle_plans_around_every_crossing_vehicle():
     task = traffic_task("medium", "certified", horizon_s=20.0)
     batch = scenes(task, 64)
     plan = Oracle(task).plan(batch)
-    north, occupied = task.others_without_ego(batch)
+    _, occupied = task.others_without_ego(batch)
     zones = task.network.conflicts[task.ego_route]
     ego = plan.progress
     for r in range(zones.shape[0]):

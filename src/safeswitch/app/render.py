@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from safeswitch.app.evaluate import controller_setup
+from safeswitch.app.evaluate import controller_setup, fit_observations, traffic_setup
 from safeswitch.evaluation.evaluate import run_controller
 from safeswitch.io import OutputDirectoryError, write_bytes_atomic
 from safeswitch.leftturn.config import SCENARIO_NAMES
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.task import LeftTurnTask, build_task
 from safeswitch.report.figures import Trace
 
 
@@ -25,7 +25,8 @@ def scenario_by_name(task: LeftTurnTask, name: str, seed: int) -> Scenarios:
     """``cut``, ``yield1``, ``yield2``, or ``random:K`` (random scenario ``K`` of ``seed``,
     the one ``evaluate --seed`` calls ``random-K``)."""
     if name in SCENARIO_NAMES:
-        return named_scenarios(name, 1)
+        named = getattr(task, "named", None)  # in traffic: the paper's cars among others
+        return named(name, 1, seed) if named is not None else named_scenarios(name, 1)
     prefix, _, index = name.partition(":")
     if prefix == "random" and index.isdigit():
         k = int(index)
@@ -41,8 +42,10 @@ def render(
     switching: str | None,
     out: str | Path,
     overwrite: bool = False,
+    traffic: str | None = None,
 ) -> Path:
     """Write the animation of one episode to ``out`` (a ``.gif``); returns its path.
+    ``traffic``: as for :func:`~safeswitch.app.evaluate.evaluate`.
 
     Raises:
         OutputDirectoryError: ``out`` exists and ``overwrite`` is off, or is not a ``.gif``.
@@ -55,7 +58,9 @@ def render(
     if controller == "oracle":
         raise ValueError("the oracle plans a trajectory, it does not drive the plant: no render")
     config, policy = controller_setup(controller, model, switching)
-    task = LeftTurnTask(replace(config, scenario=None))
+    settings, _ = traffic_setup(controller, model, traffic)
+    task = build_task(None, replace(config, scenario=None), traffic=settings)
+    policy = fit_observations(policy, model if controller == "learned" else None, task)
     batch = scenario_by_name(task, scenario, seed)
     trace = Trace(task, animate=(0,))
     assert policy is not None

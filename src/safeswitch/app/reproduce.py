@@ -44,6 +44,7 @@ from safeswitch.report.figures import (
     comparison_figure,
     episode_figure,
     frames_strip,
+    traffic_figure,
 )
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import SHIPPED_DIR
@@ -193,6 +194,57 @@ def _reckless(episodes: int) -> list[dict[str, Any]]:
     return rows
 
 
+#: The traffic study: densities, and the paper policy under each logic (it sees the paper's six
+#: values; the other vehicles reach it only through the switching logic) beside the oracle.
+TRAFFIC_PRESETS = ("light", "medium", "heavy", "test")
+TRAFFIC_CONTROLLERS = (("ppo-paper", "paper"), ("ppo-paper", "certified"), ("oracle", None))
+
+
+def traffic_study(
+    models: dict[str, str], episodes: int, folder: Path, log: Callable[[str], None]
+) -> list[dict[str, Any]]:
+    """The paper policy in traffic from every leg, under the paper and the certified logic,
+    and the oracle, at each density of :data:`TRAFFIC_PRESETS`; an animation of the certified
+    run in medium traffic. Rows: preset, controller, switching and the summary."""
+    from safeswitch.app.evaluate import fit_observations
+    from safeswitch.evaluation.evaluate import summary_against_oracle
+    from safeswitch.leftturn.task import build_task
+
+    rows = []
+    model = models["paper"]
+    for preset in TRAFFIC_PRESETS:
+        plan = None
+        for name, switching in TRAFFIC_CONTROLLERS:
+            kind = "learned" if name != "oracle" else "oracle"
+            config, policy = controller_setup(kind, model if policy_of(name) else None, switching)
+            task = build_task(None, config, traffic=preset)
+            policy = fit_observations(policy, model if policy_of(name) else None, task)
+            batch, _ = scenario_set(task, "random", episodes, EVAL_SEED)
+            busiest = int(np.argmax(batch.traffic.active.sum(axis=1)))  # type: ignore[attr-defined]
+            animate = preset == "medium" and switching == "certified"
+            trace = Trace(task, animate=(busiest,)) if animate else None
+            result, plan = run_controller(
+                task, policy, batch, trace.on_tick if trace else None, plan=plan, trace=False
+            )
+            summary = summary_against_oracle(result, plan, task.config.episode.horizon_s)
+            if not policy_of(name):  # its surrogate measures are not computed in traffic
+                summary["ttc_conflict_episodes"] = summary["pet_below_1s_episodes"] = None
+            rows.append({"preset": preset, "controller": name, "switching": switching, **summary})
+            if trace is not None:
+                write_bytes_atomic(folder / "figures" / "traffic_medium.gif", trace.gif(busiest))
+            log(
+                f"  traffic {preset:6s} {name} / {switching or '-'}: {summary['collisions']} "
+                f"collisions, {summary['cleared_episodes']}/{episodes} cleared"
+            )
+    traffic_figure(rows, TRAFFIC_PRESETS, folder / "figures" / "traffic.png")
+    return rows
+
+
+def policy_of(name: str) -> bool:
+    """Whether a controller of the traffic study is a trained policy."""
+    return name != "oracle"
+
+
 def reproduce(
     out: str | Path,
     quick: bool = True,
@@ -313,6 +365,9 @@ def reproduce(
         )
 
     assert offsets is not None and oracle_random is not None
+    traffic_episodes = max(50, episodes // 5)
+    log(f"  traffic from every leg: {traffic_episodes} random scenarios per density")
+    traffic = traffic_study(models, traffic_episodes, folder, log)
     log(f"stage {stages}/{stages}: figures and the report")
     comparison_figure(
         rows, oracle_random, offsets, horizon_s, folder / "figures" / "comparison.png"
@@ -332,6 +387,7 @@ def reproduce(
         "controllers": results,
         "paper_findings": [{"finding": f, "reproduced": ok} for f, ok in findings],
         "reckless_full_throttle": reckless,
+        "traffic": {"episodes": traffic_episodes, "rows": traffic},
         "wall_time_s": round(time.perf_counter() - began, 1),
     }
     write_json(folder / "summary.json", summary)

@@ -94,7 +94,8 @@ def run_controller(
     oracle = Oracle(task) if plan is None or policy is None else None
     if policy is None:
         assert oracle is not None
-        plan = plan or oracle.plan(batch)
+        if plan is None or plan.progress.shape[1] == 0:  # the rollout needs every tick
+            plan = oracle.plan(batch)
         return oracle.as_rollout(plan), plan
     north: list[FloatArray] = [task.initial(batch).world.progress[:, 1].copy()]
 

@@ -398,12 +398,15 @@ class Oracle:
         )
 
     def surrogate(self, plan: OraclePlan) -> tuple[FloatArray, FloatArray]:
-        """The plan's smallest TTC and PET per scenario (:mod:`~safeswitch.evaluation.surrogate`;
-        the north car's speed from its arc lengths)."""
+        """The plan's smallest TTC and PET per scenario with the north car
+        (:mod:`~safeswitch.evaluation.surrogate`; its speed from its arc lengths); NaN in
+        traffic, where the plan does not keep the other vehicles' trajectories."""
         from safeswitch.evaluation.surrogate import SurrogateTracker
 
         geo, dt = self.task.conflict, self.task.config.episode.dt
         batch, ticks = plan.progress.shape[0], plan.progress.shape[1] - 1
+        if hasattr(self.task, "others_without_ego"):
+            return np.full(batch, np.nan), np.full(batch, np.nan)
         north_speed = np.diff(plan.north_progress, axis=1, prepend=plan.north_progress[:, :1]) / dt
         present = np.ones((batch, 1), dtype=np.bool_)
         ego_zone = np.broadcast_to(np.asarray(geo.zone_a, dtype=np.float64), (batch, 1, 2))

@@ -18,6 +18,8 @@ COLOURS = {
     "zone": (230, 120, 100),
     "ego": (40, 110, 230),
     "north": (240, 150, 30),
+    "other": (175, 175, 180),
+    "rude": (150, 60, 140),
     "crash": (220, 20, 20),
     "text": (20, 20, 20),
 }
@@ -31,14 +33,19 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
         return ImageFont.load_default()
 
 
-def _legend(draw: ImageDraw.ImageDraw, font: ImageFont.FreeTypeFont | ImageFont.ImageFont) -> None:
+def _legend(
+    draw: ImageDraw.ImageDraw,
+    font: ImageFont.FreeTypeFont | ImageFont.ImageFont,
+    traffic: bool = False,
+) -> None:
     """What the colours mean, in the bottom-left corner."""
-    items = (
+    items: tuple[tuple[str, str, str], ...] = (
         ("ego (automated)", "ego", "box"),
         ("north car (never yields)", "north", "box"),
-        ("ego route", "route", "line"),
-        ("ego conflict zone", "zone", "line"),
     )
+    if traffic:
+        items += (("other (gives way)", "other", "box"), ("other (never yields)", "rude", "box"))
+    items += (("ego route", "route", "line"), ("ego conflict zone", "zone", "line"))
     top = SIZE_PX - 8 - 18 * len(items)
     draw.rectangle((4, top - 4, 206, SIZE_PX - 4), fill=(255, 255, 255))
     for j, (label, colour, kind) in enumerate(items):
@@ -98,6 +105,15 @@ def render_scene(
 
     v, p = state.world.vehicles, task.config.vehicle
     crashed = record is not None and bool(record.collision[index])
+    traffic = getattr(state, "traffic", None)
+    if traffic is not None:  # the other vehicles, under the paper's two
+        for i in np.flatnonzero(traffic.active[index]):
+            corners = _rectangle(
+                traffic.x[index, i], traffic.y[index, i], traffic.cos_yaw[index, i],
+                traffic.sin_yaw[index, i], p.length, p.width,
+            )  # fmt: skip
+            colour = "other" if traffic.yields[index, i] else "rude"
+            draw.polygon(_px(corners), fill=COLOURS[colour], outline=COLOURS["text"])
     for slot, name in ((1, "north"), (0, "ego")):
         corners = _rectangle(
             v.x[index, slot],
@@ -131,5 +147,5 @@ def render_scene(
             fill=COLOURS["crash"] if crashed or who == "safety" else COLOURS["text"],
             font=font,
         )
-    _legend(draw, _font(13))
+    _legend(draw, _font(13), traffic is not None)
     return np.asarray(image, dtype=np.uint8)

@@ -30,7 +30,20 @@ COMPARISON = (
     ("cleared_episodes", "cleared", "{:d}"),
     ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
     ("mean_efficiency", "efficiency", "{:.3f}"),
+    ("ttc_conflict_episodes", "TTC ≤ 1.5 s", "{:d}"),
+    ("mean_min_pet_s", "min PET [s]", "{:.2f}"),
     ("mean_return", "return", "{:.0f}"),
+)
+
+#: Columns of the traffic table.
+TRAFFIC = (
+    ("collisions", "collisions", "{:d}"),
+    ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("cleared_episodes", "cleared", "{:d}"),
+    ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
+    ("mean_efficiency", "efficiency", "{:.3f}"),
+    ("ttc_conflict_episodes", "TTC ≤ 1.5 s", "{:d}"),
+    ("mean_min_pet_s", "min PET [s]", "{:.2f}"),
 )
 
 #: What each column means (the report's introduction lists them).
@@ -62,6 +75,17 @@ DEFINITIONS = (
         "efficiency",
         "mean over scenarios of the oracle's time to clear divided by the controller's; an "
         "episode that never clears counts with the whole {horizon:g} s horizon",
+    ),
+    (
+        "TTC ≤ 1.5 s",
+        "episodes whose smallest time to collision at a conflict zone (both drivers keeping "
+        "their speed; Hayward 1972, as in the FHWA's SSAM) was at most 1.5 s — SSAM's "
+        "threshold for a traffic conflict",
+    ),
+    (
+        "min PET",
+        "smallest post-encroachment time (Allen et al. 1978: from one vehicle leaving the "
+        "conflict zone to the other entering it), mean over the episodes with one",
     ),
     (
         "return",
@@ -148,6 +172,18 @@ def reckless_table(summary: dict[str, Any]) -> Table:
     return Table(["switching logic", "collisions", "safety episodes"], rows, alert)
 
 
+def traffic_table(summary: dict[str, Any]) -> Table:
+    rows, alert = [], []
+    for r in summary["traffic"]["rows"]:
+        rows.append(
+            [r["preset"], r["controller"], r["switching"] or "–",
+             *(_cell(r.get(k), f, k) for k, _, f in TRAFFIC)]
+        )  # fmt: skip
+        alert.append(r["collisions"] > 0)
+    header = ["traffic", "controller", "switching", *(h for _, h, _ in TRAFFIC)]
+    return Table(header, rows, alert, text_columns=(0, 1, 2))
+
+
 def figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:
     """The report's episode figures in order, as (file stem, caption)."""
     out = []
@@ -170,6 +206,7 @@ def _context(summary: dict[str, Any]) -> dict[str, Any]:
         "scenarios": scenario_table(summary),
         "policies": policy_table(summary),
         "reckless": reckless_table(summary),
+        "traffic": traffic_table(summary),
         "figures": figure_list(summary),
         "scenario_names": SCENARIO_NAMES,
     }

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -279,6 +280,46 @@ def comparison_figure(
         ax.set_xlabel("north arrival − ego arrival at cruise [s]")
     for ax in axes[:, 0]:
         ax.set_ylabel(f"time to clear [s]\n(▲ at top: never within {horizon_s:g} s)")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def traffic_figure(rows: list[dict[str, Any]], presets: tuple[str, ...], path: Path) -> None:
+    """Time to clear against traffic density: per controller, the share of episodes that
+    cleared the conflict zone and the mean time to clear of those that did, one point per
+    preset (lightest first); collisions are written next to the points. Saved as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    x = np.arange(len(presets))
+    series: dict[str, list[dict[str, Any]]] = {}
+    for row in rows:
+        label = row["controller"] + (f" / {row['switching']}" if row["switching"] else "")
+        series.setdefault(label, []).append(row)
+    for label, points in series.items():
+        by = {p["preset"]: p for p in points}
+        cleared = [by[p]["cleared_episodes"] / by[p]["episodes"] for p in presets]
+        mean = [by[p]["mean_time_to_clear_s"] or np.nan for p in presets]
+        (line,) = left.plot(x, cleared, marker="o", label=label)
+        right.plot(x, mean, marker="o", color=line.get_color(), label=label)
+        for k, p in enumerate(presets):
+            if by[p]["collisions"]:
+                left.annotate(
+                    f"{by[p]['collisions']} collisions", (x[k], cleared[k]), color="red",
+                    fontsize=8, xytext=(4, -10), textcoords="offset points",
+                )  # fmt: skip
+    for ax, title in ((left, "episodes that cleared the conflict zone"),
+                      (right, "mean time to clear (episodes that cleared) [s]")):  # fmt: skip
+        ax.set_xticks(x, presets)
+        ax.set_xlabel("traffic (lightest to densest; test: the densest, least courteous)")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+    left.set_ylim(0, 1.05)
+    left.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
+    right.legend(fontsize=8)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
