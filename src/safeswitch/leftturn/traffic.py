@@ -136,6 +136,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self.rules = RightOfWay(
             gap_time=1.0, go_accel=1.0, stop_buffer=0.5, ego_accel=3.0, ego_rank=1,
             length=config.vehicle.length, patience=traffic.patience_s, slow_speed=1.0,
+            look_ahead=60.0,
         )  # fmt: skip
         super().__init__(config)
         self._ghost_ego = False
@@ -162,12 +163,12 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self, seed: int, env_ids: NDArray[np.int64], episodes: NDArray[np.int64]
     ) -> TrafficScenarios:
         base = super().draw_scenarios(seed, env_ids, episodes)
-        return self._with_traffic(base, seed, env_ids, episodes)
+        return self.with_traffic(base, seed, env_ids, episodes)
 
     def named(self, name: str, batch: int, seed: int = 0) -> TrafficScenarios:
         """A named scenario of the paper with traffic drawn around it (from ``seed``)."""
         ids = np.arange(batch)
-        return self._with_traffic(named_scenarios(name, batch), seed, ids, np.zeros_like(ids))
+        return self.with_traffic(named_scenarios(name, batch), seed, ids, np.zeros_like(ids))
 
     @property
     def arrivals_per_leg(self) -> int:
@@ -177,9 +178,11 @@ class LeftTurnTrafficTask(LeftTurnTask):
         mean = flow * self.config.episode.horizon_s
         return math.ceil(mean + 6.0 * math.sqrt(mean) + 4.0)
 
-    def _with_traffic(
+    def with_traffic(
         self, base: Scenarios, seed: int, env_ids: NDArray[np.int64], episodes: NDArray[np.int64]
     ) -> TrafficScenarios:
+        """The paper's scenario parameters ``base`` with traffic drawn around them (row ``i``
+        a pure function of ``(seed, env_ids[i], episodes[i])``)."""
         legs = len(LEG_DIRECTIONS)
         start = counter_uniforms(seed ^ 0x5AFE, env_ids, episodes, 3 + legs * _PER_LEG * _DRAWS)
         later = counter_uniforms(

@@ -71,7 +71,12 @@ class IDMKernel(NamedTuple):
 def idm_accel(speed: float, desired: float, gap: float, leader_speed: float, p: IDMKernel) -> float:
     """IDM acceleration [m/s²] for ``speed`` and ``desired`` speed [m/s], the gap to the leader
     [m] (``inf``: free road) and its speed [m/s], clipped to ``[-max_brake, max_accel]``."""
-    free = 1.0 - (max(speed, 0.0) / max(desired, 0.1)) ** p.exponent
+    ratio = max(speed, 0.0) / max(desired, 0.1)
+    if p.exponent == 4.0:  # the usual δ, without a call to pow
+        ratio *= ratio
+        free = 1.0 - ratio * ratio
+    else:
+        free = 1.0 - ratio**p.exponent
     if math.isinf(gap):
         return min(max(p.max_accel * free, -p.max_brake), p.max_accel)
     wanted = (

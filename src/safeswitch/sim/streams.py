@@ -70,6 +70,7 @@ class RightOfWay(NamedTuple):
         ego_rank: The ego's right of way (1: turning left from the main road).
         length: Vehicle length [m] (for gaps).
         patience: Waiting time after which a yielding driver goes before a waiting ego [s].
+        look_ahead: A driver heeds a conflict zone from this far before it [m].
         slow_speed: Below this speed a vehicle counts as waiting [m/s].
     """
 
@@ -81,16 +82,20 @@ class RightOfWay(NamedTuple):
     length: float
     patience: float
     slow_speed: float
+    look_ahead: float
 
 
 class NetworkTables(NamedTuple):
     """The network's per-movement tables, as compiled code reads them."""
 
     shared: FloatArray  # [R, R, 2, 3]
+    shares: BoolArray  # [R, R]: any shared segment (a quick test before _leader)
     conflicts: FloatArray  # [R, R, 2]
     ranks: IntArray  # [R]
     lengths: FloatArray  # [R]
     box_exits: FloatArray  # [R]
+    zones_from: FloatArray  # [R]: where the route's first conflict zone starts
+    zones_to: FloatArray  # [R]: where its last one ends
     route_tables: FloatArray  # RouteSet.tables
     spacing: float
     k_max: int
@@ -100,8 +105,12 @@ class NetworkTables(NamedTuple):
 def network_tables(network: RoadNetwork) -> NetworkTables:
     routes = network.routes
     return NetworkTables(
-        np.ascontiguousarray(network.shared), np.ascontiguousarray(network.conflicts),
-        network.ranks, network.lengths, network.box_exits, routes.tables, routes.spacing,
+        np.ascontiguousarray(network.shared),
+        np.ascontiguousarray((network.shared[..., 0] <= network.shared[..., 1]).any(axis=-1)),
+        np.ascontiguousarray(network.conflicts),
+        network.ranks, network.lengths, network.box_exits,
+        np.nanmin(network.conflicts[..., 0], axis=1), np.nanmax(network.conflicts[..., 1], axis=1),
+        routes.tables, routes.spacing,
         routes.size - 2, routes.size,
     )  # fmt: skip
 
@@ -176,17 +185,23 @@ class TrafficState:
 
 
 def place(tables: NetworkTables, state: TrafficState) -> None:
-    """Fill the poses of ``state`` from its routes and arc lengths (in place)."""
-    _place(tables, state.route, state.progress, state.x, state.y, state.cos_yaw, state.sin_yaw)
+    """Fill the poses of ``state``'s active vehicles from their routes and arc lengths (in
+    place; an empty slot keeps whatever it held)."""
+    _place(
+        tables, state.route, state.progress, state.active, state.x, state.y, state.cos_yaw,
+        state.sin_yaw,
+    )  # fmt: skip
 
 
 @jit
 def _place(
-    t: NetworkTables, route: IntArray, progress: FloatArray, x: FloatArray, y: FloatArray,
-    c: FloatArray, s: FloatArray,
+    t: NetworkTables, route: IntArray, progress: FloatArray, active: BoolArray, x: FloatArray,
+    y: FloatArray, c: FloatArray, s: FloatArray,
 ) -> None:  # fmt: skip
     for b in range(route.shape[0]):
         for i in range(route.shape[1]):
+            if not active[b, i]:
+                continue
             px, py, heading = pose(
                 t.route_tables, t.spacing, t.k_max, route[b, i] * t.size, progress[b, i]
             )
@@ -252,11 +267,13 @@ def traffic_tick(
             gap, lead_v = math.inf, 0.0
             # 1. the nearest vehicle ahead on the same lane (the ego included)
             for e in range(externals):
+                if not t.shares[ri, ext_route[b, e]]:
+                    continue
                 g = _leader(t, ri, si, ext_route[b, e], ext_progress[b, e])
                 if g < gap:
                     gap, lead_v = g, ext_speed[b, e]
             for j in range(slots):
-                if j == i or not active[b, j]:
+                if j == i or not active[b, j] or not t.shares[ri, route[b, j]]:
                     continue
                 g = _leader(t, ri, si, route[b, j], progress[b, j])
                 if g < gap:
@@ -267,7 +284,8 @@ def traffic_tick(
             stop_at = math.inf
             my_rank = t.ranks[ri]
             impatient = waited[b, i] >= rules.patience
-            for j in range(-externals, slots):
+            heeds = t.zones_from[ri] - si <= rules.look_ahead and si <= t.zones_to[ri]
+            for j in range(-externals, slots if heeds else -externals):
                 if j >= 0 and (j == i or not active[b, j]):
                     continue
                 e = j + externals  # the external vehicle's index when j < 0
@@ -275,8 +293,8 @@ def traffic_tick(
                 sj = ext_progress[b, e] if j < 0 else progress[b, j]
                 vj = ext_speed[b, e] if j < 0 else speed[b, j]
                 z_in, z_out = t.conflicts[ri, rj, 0], t.conflicts[ri, rj, 1]
-                if math.isnan(z_in) or si > z_out:
-                    continue
+                if math.isnan(z_in) or si > z_in or z_in - si > rules.look_ahead:
+                    continue  # no conflict, already inside its zone (it cannot undo that), or far
                 w_in, w_out = t.conflicts[rj, ri, 0], t.conflicts[rj, ri, 1]
                 if sj > w_out:
                     continue  # the other has passed
@@ -287,35 +305,34 @@ def traffic_tick(
                 ):
                     continue  # a non-yielding (or impatient) driver ignores the ego
                 entry = z_in - rules.stop_buffer
-                if si > z_in:
-                    continue  # already inside its zone: drive on (it cannot undo that)
                 # 3. the other is inside its zone: wait before one's own
                 if sj >= w_in:
                     stop_at = min(stop_at, entry)
                     continue
-                # 2. give way if the other has the right of way
+                # 2. give way if the other has the right of way: a higher rank, or the same
+                # and the earlier possible arrival
                 their_rank = t.ranks[rj]
                 if j < 0 and ext_is_ego[e]:
                     their_rank = rules.ego_rank
+                if their_rank > my_rank:
+                    continue
+                # one that cannot stop before its zone any more goes on (it was allowed to)
+                if vi > rules.slow_speed and si + vi * vi / (2.0 * idm.max_brake) > entry:
+                    continue
                 if j < 0:
                     their_accel, their_top = rules.ego_accel, ext_top[b, e]
                 else:
                     their_accel, their_top = idm.max_accel, desired[b, j]
                 arrive = earliest_arrival(w_in - sj, vj, their_accel, their_top)
-                clear = earliest_arrival(z_out + rules.length - si, 0.0, rules.go_accel, 1e9)
-                if vi > 0.0:
-                    clear = min(clear, earliest_arrival(z_out + rules.length - si, vi,
-                                                        rules.go_accel, 1e9))  # fmt: skip
+                if their_rank == my_rank and arrive >= earliest_arrival(
+                    z_in - si, vi, idm.max_accel, desired[b, i]
+                ):
+                    continue
                 # keep the box clear: not before the leader has left room past the zone
                 if si + ahead < z_out + rules.length + idm.min_gap:
-                    clear = math.inf
-                mine = earliest_arrival(z_in - si, vi, idm.max_accel, desired[b, i])
-                priority = their_rank < my_rank or (their_rank == my_rank and arrive < mine)
-                if not priority:
+                    stop_at = min(stop_at, entry)
                     continue
-                # one that cannot stop before its zone any more goes on (it was allowed to)
-                if vi > rules.slow_speed and si + vi * vi / (2.0 * idm.max_brake) > entry:
-                    continue
+                clear = earliest_arrival(z_out + rules.length - si, vi, rules.go_accel, 1e9)
                 if clear + rules.gap_time > arrive:
                     stop_at = min(stop_at, entry)
             if stop_at - si < gap:
