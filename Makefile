@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml Makefile
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 	$(PIP) install --quiet "$(TORCH_PIN)"
-	$(PIP) install --quiet -e ".[dev,bench,ray]"
+	$(PIP) install --quiet -e ".[dev,bench,ray,sumo]"
 	touch $(STAMP)
 
 demo: venv

@@ -1,7 +1,7 @@
 """The package's layers: each imports only the layers below it (no cycles between packages),
 and only ``report`` imports matplotlib.
 
-core → sim → leftturn → evaluation → training, report → app, examples → cli
+core → sim → leftturn → sumo, evaluation → training, report → app, examples → cli
 (``io`` and ``progress`` are leaf utilities every layer may use.)
 """
 
@@ -19,13 +19,14 @@ BELOW = {
     "core": UTILITIES,
     "sim": UTILITIES | {"core"},
     "leftturn": UTILITIES | {"core", "sim"},
+    "sumo": UTILITIES | {"core", "sim", "leftturn"},
     "evaluation": UTILITIES | {"core", "sim", "leftturn"},
     "training": UTILITIES | {"core", "sim", "leftturn", "evaluation"},
     "report": UTILITIES | {"core", "sim", "leftturn", "evaluation"},
     "examples": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
     "bench": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
 }
-BELOW["app"] = BELOW["training"] | {"training", "report", "examples"}
+BELOW["app"] = BELOW["training"] | {"training", "report", "examples", "sumo"}
 BELOW["cli"] = BELOW["app"] | {"app", "bench"}
 
 

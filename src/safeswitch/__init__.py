@@ -21,6 +21,9 @@ ENV_ID = "safeswitch/LeftTurn-v0"
 #: ``highway-env`` package; see :mod:`safeswitch.examples.highway`).
 HIGHWAY_ENV_ID = "safeswitch/Highway-v0"
 
+#: The left turn with SUMO driving the north car (extra ``safeswitch[sumo]``).
+SUMO_ENV_ID = "safeswitch/LeftTurnSumo-v0"
+
 #: The left turn among traffic from every leg (``traffic=`` a preset or settings).
 TRAFFIC_ENV_ID = "safeswitch/LeftTurnTraffic-v0"
 
@@ -32,6 +35,8 @@ if TRAFFIC_ENV_ID not in _gym.registry:
         entry_point="safeswitch.leftturn.env:LeftTurnEnv",
         kwargs={"traffic": "medium"},
     )
+if SUMO_ENV_ID not in _gym.registry:
+    _gym.register(id=SUMO_ENV_ID, entry_point="safeswitch.sumo.task:LeftTurnSumoEnv")
 if HIGHWAY_ENV_ID not in _gym.registry:
     _gym.register(id=HIGHWAY_ENV_ID, entry_point="safeswitch.examples.highway:make_highway_env")
 
@@ -52,6 +57,7 @@ _EXPORTS = {
 __all__ = [
     "ENV_ID",
     "HIGHWAY_ENV_ID",
+    "SUMO_ENV_ID",
     "TRAFFIC_ENV_ID",
     "Decision",
     "NeverSwitch",

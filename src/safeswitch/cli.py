@@ -168,6 +168,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             progress=not (args.no_progress or args.json),
             traffic=args.traffic,
+            sim=args.sim,
         )
     if args.json:
         from safeswitch.io import to_json
@@ -418,6 +419,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--traffic",
         help="traffic from every leg: a preset (light, medium, heavy, train, test) or none "
         "(default: what the policy was trained in; none for the baselines)",
+    )
+    ev.add_argument(
+        "--sim",
+        choices=("embedded", "sumo"),
+        default="embedded",
+        help="the simulator: ours (batched), or SUMO driving the north car (extra "
+        "safeswitch[sumo]; one episode after another)",
     )
     ev.add_argument("--out", help="folder for episodes.csv and summary.json")
     ev.add_argument("--overwrite", action="store_true", help="replace files in a non-empty --out")

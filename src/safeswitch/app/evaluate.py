@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -9,6 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.core.arrays import take_rows
 from safeswitch.evaluation.evaluate import (
     BASELINES,
     EpisodeCSV,
@@ -25,10 +27,14 @@ from safeswitch.leftturn.config import (
     TrafficConfig,
     traffic_config,
 )
+from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, build_task
 from safeswitch.progress import Progress
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
+
+#: Every ``--sim``.
+SIMULATORS = ("embedded", "sumo")
 
 #: Every ``--controller``.
 CONTROLLERS: tuple[str, ...] = ("learned", *BASELINES)
@@ -121,19 +127,29 @@ def evaluate(
     overwrite: bool = False,
     progress: bool = False,
     traffic: str | None = None,
+    sim: str = "embedded",
 ) -> dict[str, Any]:
     """Run the evaluation and return its summary (see :mod:`safeswitch.evaluation.metrics` for
     the fields); with ``out``, write ``episodes.csv`` (row by row, as chunks finish) and
     ``summary.json`` there. Episodes run in chunks of
     :data:`~safeswitch.evaluation.evaluate.CHUNK`, so memory stays bounded whatever
-    ``episodes`` is. ``traffic``: see :func:`traffic_setup`.
+    ``episodes`` is. ``traffic``: see :func:`traffic_setup`. ``sim="sumo"``: on SUMO
+    (:mod:`safeswitch.sumo`), one episode after another; the summary adds the episodes in which
+    SUMO reported a collision and those in which its north car broke the certified logic's
+    assumptions.
 
     Raises:
         OutputDirectoryError: ``out`` is a file, or holds files and ``overwrite`` is off.
     """
+    if sim not in SIMULATORS:
+        raise ValueError(f"--sim must be one of {', '.join(SIMULATORS)}, got {sim!r}")
     env_config, policy = controller_setup(controller, model, switching)
     settings, traffic_label = traffic_setup(controller, model, traffic)
     task = build_task(None, env_config, traffic=settings)
+    if sim == "sumo":
+        from safeswitch.sumo.task import sumo_task
+
+        task = sumo_task(env_config, settings)
     policy = fit_observations(policy, model if controller == "learned" else None, task)
     chunks = scenario_chunks(task, scenarios, episodes, seed)  # validates the arguments
     folder = prepare_output_dir(out, overwrite) if out is not None else None
@@ -141,19 +157,27 @@ def evaluate(
     accumulator = SummaryAccumulator()
     writer = EpisodeCSV(folder / "episodes.csv") if folder is not None else None
     bar = Progress(total, f"evaluate {controller}", enabled=progress)
+    sumo = {"sumo_collision_episodes": 0, "assumption_break_episodes": 0}
     try:
         for names, batch in chunks:
-            result, plan = run_controller(task, policy, batch, trace=False)
-            accumulator.add(result, plan.time_to_clear, task.config.episode.horizon_s)
-            if writer is not None:
-                writer.write(names, batch, result, plan.time_to_clear)
-            bar.update(len(names))
+            for part, scenes in _one_by_one(names, batch, sim == "sumo"):
+                result, plan = run_controller(task, policy, scenes, trace=False)
+                accumulator.add(result, plan.time_to_clear, task.config.episode.horizon_s)
+                if writer is not None:
+                    writer.write(part, scenes, result, plan.time_to_clear)
+                if sim == "sumo":
+                    sumo["sumo_collision_episodes"] += int(getattr(task, "sumo_collisions", 0) > 0)
+                    sumo["assumption_break_episodes"] += int(task.assumption_breaks)
+                bar.update(len(part))
     except BaseException:
         if writer is not None:
             writer.abandon()
         raise
     finally:
         bar.close()
+        close = getattr(task, "close", None)
+        if close is not None:
+            close()
     if writer is not None:
         writer.close()
     summary = {
@@ -162,9 +186,22 @@ def evaluate(
         "switching": env_config.switching if policy is not None else None,
         "scenarios": scenarios,
         "traffic": traffic_label,
+        "sim": sim,
         "seed": seed,
         **accumulator.summary(),
+        **(sumo if sim == "sumo" else {}),
     }
     if folder is not None:
         write_json(folder / "summary.json", summary)
     return summary
+
+
+def _one_by_one(
+    names: list[str], batch: Scenarios, single: bool
+) -> Iterator[tuple[list[str], Scenarios]]:
+    """The chunk as it is, or (``single``: SUMO runs one scene per process) scene by scene."""
+    if not single:
+        yield names, batch
+        return
+    for i, name in enumerate(names):
+        yield [name], take_rows(batch, np.array([i]))

@@ -11,7 +11,13 @@ from numpy.typing import NDArray
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import scenario_info, step_info
 from safeswitch.leftturn.spaces import action_space, observation_space
-from safeswitch.leftturn.task import StepRecord, TaskState, build_task, learned_actions
+from safeswitch.leftturn.task import (
+    LeftTurnTask,
+    StepRecord,
+    TaskState,
+    build_task,
+    learned_actions,
+)
 
 
 class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -61,7 +67,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         learned_scope: str = FROM_CONFIG,
         traffic: Any = None,
     ) -> None:
-        self.task = build_task(
+        self.task = self.make_task(
             render_mode, config, learned_scope, traffic, switching=switching,
             adas_penalty=adas_penalty, scenario=scenario,
         )  # fmt: skip
@@ -74,6 +80,12 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._episode = 0
         self._state: TaskState | None = None
         self._record: StepRecord | None = None
+
+    def make_task(self, render_mode: str | None, config: Any, learned_scope: str,
+                  traffic: Any, **overrides: Any) -> LeftTurnTask:  # fmt: skip
+        """The task behind the environment (:func:`~safeswitch.leftturn.task.build_task`; a
+        subclass may run it on another simulator)."""
+        return build_task(render_mode, config, learned_scope, traffic, **overrides)
 
     @property
     def state(self) -> TaskState:
