@@ -146,10 +146,11 @@ def evaluate(
     env_config, policy = controller_setup(controller, model, switching)
     settings, traffic_label = traffic_setup(controller, model, traffic)
     task = build_task(None, env_config, traffic=settings)
+    on_sumo = None
     if sim == "sumo":
         from safeswitch.sumo.task import sumo_task
 
-        task = sumo_task(env_config, settings)
+        task = on_sumo = sumo_task(env_config, settings)
     policy = fit_observations(policy, model if controller == "learned" else None, task)
     chunks = scenario_chunks(task, scenarios, episodes, seed)  # validates the arguments
     folder = prepare_output_dir(out, overwrite) if out is not None else None
@@ -160,14 +161,14 @@ def evaluate(
     sumo = {"sumo_collision_episodes": 0, "assumption_break_episodes": 0}
     try:
         for names, batch in chunks:
-            for part, scenes in _one_by_one(names, batch, sim == "sumo"):
+            for part, scenes in _one_by_one(names, batch, on_sumo is not None):
                 result, plan = run_controller(task, policy, scenes, trace=False)
                 accumulator.add(result, plan.time_to_clear, task.config.episode.horizon_s)
                 if writer is not None:
                     writer.write(part, scenes, result, plan.time_to_clear)
-                if sim == "sumo":
-                    sumo["sumo_collision_episodes"] += int(getattr(task, "sumo_collisions", 0) > 0)
-                    sumo["assumption_break_episodes"] += int(task.assumption_breaks)
+                if on_sumo is not None:
+                    sumo["sumo_collision_episodes"] += int(on_sumo.sumo_collisions > 0)
+                    sumo["assumption_break_episodes"] += int(on_sumo.assumption_breaks)
                 bar.update(len(part))
     except BaseException:
         if writer is not None:
@@ -175,9 +176,8 @@ def evaluate(
         raise
     finally:
         bar.close()
-        close = getattr(task, "close", None)
-        if close is not None:
-            close()
+        if on_sumo is not None:
+            on_sumo.close()
     if writer is not None:
         writer.close()
     summary = {
