@@ -240,6 +240,37 @@ def traffic_study(
     return rows
 
 
+#: The cross-simulator comparison: controllers (name, kind, shipped policy).
+SUMO_CONTROLLERS = (("ppo-paper", "learned", "paper"), ("ppo-certified", "learned", "certified"),
+                    ("rule", "rule", None))  # fmt: skip
+
+
+def sumo_study(episodes: int, log: Callable[[str], None]) -> dict[str, Any]:
+    """The shipped paper and certified policies and the rule-based controller on the same
+    random scenarios on both simulators (SUMO driving the north car); ``available`` is false
+    (and there are no rows) without the ``safeswitch[sumo]`` extra."""
+    from safeswitch.app.evaluate import evaluate
+    from safeswitch.sumo.network import SumoMissingError, sumo_home
+
+    try:
+        sumo_home()
+        import libsumo  # noqa: F401
+    except (SumoMissingError, ImportError) as exc:
+        log(f"  SUMO: skipped ({exc})")
+        return {"available": False, "episodes": episodes, "rows": [], "reason": str(exc)}
+    rows = []
+    for name, kind, policy in SUMO_CONTROLLERS:
+        model = str(SHIPPED_DIR / policy) if policy else None
+        for sim in ("embedded", "sumo"):
+            summary = evaluate(kind, model, "random", episodes, EVAL_SEED, None, None, sim=sim)
+            rows.append({**summary, "controller": name})
+        log(
+            f"  SUMO: {name}: {rows[-1]['collisions']} collisions on SUMO, "
+            f"{rows[-2]['collisions']} embedded"
+        )
+    return {"available": True, "episodes": episodes, "rows": rows}
+
+
 def policy_of(name: str) -> bool:
     """Whether a controller of the traffic study is a trained policy."""
     return name != "oracle"
@@ -368,6 +399,9 @@ def reproduce(
     traffic_episodes = max(50, episodes // 5)
     log(f"  traffic from every leg: {traffic_episodes} random scenarios per density")
     traffic = traffic_study(models, traffic_episodes, folder, log)
+    sumo_episodes = max(20, episodes // 20)
+    log(f"  SUMO as a second simulator: {sumo_episodes} random scenarios per controller")
+    sumo = sumo_study(sumo_episodes, log)
     log(f"stage {stages}/{stages}: figures and the report")
     comparison_figure(
         rows, oracle_random, offsets, horizon_s, folder / "figures" / "comparison.png"
@@ -388,6 +422,7 @@ def reproduce(
         "paper_findings": [{"finding": f, "reproduced": ok} for f, ok in findings],
         "reckless_full_throttle": reckless,
         "traffic": {"episodes": traffic_episodes, "rows": traffic},
+        "sumo": sumo,
         "wall_time_s": round(time.perf_counter() - began, 1),
     }
     write_json(folder / "summary.json", summary)

@@ -184,6 +184,28 @@ def traffic_table(summary: dict[str, Any]) -> Table:
     return Table(header, rows, alert, text_columns=(0, 1, 2))
 
 
+#: Columns of the cross-simulator table.
+SIMULATORS = (
+    ("collisions", "collisions", "{:d}"),
+    ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("cleared_episodes", "cleared", "{:d}"),
+    ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
+    ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("mean_efficiency", "efficiency", "{:.3f}"),
+    ("sumo_collision_episodes", "SUMO's collisions", "{:d}"),
+    ("assumption_break_episodes", "assumptions broken", "{:d}"),
+)
+
+
+def sumo_table(summary: dict[str, Any]) -> Table:
+    rows, alert = [], []
+    for r in summary.get("sumo", {}).get("rows", []):
+        rows.append([r["controller"], r["sim"], *(_cell(r.get(k), f, k) for k, _, f in SIMULATORS)])
+        alert.append(r["collisions"] > 0)
+    header = ["controller", "simulator", *(h for _, h, _ in SIMULATORS)]
+    return Table(header, rows, alert, text_columns=(0, 1))
+
+
 def figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:
     """The report's episode figures in order, as (file stem, caption)."""
     out = []
@@ -207,6 +229,7 @@ def _context(summary: dict[str, Any]) -> dict[str, Any]:
         "policies": policy_table(summary),
         "reckless": reckless_table(summary),
         "traffic": traffic_table(summary),
+        "sumo": sumo_table(summary),
         "figures": figure_list(summary),
         "scenario_names": SCENARIO_NAMES,
     }

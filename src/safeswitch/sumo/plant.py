@@ -162,10 +162,13 @@ class SumoPlant:
     def vehicles(self) -> tuple[str, ...]:
         return tuple(self._sumo.vehicle.getIDList())
 
-    def read(self, vid: str) -> Pose:
-        """A vehicle's centre, heading and speed."""
+    def read(self, vid: str) -> Pose | None:
+        """A vehicle's centre, heading and speed (``None``: it has left the network)."""
         v = self._sumo.vehicle
-        x, y = v.getPosition(vid)
+        try:
+            x, y = v.getPosition(vid)
+        except self._sumo.TraCIException:
+            return None
         heading = from_sumo_angle(v.getAngle(vid))
         half = self.length / 2
         return Pose(

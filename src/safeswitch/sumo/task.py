@@ -99,10 +99,10 @@ class LeftTurnSumoTask(LeftTurnTask):
     def _sync_north(self, world: WorldState) -> None:
         """Overwrite the north car of ``world`` (in place) with SUMO's."""
         v = world.vehicles
-        if "north" not in self.plant.vehicles():  # it has left the network: drive on
+        pose = self.plant.read("north")
+        if pose is None:  # it has left the network: drive on
             world.progress[0, 1] += v.speed[0, 1] * self.config.episode.dt
             return
-        pose = self.plant.read("north")
         before = float(v.speed[0, 1])
         v.x[0, 1], v.y[0, 1] = pose.x, pose.y
         v.cos_yaw[0, 1], v.sin_yaw[0, 1] = math.cos(pose.heading), math.sin(pose.heading)
