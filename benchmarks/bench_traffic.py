@@ -11,7 +11,8 @@
    the ego and among the other vehicles are counted.
 
 Run: ``python benchmarks/bench_traffic.py [--json] [--episodes N] [--skip-safety]``; writes
-``benchmarks/results/traffic.json``. The full run (25,000 random episodes per logic, density
+``benchmarks/results/traffic.json`` (``--skip-safety`` measures the throughput alone and keeps
+the file's safety rows). The full run (25,000 random episodes per logic, density
 and adversary family at the default ``--episodes 3125``) takes about half an hour.
 """
 
@@ -181,6 +182,11 @@ def main() -> None:
         result["safety"] = rows
         result["safety_totals"] = totals(rows)
         print(json.dumps(result["safety_totals"], indent=1), file=sys.stderr)
+    elif RESULTS.is_file():  # keep the last safety run's rows beside the new throughput
+        previous = json.loads(RESULTS.read_text())
+        for key in ("safety", "safety_totals"):
+            if key in previous:
+                result[key] = previous[key]
     RESULTS.parent.mkdir(exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=2) + "\n")
     _common.emit(result, args.json)

@@ -163,3 +163,21 @@ def test_render_writes_an_animation_of_one_episode(tmp_path, capsys):
         main(["render", "--controller", "rule", "--scenario", "random:3", "--out", str(out)]) == 2
     )
     assert "--overwrite" in error_line(capsys)
+
+
+def test_evaluate_in_traffic_and_on_sumo(capsys):
+    """``--traffic`` and ``--sim`` reach the evaluation and its summary; a bad preset is one
+    error line naming it."""
+    assert main(["evaluate", "--controller", "planner", "--traffic", "light", "--episodes",
+                 "4", "--json"]) == 0  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["traffic"] == "light" and summary["episodes"] == 4
+    assert summary["mean_min_pet_s"] is None or summary["mean_min_pet_s"] > 0
+    assert main(["evaluate", "--controller", "rule", "--traffic", "rush", "--episodes", "4"]) == 2
+    assert "rush" in error_line(capsys)
+    pytest.importorskip("libsumo")
+    assert main(["evaluate", "--model", "shipped", "--sim", "sumo", "--episodes", "3",
+                 "--json"]) == 0  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["sim"] == "sumo" and summary["episodes"] == 3
+    assert summary["collisions"] == 0 and summary["sumo_collision_episodes"] == 0

@@ -90,7 +90,7 @@ def test_grids_are_checked_and_generated_lazily():
         Grid.parse(["speed=1"])
 
 
-def test_no_ray_and_an_unreachable_cluster_are_clear_errors(monkeypatch, capsys):
+def test_no_ray_and_an_unreachable_cluster_are_clear_errors(monkeypatch, capsys, tmp_path):
     started = time.perf_counter()
     with pytest.raises(DistributedError, match=r"cannot reach a Ray cluster at 127\.0\.0\.1:9"):
         check_reachable("127.0.0.1:9", timeout=2.0)
@@ -111,9 +111,10 @@ def test_no_ray_and_an_unreachable_cluster_are_clear_errors(monkeypatch, capsys)
         pass
     monkeypatch.undo()
     args = ["campaign", "--controller", "rule", "--episodes", "5", "--address",
-            "127.0.0.1:9", "--out", "/tmp/never"]  # fmt: skip
+            "127.0.0.1:9", "--out", str(tmp_path / "never")]  # fmt: skip
     assert main(args) == 2
     assert "cannot reach a Ray cluster" in capsys.readouterr().err
+    assert not (tmp_path / "never").exists()  # nothing written for a campaign that never ran
 
 
 def test_falsification_finds_the_paper_logics_failures_far_more_often_than_random(tmp_path):

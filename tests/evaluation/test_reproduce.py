@@ -64,8 +64,9 @@ def test_the_report_embeds_every_figure_and_animation_it_lists(report):
     assert len(listed) == 3 * (len(ENTRIES) - 1)  # 3 scenarios per controller but the oracle
     pngs = re.findall(r'src="data:image/png;base64,', page)
     gifs = re.findall(r'src="data:image/gif;base64,', page)
-    assert len(pngs) == len(listed) + 1  # and the comparison
-    assert len(gifs) == len(SCENARIO_NAMES)
+    assert len(pngs) == len(listed) + 2  # and the comparison and clearing against traffic
+    assert len(gifs) == len(SCENARIO_NAMES) + 1  # and one in traffic
+    assert "Traffic from every leg" in page and "SUMO as a second simulator" in page
     assert not re.search(r"(src|href)=\"(?!data:)", page)  # self-contained, offline
     markdown = (report / "report.md").read_text()
     for stem, _ in listed:

@@ -124,7 +124,6 @@ def test_what_sumo_cannot_do_is_refused_by_name(task):
         task.initial(task.draw_scenarios(0, np.arange(4), np.zeros(4, dtype=np.int64)))
 
 
-
 def test_a_north_car_starting_inside_the_junction_is_placed_there(task):
     """SUMO inserts vehicles on approaches only; the north car is inserted earlier and driven
     to where the scenario starts it."""

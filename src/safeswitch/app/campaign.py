@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from safeswitch.app.distributed import cluster
+from safeswitch.app.distributed import check_reachable, cluster
 from safeswitch.io import write_json
 from safeswitch.progress import Progress
 
@@ -299,6 +299,8 @@ def campaign(
             raise CampaignError(f"{folder} holds a different campaign; --resume must ask the same")
     elif folder.is_dir() and any(folder.iterdir()):
         raise CampaignError(f"--out {folder} is not empty and holds no campaign")
+    if address is not None:  # before anything is written: a typo leaves no campaign behind
+        check_reachable(address)
     folder.mkdir(parents=True, exist_ok=True)
     write_json(record, asked)
 
