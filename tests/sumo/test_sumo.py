@@ -157,7 +157,7 @@ def test_vec_env_workers_step_and_close():
         obs = env.reset()
         assert obs.shape == (2, 6)
         for _ in range(20):
-            obs, reward, done, infos = env.step(np.full((2, 1), 0.3, dtype=np.float32))
+            obs, reward, _, _ = env.step(np.full((2, 1), 0.3, dtype=np.float32))
         assert np.isfinite(reward).all()
         pids = [p.pid for p in env.processes]
     finally:
