@@ -8,7 +8,8 @@ loop over the scenes:
 1. **Car following** — the Intelligent Driver Model (:mod:`safeswitch.sim.idm`) behind the
    nearest vehicle ahead on the same lane: any vehicle, the automated ego included, on a shared
    segment of the two routes (:attr:`RoadNetwork.shared`).
-2. **Right of way** — before a conflict zone with a vehicle that has the right of way (lower
+2. **Right of way** — within ``look_ahead`` metres before a conflict zone with a vehicle that
+   has the right of way (lower
    :func:`~safeswitch.sim.network.priority_rank`; on equal rank, the one that can arrive first),
    a driver goes only if it can clear its zone, driving on at no less than ``go_accel``,
    ``gap_time`` before the other can possibly reach its own (accelerating at its bound up to
