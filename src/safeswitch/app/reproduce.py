@@ -396,10 +396,10 @@ def reproduce(
         )
 
     assert offsets is not None and oracle_random is not None
-    traffic_episodes = max(50, episodes // 5)
+    traffic_episodes = max(50, episodes // 10)
     log(f"  traffic from every leg: {traffic_episodes} random scenarios per density")
     traffic = traffic_study(models, traffic_episodes, folder, log)
-    sumo_episodes = max(20, episodes // 20)
+    sumo_episodes = max(20, episodes // 50)
     log(f"  SUMO as a second simulator: {sumo_episodes} random scenarios per controller")
     sumo = sumo_study(sumo_episodes, log)
     log(f"stage {stages}/{stages}: figures and the report")
