@@ -8,8 +8,9 @@ episodes of the shipped policy.
 3. ``--million``: 1,000,000 episodes of the shipped policy under ``paper`` with 2 workers.
 
 Run: ``python benchmarks/bench_campaign.py [--episodes 100000] [--controller rule] [--million]
-[--json]``; writes ``benchmarks/results/campaign.json``. Run it on an otherwise idle machine:
-a second job on one of the two cores halves what two workers can give.
+[--json]``; writes ``benchmarks/results/campaign.json`` (``campaign_learned.json`` with
+``--controller learned``, the shipped policy). Run it on an otherwise idle machine: a second
+job on one of the two cores halves what two workers can give.
 """
 
 from __future__ import annotations
@@ -87,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
             f"({million['episodes_per_s']:,.0f} episodes/s), {million['collisions']} collisions",
             file=sys.stderr,
         )
-    write_json(RESULTS, result)
+    write_json(RESULTS if args.controller == "rule" else RESULTS.with_name(
+        f"campaign_{args.controller}.json"), result)
     _common.emit(result, args.json)
     return 0
 

@@ -36,7 +36,7 @@ from safeswitch.sumo.task import LeftTurnSumoEnv, sumo_task
 RESULTS = Path(__file__).parent / "results" / "sumo.json"
 ADVERSARIES = ("uniform", "bang_bang", "full_throttle", "zero_throttle", "enter_then_stop",
                "creep", "nan_inf", "noisy_cruise")  # fmt: skip
-COMPARED = (("learned", "shipped"), ("learned", "certified"), ("learned", "paper_scratch"),
+COMPARED = (("learned", "shipped"), ("learned", "certified"), ("learned", "paper-scratch"),
             ("rule", None))  # fmt: skip
 KEYS = ("collisions", "safety_activation_episodes", "cleared_episodes", "mean_time_to_clear_s",
         "comfort_violation_fraction", "mean_efficiency")  # fmt: skip

@@ -12,6 +12,7 @@ from __future__ import annotations
 import pickle
 import zipfile
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from numpy.typing import NDArray
+from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.rollout import Policy
@@ -66,8 +68,47 @@ class TrainedPolicy:
 
     def act(self, obs: NDArray[np.float32], deterministic: bool = True) -> NDArray[np.float64]:
         """Actions ``[B]`` in [-1, 1] for observations ``[B, 6]``."""
-        actions, _ = self.model.predict(self.normalise(obs), deterministic=deterministic)
+        normalised = self.normalise(obs)
+        if deterministic and self._actor is not None:
+            actions = self._mean_action(normalised)
+        else:
+            actions, _ = self.model.predict(normalised, deterministic=deterministic)
         return np.asarray(actions, dtype=np.float64).reshape(obs.shape[0])
+
+    @cached_property
+    def _actor(self) -> list[torch.nn.Module] | None:
+        """The actor's layers (Linear and Tanh only, then the action head) for
+        :meth:`_mean_action`, or ``None`` when the policy is built otherwise (then SB3's
+        ``predict`` serves)."""
+        policy = self.model.policy
+        layers = [*policy.mlp_extractor.policy_net, policy.action_net]
+        plain = (
+            isinstance(policy.features_extractor, FlattenExtractor)
+            and not policy.squash_output
+            and isinstance(policy.action_space, spaces.Box)
+            and all(isinstance(m, (torch.nn.Linear, torch.nn.Tanh)) for m in layers)
+        )
+        return layers if plain else None
+
+    def _mean_action(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        """SB3's deterministic ``predict`` (the Gaussian's mean, clipped to the action space)
+        computed layer by layer, with the tanh in numpy: this CPU build of torch evaluates tanh
+        element by element (1.2 ms for 4,096 × 128 against numpy's 0.09 ms), which made
+        inference two thirds of a campaign's time. Equal to ``predict`` up to float32 rounding
+        in the last bit of a tanh (``tests/training/test_policies.py``)."""
+        layers = self._actor
+        assert layers is not None
+        space = self.model.policy.action_space
+        with torch.inference_mode():
+            x = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32).reshape(len(obs), -1))
+            for layer in layers:
+                if isinstance(layer, torch.nn.Linear):
+                    x = torch.nn.functional.linear(x, layer.weight, layer.bias)
+                else:
+                    values = x.numpy()
+                    np.tanh(values, out=values)
+            mean = x.numpy()
+        return np.clip(mean, space.low, space.high)
 
     def act_one(self, obs: Any, deterministic: bool = True) -> NDArray[Any]:
         """The action for one observation of any environment (its action space's shape)."""
