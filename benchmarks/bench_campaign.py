@@ -88,8 +88,8 @@ def main(argv: list[str] | None = None) -> int:
             f"({million['episodes_per_s']:,.0f} episodes/s), {million['collisions']} collisions",
             file=sys.stderr,
         )
-    write_json(RESULTS if args.controller == "rule" else RESULTS.with_name(
-        f"campaign_{args.controller}.json"), result)
+    name = "campaign.json" if args.controller == "rule" else f"campaign_{args.controller}.json"
+    write_json(RESULTS.with_name(name), result)
     _common.emit(result, args.json)
     return 0
 

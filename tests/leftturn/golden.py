@@ -36,7 +36,14 @@ def runs():
     episode = {"episode": {"learned_scope": "episode"}}
 
     def learned(policy):
-        return lambda: lambda obs, state, tick: policy.act(obs)
+        # SB3's own predict, as when the runs were recorded: the golden runs pin the task's
+        # decisions, not the inference path (TrainedPolicy.act computes the same actions up to
+        # the last bit of a float32 tanh; tests/training/test_policies.py checks that).
+        def act(obs, state, tick):
+            actions, _ = policy.model.predict(policy.normalise(obs), deterministic=True)
+            return np.asarray(actions, dtype=np.float64).reshape(obs.shape[0])
+
+        return lambda: act
 
     return [
         ("rule_paper", resolve_config({"episode": {"learned_scope": "never"}}),

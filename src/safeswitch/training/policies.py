@@ -99,6 +99,7 @@ class TrainedPolicy:
         layers = self._actor
         assert layers is not None
         space = self.model.policy.action_space
+        assert isinstance(space, spaces.Box)  # checked by _actor
         with torch.inference_mode():
             x = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32).reshape(len(obs), -1))
             for layer in layers:
