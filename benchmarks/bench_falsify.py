@@ -1,10 +1,11 @@
 """Falsification against random sampling: failures found per 1,000 simulated episodes.
 
 For each target (the rule under ``paper``, the creeping adversary under ``paper``, the shipped
-policy under ``paper`` and the rule under ``certified``), ``safeswitch falsify`` runs the
-cross-entropy search and uniform random sampling with the same budget in the same run (2 Ray
-workers) and reports how many collisions each found, their ratio, and the smallest footprint
-separation seen (the margin, for a target that does not collide).
+policy under ``paper`` — its collisions, then its safety actions — and the rule under
+``certified``), ``safeswitch falsify`` runs the cross-entropy search and uniform random
+sampling with the same budget in the same run (2 Ray workers) and reports how many failures
+each found, their ratio, and the smallest footprint separation seen (the margin, for a target
+that does not collide).
 
 Run: ``python benchmarks/bench_falsify.py [--budget 20000] [--json]``; writes
 ``benchmarks/results/falsify.json`` (the figures go to a temporary folder).
@@ -22,11 +23,12 @@ from safeswitch.app.falsify import Target, falsify
 from safeswitch.io import write_json
 
 RESULTS = Path(__file__).resolve().parent / "results" / "falsify.json"
-TARGETS = (
-    Target("rule", None, "paper"),
-    Target("adversary:creep", None, "paper"),
-    Target("learned", "shipped", "paper"),
-    Target("rule", None, "certified"),
+TARGETS = (  # (what, the failure searched for)
+    (Target("rule", None, "paper"), "collision"),
+    (Target("adversary:creep", None, "paper"), "collision"),
+    (Target("learned", "shipped", "paper"), "collision"),
+    (Target("learned", "shipped", "paper"), "safety"),
+    (Target("rule", None, "certified"), "collision"),
 )
 
 
@@ -38,16 +40,17 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for k, target in enumerate(TARGETS):
+        for k, (target, failure) in enumerate(TARGETS):
             summary = falsify(
-                target, Path(tmp) / str(k), budget=args.budget, workers=args.workers,
-                progress=False,
+                target, Path(tmp) / str(k), budget=args.budget, failure=failure,
+                workers=args.workers, progress=False,
             )  # fmt: skip
             m = summary["methods"]
             row = {
                 "controller": target.controller,
                 "model": target.model,
                 "switching": target.switching,
+                "failure": failure,
                 "budget_per_method": args.budget,
                 "random_failures": m["random"]["failures"],
                 "search_failures": m["cross-entropy"]["failures"],
@@ -59,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             ratio = row["search_over_random"]
             print(
-                f"{target.controller:16} {target.switching:9} random {row['random_failures']:6} "
+                f"{target.controller:16} {target.switching:9} {failure:9} "
+                f"random {row['random_failures']:6} "
                 f"search {row['search_failures']:6} "
                 f"({'n/a' if ratio is None else f'{ratio:.1f}×'}); min separation "
                 f"{row['random_min_separation_m']:.3f} / {row['search_min_separation_m']:.3f} m",
