@@ -67,7 +67,8 @@ class TrainedPolicy:
         return np.asarray(self.normalizer.normalize_obs(obs), dtype=np.float32)
 
     def act(self, obs: NDArray[np.float32], deterministic: bool = True) -> NDArray[np.float64]:
-        """Actions ``[B]`` in [-1, 1] for observations ``[B, 6]``."""
+        """Actions ``[B]`` in [-1, 1] for observations ``[B, obs_dim]`` (deterministic: the
+        Gaussian's mean, see :meth:`_mean_action`)."""
         normalised = self.normalise(obs)
         if deterministic and self._actor is not None:
             actions = self._mean_action(normalised)
