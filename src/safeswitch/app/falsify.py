@@ -6,8 +6,12 @@ driving see e.g. Corso et al., *A Survey of Algorithms for Black-Box Safety Vali
 scenarios are drawn from a Gaussian over the normalised scenario parameters (ego start distance
 and speed, north speed, arrival offset, each within the configured range), every generation
 is simulated in one batch per shard — the shards spread over Ray workers —, the most dangerous
-tenth (smallest footprint separation; a collision is a separation ≤ 0) refit the Gaussian, and
-a tenth of each generation stays uniform so that other failure regions can still be found.
+3 % refit the Gaussian, and a tenth of each generation stays uniform so that other failure
+regions can still be found. "Most dangerous" is tiered: collisions first, then episodes in which
+the Safety controller acted (the logic judged the moment critical), then the smallest footprint
+separation; and once a tier above the last holds a handful of episodes — in this generation
+or kept from earlier ones —, the elite is drawn from it alone (:func:`_elite`). By separation
+alone the search went to near misses far from where a trained policy's rare failures lie.
 With the same budget, uniform random sampling of the same space runs alongside, so the report
 can say how much better the search finds failures (failures per 1,000 simulated episodes).
 
@@ -33,6 +37,7 @@ from safeswitch.progress import Progress
 #: The searched parameters, in the order of the normalised vector.
 PARAMETERS = ("ego_start_distance_m", "ego_speed_kmh", "north_speed_kmh", "arrival_offset_s")
 ELITE = 0.03
+MIN_TIER = 5  # episodes a tier needs before the elite is drawn from it alone (see _elite)
 UNIFORM_SHARE = 0.1
 SMOOTHING = 0.7  # weight of the new elite statistics in the refit
 
@@ -134,6 +139,7 @@ def falsify(
     rows: list[tuple[str, int, np.ndarray, np.ndarray]] = []
     bar = Progress(2 * generations * generation, "falsify", enabled=progress)
     mean, std = np.full(4, 0.5), np.full(4, 0.3)
+    kept_units, kept_outcome = np.empty((0, 4)), np.empty((0, 3))
     with cluster(workers, address) as where:
 
         def run(unit: np.ndarray, tag: int) -> np.ndarray:
@@ -160,8 +166,13 @@ def falsify(
             outcome = run(searched, 2 * g + 1)
             rows.append(("cross-entropy", g, searched, outcome))
             bar.update(generation)
-            danger = _danger(outcome, failure)
-            elite = searched[np.argsort(danger)[: max(2, int(ELITE * generation))]]
+            # the elite comes from this generation and every critical episode searched before
+            pool_units = np.concatenate([searched, kept_units])
+            pool_outcome = np.concatenate([outcome, kept_outcome])
+            elite = pool_units[_elite(pool_outcome, failure, max(2, int(ELITE * generation)))]
+            critical = _tier(outcome, failure) >= 1
+            kept_units = np.concatenate([kept_units, searched[critical]])
+            kept_outcome = np.concatenate([kept_outcome, outcome[critical]])
             mean = (1 - SMOOTHING) * mean + SMOOTHING * elite.mean(axis=0)
             std = np.maximum((1 - SMOOTHING) * std + SMOOTHING * elite.std(axis=0), 0.02)
         startup = where.startup_s
@@ -188,6 +199,30 @@ def _danger(outcome: np.ndarray, failure: str) -> np.ndarray:
     if failure == "collision":
         return outcome[:, 0]
     return -outcome[:, 2] + 1e-3 * outcome[:, 0]
+
+
+def _tier(outcome: np.ndarray, failure: str) -> np.ndarray:
+    """How bad an episode was, coarsely: 2 a collision, 1 a safety action (the logic itself
+    judged the moment critical), 0 neither; for safety failures a collision counts as 1."""
+    tier = (outcome[:, 2] > 0).astype(int)
+    if failure == "collision":
+        tier[outcome[:, 1] > 0] = 2
+    return tier
+
+
+def _elite(outcome: np.ndarray, failure: str, size: int) -> np.ndarray:
+    """Indices of the generation's elite: the ``size`` most dangerous episodes (by tier, then
+    by :func:`_danger`), but only from the highest tier that has at least ``MIN_TIER`` members
+    when that tier is above 0. Ranked by separation alone, the search settles on near misses
+    that are nowhere near where a policy's rare failures lie (its safety actions and collisions
+    sit on the boundary between crossing first and giving way); seeded with the few episodes
+    the logic judged critical, it goes there."""
+    tier = _tier(outcome, failure)
+    order = np.lexsort((_danger(outcome, failure), -tier))[:size]
+    for level in (2, 1):
+        if np.count_nonzero(tier >= level) >= MIN_TIER:
+            return order[tier[order] >= level]
+    return order
 
 
 def _failed(outcome: np.ndarray, failure: str) -> np.ndarray:
