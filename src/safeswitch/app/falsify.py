@@ -202,8 +202,8 @@ def _danger(outcome: np.ndarray, failure: str) -> np.ndarray:
 
 
 def _tier(outcome: np.ndarray, failure: str) -> np.ndarray:
-    """How bad an episode was, coarsely: 2 a collision, 1 a safety action (the logic itself
-    judged the moment critical), 0 neither; for safety failures a collision counts as 1."""
+    """How bad an episode was, coarsely: 2 a collision (when collisions are searched for), 1 a
+    safety action (the logic itself judged the moment critical), 0 neither."""
     tier = (outcome[:, 2] > 0).astype(int)
     if failure == "collision":
         tier[outcome[:, 1] > 0] = 2
