@@ -12,7 +12,7 @@ from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.planner import Planner, PlannerConfig
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.spaces import speed_tracking_action
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.task import LeftTurnTask, build_task
 
 EPISODES = 40
 
@@ -99,6 +99,98 @@ def test_no_controller_that_never_triggers_the_logic_clears_sooner(setup, bounds
     assert ok.sum() > 3 * EPISODES
     assert np.all(time[ok] >= low[ok] - 1e-9)
     assert np.min(time[ok] - low[ok]) < 0.3
+
+
+# -- in traffic: every conflict at once ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def traffic():
+    """Light traffic whose drivers never give way to the ego, so the others' world does not
+    depend on what the ego does and the bound holds episode by episode."""
+    task = build_task(
+        None,
+        {"episode": {"learned_scope": "episode"}},
+        traffic={"preset": "light", "horizon_s": 20.0, "non_yielding_share": (1.0, 1.0)},
+        switching="paper",
+    )
+    scenarios = task.draw_scenarios(5, np.arange(EPISODES), np.zeros(EPISODES, dtype=np.int64))
+    timeline = task.conflict_timeline(scenarios)
+    free = PaperLogicLimit(task, logic=False)
+    return {
+        "task": task,
+        "scenarios": scenarios,
+        "timeline": timeline,
+        "oracle": Oracle(task).plan(scenarios, full=False).time_to_clear,
+        "free": free.bound(timeline),
+        "paper": PaperLogicLimit(task).bound(timeline),
+        "throttle": PaperLogicLimit(task, braking="throttle").bound(timeline),
+    }
+
+
+def test_in_traffic_the_bound_without_the_logic_is_below_the_multi_conflict_oracle(traffic):
+    """The oracle is one feasible plan (brake, then drive) around every occupied zone; the
+    reachable set knows every plan, so it is never slower, and mostly within the grid."""
+    oracle, free = traffic["oracle"], traffic["free"]
+    assert np.isfinite(oracle).mean() > 0.9
+    assert np.isfinite(free[np.isfinite(oracle)]).all()
+    both = np.isfinite(oracle)
+    assert np.all(free[both] <= oracle[both] + 1e-9)
+    assert np.median(oracle[both] - free[both]) < 0.05
+
+
+def test_in_traffic_every_conflicting_vehicle_counts(traffic):
+    """Against the north car alone the bound is never later, and in some scenes it is
+    earlier: the other vehicles' zones and their Algorithm 1 are in the bound."""
+    task, timeline = traffic["task"], traffic["timeline"]
+    north = np.zeros(timeline.present.shape[-1], dtype=bool)
+    north[0] = True
+    alone = PaperLogicLimit(task).bound(timeline._replace(present=timeline.present & north))
+    full = traffic["paper"]
+    fin = np.isfinite(full)
+    assert np.all(alone[fin] <= full[fin] + 1e-9)
+    assert np.sum(alone[fin] < full[fin] - 0.1) >= 2
+    assert np.all(full[fin] >= traffic["free"][fin])
+    assert np.all(traffic["throttle"][fin] >= full[fin] - 1e-9)
+
+
+def test_in_traffic_no_controller_that_never_triggers_the_logic_clears_sooner(traffic):
+    """Speed trackers and the planner in the same scenes: every episode without a safety
+    action, comfort violation, speeding or collision clears no sooner than the bound."""
+    task, scenarios, bound = traffic["task"], traffic["scenarios"], traffic["throttle"]
+    top_speed = PaperLogicLimit(task, braking="throttle").top_speed
+    rows = np.tile(np.arange(EPISODES), 4)
+    targets = np.random.default_rng(3).uniform(1.5, 5.7, rows.size)
+    vehicle = task.config.vehicle
+    drivers = [
+        (np.arange(EPISODES), Planner(task, PlannerConfig())),
+        (
+            rows,
+            lambda obs, state, tick: speed_tracking_action(
+                vehicle, targets, state.world.vehicles.speed[:, 0], 1.0
+            ),
+        ),
+    ]
+    margins = []
+    for picked, driver in drivers:
+        top = np.zeros(picked.size)
+
+        def watch(state, record, tick, top=top):
+            np.maximum(top, state.world.vehicles.speed[:, 0], out=top)
+
+        result = rollout(task, scenarios.take(picked), driver, on_tick=watch)
+        clean = (
+            (result.safety_steps == 0)
+            & (result.comfort_violation_steps == 0)
+            & (result.collision == 0)
+            & (top <= top_speed)
+            & np.isfinite(result.time_to_clear)
+        )
+        assert clean.sum() >= 10
+        margins.append(result.time_to_clear[clean] - bound[picked][clean])
+    margin = np.concatenate(margins)
+    assert np.all(margin >= -1e-9)
+    assert margin.min() < 0.3
 
 
 def test_bad_settings_are_named(setup):

@@ -17,11 +17,24 @@ every speed the acceleration limits allow, and removes the positions at which
 - Algorithm 1 would fire: both cars at the intersection, ``TTR_n − TTR_e < threshold`` and
   ``d_stop ≤ d_safe + v·latency + margin`` (the task's own constants).
 
+In traffic (:class:`~safeswitch.leftturn.traffic.LeftTurnTrafficTask`) the same holds against
+every conflict at once, as the generalised paper logic sees them
+(:mod:`~safeswitch.leftturn.traffic_logics`): the ego is out of each conflict zone while its
+vehicle is in its own (the union of the occupied intervals), and no conflict's Algorithm 1 fires.
+Like the multi-conflict oracle it plans against the others' world *without* the ego
+(:meth:`~safeswitch.leftturn.traffic.LeftTurnTrafficTask.conflict_timeline`): in the episode
+itself drivers who give way to the ego or follow it react to it, which the bound does not know.
+
 The result is a *relaxation*, so the times are lower bounds (up to float rounding): grid speeds
 are rounded up (positions then run ahead of the true ones by at most ``dv·dt`` per tick, and
 every constraint only removes a position if it rules out the whole box of true states it may
 stand for); each speed keeps the hull of its intervals; there are no actuator lags. It knows
 nothing of comfort beyond the oracle's limits, so a controller that exceeds them may be faster.
+In traffic it also stops at the exit of the north car's zone (the time to clear), without
+asking whether the ego could then get past the zones that follow; and where the true plan
+clears on the very tick a vehicle enters, the grid's rounding may let the bound pass first —
+so there it can lie well below the multi-conflict oracle (``benchmarks/traffic_limit.py``
+measures how often). It stays a lower bound.
 
 Two braking models: ``"comfort"`` brakes at the oracle's deceleration (any controller that can
 brake), ``"throttle"`` only as hard as a closed throttle slows the plant (engine braking plus
@@ -31,6 +44,7 @@ driving resistance: the learned controller's means, which has no brake pedal).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from typing import Literal, NamedTuple
 
 import numba
@@ -47,7 +61,7 @@ from safeswitch.leftturn.switching import (
     firing_distance,
     time_to_reach,
 )
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import closed_throttle_drag, driving_resistance
 
@@ -56,28 +70,19 @@ Braking = Literal["comfort", "throttle"]
 
 class LimitLayout(NamedTuple):
     """The scalars the compiled reachability kernel reads (the paper logic's own constants
-    travel separately, as :attr:`PaperSwitching.constants`).
+    travel separately, as :attr:`PaperSwitching.constants`; the conflicts, tick by tick, as a
+    :class:`~safeswitch.leftturn.task.ConflictTimeline`).
 
     Attributes:
         dt: Tick [s].
-        ego_zone_entry: Ego's conflict-zone entry on its route [m].
-        ego_zone_exit: Ego's conflict-zone exit [m].
-        north_zone_entry: North car's conflict-zone entry on its route [m].
-        north_zone_exit: North car's conflict-zone exit [m].
-        ego_conflict_point: Conflict point on the ego's route [m].
-        north_conflict_point: Conflict point on the north car's route [m].
+        clear_at: Where the ego has cleared: the exit of its zone with the north car [m].
         approach_distance: Algorithm 1's "at the intersection" distance [m].
         speed_step: Step of the speed grid [m/s].
         logic: Whether the paper logic's constraint applies.
     """
 
     dt: float
-    ego_zone_entry: float
-    ego_zone_exit: float
-    north_zone_entry: float
-    north_zone_exit: float
-    ego_conflict_point: float
-    north_conflict_point: float
+    clear_at: float
     approach_distance: float
     speed_step: float
     logic: bool
@@ -92,8 +97,9 @@ class PaperLogicLimit:
         limits: The limits (default: the oracle's, :meth:`OracleLimits.from_config`).
         braking: ``"comfort"`` or ``"throttle"`` (see the module docstring).
         speed_step: Step of the speed grid [m/s]; smaller is tighter and slower.
-        logic: ``False`` drops the switching-logic constraint (then the bound is the oracle's
-            time up to the grid's rounding: a check of the computation).
+        logic: ``False`` drops the switching-logic constraint (then, in the paper's scene, the
+            bound is the oracle's time up to the grid's rounding: a check of the computation;
+            in traffic a bound on the oracle's, see the module docstring).
 
     Attributes:
         top_speed: The highest speed the bound admits [m/s]: ``v_max`` rounded up to the grid.
@@ -137,8 +143,7 @@ class PaperLogicLimit:
         self._curve = self._curvature_bands(speeds - speed_step)
         geo, paper = task.conflict, config.paper
         self._constants = LimitLayout(
-            config.episode.dt, geo.zone_a[0], geo.zone_a[1], geo.zone_b[0], geo.zone_b[1],
-            geo.s_point_a, geo.s_point_b, config.episode.approach_distance_m, speed_step,
+            config.episode.dt, geo.zone_a[1], config.episode.approach_distance_m, speed_step,
             bool(logic),
         )  # fmt: skip
         self._paper = PaperSwitching(paper, config.controllers.emergency_decel).constants
@@ -174,15 +179,59 @@ class PaperLogicLimit:
                 out[b, r] = lo, hi
         return out
 
-    def times(self, scenarios: Scenarios) -> FloatArray:
+    def times(self, scenarios: Scenarios, chunk: int = 64) -> FloatArray:
         """Lower bounds on the time to clear [s] ``[B]`` (NaN: not possible within the
-        horizon without triggering the logic)."""
-        north, north_speed, start = self.oracle.north_trajectory(scenarios)
+        horizon without triggering the logic). In traffic the scenarios are taken ``chunk``
+        at a time (the conflict timeline holds every conflict on every tick)."""
+        timeline = getattr(self.task, "conflict_timeline", None)
+        batch = len(scenarios.ego_speed)
+        parts: Iterable[ConflictTimeline]
+        if timeline is None:
+            parts = [self._north_timeline(scenarios)]
+            rows = [np.arange(batch)]
+        else:
+            rows = [np.arange(i, min(i + chunk, batch)) for i in range(0, batch, chunk)]
+            parts = (timeline(scenarios.take(r)) for r in rows)
+        out = np.empty(batch)
+        for r, t in zip(rows, parts, strict=False):
+            out[r] = self.bound(t)
+        return out
+
+    def bound(self, timeline: ConflictTimeline) -> FloatArray:
+        """:meth:`times` against conflicts given tick by tick (``[B, H + 1, C]``, e.g. from
+        the task's ``conflict_timeline``)."""
+        t = timeline
         ticks = _reachable(
-            start, north, north_speed, self._accel, self._decel, self._curve, self._constants,
-            self._paper,
+            t.start, t.present, t.ego_entry, t.ego_exit, t.ego_point, t.other_distance,
+            t.other_inside, t.other_window, t.other_speed, self._accel, self._decel,
+            self._curve, self._constants, self._paper,
         )  # fmt: skip
         return np.where(ticks >= 0, ticks * self.task.config.episode.dt, np.nan)
+
+    def _north_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
+        """The paper's scene: one conflict, the north car (it never reacts to the ego)."""
+        north, speed, start = self.oracle.north_trajectory(scenarios)
+        geo = self.task.conflict
+        batch, ticks = north.shape
+
+        def const(value: float) -> FloatArray:
+            return np.full((batch, ticks, 1), value)
+
+        distance = (geo.s_point_b - north)[..., None]
+        return ConflictTimeline(
+            start=start,
+            present=np.ones((batch, ticks, 1), dtype=np.bool_),
+            ego_entry=const(geo.zone_a[0]),
+            ego_exit=const(geo.zone_a[1]),
+            ego_point=const(geo.s_point_a),
+            other_distance=distance,
+            other_inside=((north >= geo.zone_b[0]) & (north <= geo.zone_b[1]))[..., None],
+            other_window=(
+                (distance[..., 0] <= self.task.config.episode.approach_distance_m)
+                & (north <= geo.zone_b[1])
+            )[..., None],
+            other_speed=speed[..., None],
+        )
 
 
 def _crossing(grid: FloatArray, cap: FloatArray, i: int, j: int, target: float) -> float:
@@ -227,28 +276,44 @@ def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: fl
 
 
 @jit
-def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: NDArray[np.float64],
-                accel: NDArray[np.float64], decel: NDArray[np.float64], curve: NDArray[np.float64],
+def _clear_tick(s0: float, v0: float, present: NDArray[np.bool_], ego_entry: FloatArray,
+                ego_exit: FloatArray, ego_point: FloatArray, other_distance: FloatArray,
+                other_inside: NDArray[np.bool_], other_window: NDArray[np.bool_],
+                other_speed: FloatArray, accel: FloatArray, decel: FloatArray, curve: FloatArray,
                 c: LimitLayout, paper: PaperConstants) -> int:  # fmt: skip
-    """First tick on which the ego can be past its conflict zone, or -1 (see the class)."""
+    """First tick on which the ego can be past its conflict zone with the north car, or -1
+    (see the class; the conflicts ``[H + 1, C]`` as in :class:`ConflictTimeline`)."""
     dt, dv = c.dt, c.speed_step
-    bins = accel.shape[0]
+    bins, conflicts = accel.shape[0], present.shape[1]
     lo = np.full(bins, np.inf)
     hi = np.full(bins, -np.inf)
     j0 = min(math.ceil(v0 / dv - 1e-12), bins - 1)
     lo[j0], hi[j0] = s0, s0
     new_lo = np.empty(bins)
     new_hi = np.empty(bins)
-    piece_lo = np.empty(2 + curve.shape[1] + 4)
-    piece_hi = np.empty(2 + curve.shape[1] + 4)
-    for k in range(north.shape[0] - 1):
+    room = 2 + curve.shape[1] + 2 * conflicts + 4
+    piece_lo = np.empty(room)
+    piece_hi = np.empty(room)
+    occupied = np.empty(conflicts, dtype=np.int64)  # this tick's occupied zones
+    firing = np.empty(conflicts, dtype=np.int64)  # this tick's conflicts "at the intersection"
+    gaps = np.empty(conflicts)  # TTR_k − threshold
+    for k in range(present.shape[0] - 1):
         tol = (k + 1) * dv * dt  # how far grid positions may run ahead of the true ones
-        s_n, v_n = north[k + 1], north_speed[k + 1]
-        north_in = c.north_zone_entry <= s_n <= c.north_zone_exit
-        window = (c.north_conflict_point - s_n <= c.approach_distance) and (
-            s_n <= c.north_zone_exit
-        )
-        ttr_n = time_to_reach(c.north_conflict_point - s_n, v_n, paper.min_speed)
+        t = k + 1
+        n_occ, n_fire = 0, 0
+        for q in range(conflicts):
+            if not present[t, q]:
+                continue
+            if other_inside[t, q]:
+                occupied[n_occ] = q
+                n_occ += 1
+            if c.logic and other_window[t, q]:
+                firing[n_fire] = q
+                gaps[n_fire] = (
+                    time_to_reach(other_distance[t, q], other_speed[t, q], paper.min_speed)
+                    - paper.ttr_threshold_s
+                )
+                n_fire += 1
         new_lo[:] = np.inf
         new_hi[:] = -np.inf
         for j in range(bins):
@@ -264,40 +329,43 @@ def _clear_tick(s0: float, v0: float, north: NDArray[np.float64], north_speed: N
                 n = 1
                 for r in range(curve.shape[1]):
                     n = _remove(piece_lo, piece_hi, n, curve[j2, r, 0] + tol, curve[j2, r, 1])
-                if north_in:
-                    n = _remove(piece_lo, piece_hi, n, c.ego_zone_entry + tol, c.ego_zone_exit)
-                if c.logic and window and n > 0:
+                for i in range(n_occ):
+                    q = occupied[i]
+                    n = _remove(piece_lo, piece_hi, n, ego_entry[t, q] + tol, ego_exit[t, q])
+                if n_fire and n > 0:
                     # Fires for every true speed in (v2 - dv, v2] from the slowest one's braking
                     # point on, up to where the fastest one's TTR would leave a gap.
                     reach = firing_distance(max(v2 - dv, 0.0), paper)
-                    fire_lo = max(
-                        c.ego_zone_entry - reach, c.ego_conflict_point - c.approach_distance
-                    )
-                    fire_hi = c.ego_zone_exit
-                    gap = ttr_n - paper.ttr_threshold_s
-                    if gap >= 0:
-                        fire_hi = min(
-                            fire_hi, c.ego_conflict_point - gap * max(v2, paper.min_speed)
-                        )
-                    n = _remove(piece_lo, piece_hi, n, fire_lo + tol, fire_hi)
+                    for i in range(n_fire):
+                        q = firing[i]
+                        point = ego_point[t, q]
+                        fire_lo = max(ego_entry[t, q] - reach, point - c.approach_distance)
+                        fire_hi = ego_exit[t, q]
+                        if gaps[i] >= 0:
+                            fire_hi = min(fire_hi, point - gaps[i] * max(v2, paper.min_speed))
+                        n = _remove(piece_lo, piece_hi, n, fire_lo + tol, fire_hi)
                 for i in range(n):
                     new_lo[j2] = min(new_lo[j2], piece_lo[i])
                     new_hi[j2] = max(new_hi[j2], piece_hi[i])
         lo[:] = new_lo
         hi[:] = new_hi
         for j in range(bins):
-            if lo[j] <= hi[j] and hi[j] > c.ego_zone_exit:
+            if lo[j] <= hi[j] and hi[j] > c.clear_at:
                 return k + 1
     return -1
 
 
 @numba.njit(cache=True, parallel=True)
-def _reachable(start: NDArray[np.float64], north: NDArray[np.float64],
-               north_speed: NDArray[np.float64], accel: NDArray[np.float64],
-               decel: NDArray[np.float64], curve: NDArray[np.float64], c: LimitLayout,
-               paper: PaperConstants) -> NDArray[np.int64]:  # fmt: skip
+def _reachable(start: FloatArray, present: NDArray[np.bool_], ego_entry: FloatArray,
+               ego_exit: FloatArray, ego_point: FloatArray, other_distance: FloatArray,
+               other_inside: NDArray[np.bool_], other_window: NDArray[np.bool_],
+               other_speed: FloatArray, accel: FloatArray, decel: FloatArray, curve: FloatArray,
+               c: LimitLayout, paper: PaperConstants) -> NDArray[np.int64]:  # fmt: skip
     out = np.empty(start.shape[0], dtype=np.int64)
     for b in numba.prange(start.shape[0]):
-        out[b] = _clear_tick(start[b, 0], start[b, 1], north[b], north_speed[b], accel, decel,
-                             curve, c, paper)  # fmt: skip
+        out[b] = _clear_tick(
+            start[b, 0], start[b, 1], present[b], ego_entry[b], ego_exit[b], ego_point[b],
+            other_distance[b], other_inside[b], other_window[b], other_speed[b], accel, decel,
+            curve, c, paper,
+        )  # fmt: skip
     return out

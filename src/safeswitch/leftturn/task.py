@@ -153,6 +153,35 @@ class ConflictArrays:
     other_zone: FloatArray
 
 
+class ConflictTimeline(NamedTuple):
+    """The ego's conflicts on every tick of an episode in which the others drive as if the ego
+    were not there, as the paper logic sees them: what the logic-aware limit plans against
+    (:mod:`safeswitch.evaluation.logic_limit`). Arrays ``[B, H + 1, C]`` unless noted.
+
+    Attributes:
+        start: The ego's start ``(s0, v0)`` [m, m/s] ``[B, 2]``.
+        present: The conflict exists (its vehicle is there and crosses the ego's route).
+        ego_entry: Where the ego's conflict zone begins on its route [m].
+        ego_exit: Where it ends [m].
+        ego_point: The conflict point on the ego's route [m].
+        other_distance: The other vehicle's path distance to its conflict point [m].
+        other_inside: The other vehicle is inside its conflict zone.
+        other_window: It is "at the intersection" in Algorithm 1's sense: within the approach
+            distance of its conflict point and not past its zone.
+        other_speed: Its speed [m/s].
+    """
+
+    start: FloatArray
+    present: BoolArray
+    ego_entry: FloatArray
+    ego_exit: FloatArray
+    ego_point: FloatArray
+    other_distance: FloatArray
+    other_inside: BoolArray
+    other_window: BoolArray
+    other_speed: FloatArray
+
+
 @dataclass
 class StepRecord:
     """Everything that happened on one tick, each field ``[B]`` (``observation``: ``[B, 6]``).

@@ -21,6 +21,7 @@ With ``traffic=None`` none of this exists: the environments build the plain
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,7 +32,7 @@ from safeswitch.core.arrays import jit
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
 from safeswitch.leftturn.switching import ConflictState
-from safeswitch.leftturn.task import ConflictArrays, LeftTurnTask, TaskState
+from safeswitch.leftturn.task import ConflictArrays, ConflictTimeline, LeftTurnTask, TaskState
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.idm import IDMParams
 from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
@@ -337,29 +338,68 @@ class LeftTurnTrafficTask(LeftTurnTask):
             other_speed=view.other_speed, other_zone=view.other_zone,
         )  # fmt: skip
 
-    def others_without_ego(self, scenarios: Scenarios) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """The other vehicles' world as if the ego were not there (nobody gives way to it or
-        follows it): the north car's arc length ``[B, H + 1]`` and, per movement, whether a
-        vehicle on it is inside its conflict zone with the ego's route ``[B, R, H + 1]`` —
-        what the oracle plans against (:mod:`safeswitch.evaluation.oracle`)."""
+    def _without_ego(self, scenarios: Scenarios) -> Iterator[TrafficTaskState]:
+        """The state on every tick ``0..H`` of the other vehicles' world as if the ego were not
+        there (nobody gives way to it or follows it; it holds a zero action)."""
         state: TaskState = self.initial(scenarios)
-        batch, horizon = state.batch_size, self.config.episode.horizon_ticks
-        zones = np.ascontiguousarray(self.network.conflicts[:, self.ego_route])
-        occupied = np.zeros((batch, len(self.network.movements), horizon + 1), dtype=np.bool_)
-        north = np.empty((batch, horizon + 1))
-        hold = np.zeros(batch)
+        hold = np.zeros(state.batch_size)
         self._ghost_ego = True
         try:
-            for tick in range(horizon + 1):
+            for tick in range(self.config.episode.horizon_ticks + 1):
                 if tick:
                     state, _ = self.step(state, hold)
                 assert isinstance(state, TrafficTaskState)
-                north[:, tick] = state.world.progress[:, 1]
-                tr = state.traffic
-                _occupied(tr.route, tr.progress, tr.active, zones, tick, occupied)
+                yield state
         finally:
             self._ghost_ego = False
+
+    def others_without_ego(self, scenarios: Scenarios) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """The other vehicles' world as if the ego were not there: the north car's arc length
+        ``[B, H + 1]`` and, per movement, whether a vehicle on it is inside its conflict zone
+        with the ego's route ``[B, R, H + 1]`` — what the oracle plans against
+        (:mod:`safeswitch.evaluation.oracle`)."""
+        batch, horizon = len(scenarios.ego_speed), self.config.episode.horizon_ticks
+        zones = np.ascontiguousarray(self.network.conflicts[:, self.ego_route])
+        occupied = np.zeros((batch, len(self.network.movements), horizon + 1), dtype=np.bool_)
+        north = np.empty((batch, horizon + 1))
+        for tick, state in enumerate(self._without_ego(scenarios)):
+            north[:, tick] = state.world.progress[:, 1]
+            tr = state.traffic
+            _occupied(tr.route, tr.progress, tr.active, zones, tick, occupied)
         return north, occupied
+
+    def conflict_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
+        """Every conflict of the ego on every tick of the others' world without the ego, as the
+        paper logic sees it (:class:`ConflictTimeline`, ``C`` = the north car plus every
+        slot): what the logic-aware limit plans against."""
+        batch, ticks = len(scenarios.ego_speed), self.config.episode.horizon_ticks + 1
+        slots = self.traffic.max_vehicles + 1
+        approach = self.config.episode.approach_distance_m
+        present = np.empty((batch, ticks, slots), dtype=np.bool_)
+        inside, window = np.empty_like(present), np.empty_like(present)
+        floats = np.empty((5, batch, ticks, slots))
+        start = np.empty((batch, 2))
+        for tick, state in enumerate(self._without_ego(scenarios)):
+            if not tick:
+                start[:, 0] = state.world.progress[:, 0]
+                start[:, 1] = state.world.vehicles.speed[:, 0]
+            view = self.logic_view(state, self.conflict_state(state))
+            distance = view.other_point - view.other_progress
+            present[:, tick] = view.present
+            inside[:, tick] = (view.other_progress >= view.other_zone[..., 0]) & (
+                view.other_progress <= view.other_zone[..., 1]
+            )
+            window[:, tick] = (distance <= approach) & (
+                view.other_progress <= view.other_zone[..., 1]
+            )
+            floats[0, :, tick] = view.ego_zone[..., 0]
+            floats[1, :, tick] = view.ego_zone[..., 1]
+            floats[2, :, tick] = view.ego_point
+            floats[3, :, tick] = distance
+            floats[4, :, tick] = view.other_speed
+        return ConflictTimeline(
+            start, present, floats[0], floats[1], floats[2], floats[3], inside, window, floats[4]
+        )
 
     def switching_zones(self) -> tuple[tuple[float, float], tuple[float, float]]:
         """The north car's conflict zones with the certified margin (ego's, north car's)."""
