@@ -11,16 +11,27 @@ both simulators.
 3. **Cross-simulator.** The shipped policies and the rule-based controller on the same random
    scenarios, embedded vs SUMO: collisions, safety activations, time to clear, comfort.
 
-Run: ``python benchmarks/bench_sumo.py [--json] [--episodes N] [--compare N]``; writes
-``benchmarks/results/sumo.json``. Needs ``pip install 'safeswitch[sumo]'``.
+``--traffic`` measures the same three in traffic from every leg instead (SUMO driving every
+other vehicle): the single Env's speed in the ``heavy`` preset; every adversary under
+``certified`` and ``paper`` at each density (light, medium, heavy and the test split; two
+worker processes, one SUMO each), with SUMO's collisions and the episodes in which any of its
+drivers broke the certified assumptions; the rule and the shipped ``paper`` policy under both
+logics in medium traffic, embedded vs SUMO. It writes the ``traffic`` entry of the results
+file and keeps the rest.
+
+Run: ``python benchmarks/bench_sumo.py [--json] [--episodes N] [--compare N] [--traffic]``;
+writes ``benchmarks/results/sumo.json``. Needs ``pip install 'safeswitch[sumo]'``. The
+single-car run takes about 25 minutes, ``--traffic`` about 15 (two cores).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -38,11 +49,13 @@ ADVERSARIES = ("uniform", "bang_bang", "full_throttle", "zero_throttle", "enter_
                "creep", "nan_inf", "noisy_cruise")  # fmt: skip
 COMPARED = (("learned", "shipped"), ("learned", "certified"), ("learned", "paper-scratch"),
             ("rule", None))  # fmt: skip
+TRAFFIC_PRESETS = ("light", "medium", "heavy", "test")
 KEYS = ("collisions", "safety_activation_episodes", "cleared_episodes", "mean_time_to_clear_s",
         "comfort_violation_fraction", "mean_efficiency")  # fmt: skip
 
 
 def steps_per_s(env: Any, steps: int) -> float:
+    """Steps per second of ``env`` at a constant action, resets included."""
     env.reset(seed=0)
     action = np.array([0.3], dtype=np.float32)
     began = time.perf_counter()
@@ -53,8 +66,8 @@ def steps_per_s(env: Any, steps: int) -> float:
     return steps / (time.perf_counter() - began)
 
 
-def speed(rounds: int = 3, steps: int = 3000) -> dict[str, float]:
-    sumo, ours = LeftTurnSumoEnv(), LeftTurnEnv()
+def speed(rounds: int = 3, steps: int = 3000, traffic: str | None = None) -> dict[str, float]:
+    sumo, ours = LeftTurnSumoEnv(traffic=traffic), LeftTurnEnv(traffic=traffic)
     rates: dict[str, list[float]] = {"sumo": [], "embedded": []}
     for _ in range(rounds):
         rates["sumo"].append(steps_per_s(sumo, steps))
@@ -63,67 +76,129 @@ def speed(rounds: int = 3, steps: int = 3000) -> dict[str, float]:
     out = {name: float(np.median(values)) for name, values in rates.items()}
     out["sumo_to_embedded"] = out["sumo"] / out["embedded"]
     print(
-        f"single env: SUMO {out['sumo']:,.0f} steps/s, embedded {out['embedded']:,.0f} steps/s "
+        f"single env{'' if traffic is None else ' in ' + traffic + ' traffic'}: "
+        f"SUMO {out['sumo']:,.0f} steps/s, embedded {out['embedded']:,.0f} steps/s "
         f"(ratio {out['sumo_to_embedded']:.2f})",
         file=sys.stderr,
     )
     return out
 
 
+def safety_cell(
+    switching: str, name: str, episodes: int, traffic: str | None = None
+) -> dict[str, object]:
+    """One adversary's episodes under one logic (a worker process may run it: it opens and
+    closes its own SUMO)."""
+    task = sumo_task({"episode": {"learned_scope": "episode"}}, traffic, switching=switching)
+    row = {"switching": switching, "adversary": name, "episodes": episodes, "collisions": 0,
+           "sumo_collision_episodes": 0, "assumption_break_episodes": 0}  # fmt: skip
+    if traffic is not None:
+        row["traffic"] = traffic
+    try:
+        for k in range(episodes):
+            scenario = task.draw_scenarios(2024, np.array([k]), np.zeros(1, int))
+            result = rollout(task, scenario, catalogue(task, 1, k)[name]())
+            row["collisions"] += int(result.collision[0])  # type: ignore[operator]
+            row["sumo_collision_episodes"] += int(task.sumo_collisions > 0)  # type: ignore[operator]
+            row["assumption_break_episodes"] += int(task.assumption_breaks)  # type: ignore[operator]
+    finally:
+        task.close()
+    return row
+
+
 def safety(episodes: int) -> list[dict[str, object]]:
     rows = []
     for switching in ("certified", "paper"):
-        task = sumo_task({"episode": {"learned_scope": "episode"}}, switching=switching)
-        try:
-            for name in ADVERSARIES:
-                row = {"switching": switching, "adversary": name, "episodes": episodes,
-                       "collisions": 0, "sumo_collision_episodes": 0,
-                       "assumption_break_episodes": 0}  # fmt: skip
-                for k in range(episodes):
-                    scenario = task.draw_scenarios(2024, np.array([k]), np.zeros(1, int))
-                    result = rollout(task, scenario, catalogue(task, 1, k)[name]())
-                    row["collisions"] += int(result.collision[0])  # type: ignore[operator]
-                    row["sumo_collision_episodes"] += int(task.sumo_collisions > 0)  # type: ignore[operator]
-                    row["assumption_break_episodes"] += int(task.assumption_breaks)  # type: ignore[operator]
-                rows.append(row)
-                print(f"  {switching:9} {name:16} {row}", file=sys.stderr)
-        finally:
-            task.close()
+        for name in ADVERSARIES:
+            rows.append(safety_cell(switching, name, episodes))
+            print(f"  {switching:9} {name:16} {rows[-1]}", file=sys.stderr)
     return rows
 
 
-def cross(episodes: int) -> list[dict[str, object]]:
+def traffic_safety(episodes: int, workers: int = 2) -> list[dict[str, object]]:
+    jobs = [(s, name, episodes, preset) for preset in TRAFFIC_PRESETS
+            for s in ("certified", "paper") for name in ADVERSARIES]  # fmt: skip
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        rows = list(pool.map(safety_cell, *zip(*jobs, strict=True)))
+    for row in rows:
+        print(f"  {row}", file=sys.stderr)
+    return rows
+
+
+def totals(rows: list[dict[str, object]]) -> dict[str, dict[str, int]]:
+    keys = ("episodes", "collisions", "sumo_collision_episodes", "assumption_break_episodes")
+    return {
+        s: {k: sum(int(r[k]) for r in rows if r["switching"] == s) for k in keys}  # type: ignore[call-overload]
+        for s in ("certified", "paper")
+    }
+
+
+def cross(episodes: int, traffic: str | None = None) -> list[dict[str, object]]:
     rows = []
-    for controller, model in COMPARED:
-        for sim in ("embedded", "sumo"):
-            summary = evaluate(controller, model, "random", episodes, 7, None, None, sim=sim)
-            row = {"controller": controller, "model": model, "sim": sim,
-                   **{k: summary[k] for k in KEYS}}  # fmt: skip
-            if sim == "sumo":
-                row["sumo_collision_episodes"] = summary["sumo_collision_episodes"]
-                row["assumption_break_episodes"] = summary["assumption_break_episodes"]
-            rows.append(row)
-            print(f"  {row}", file=sys.stderr)
+    compared = COMPARED
+    if traffic is not None:  # the shipped paper policy under both logics, and the rule
+        compared = (("learned", "shipped"), ("rule", None))
+    for controller, model in compared:
+        for switching in (None,) if traffic is None else ("paper", "certified"):
+            for sim in ("embedded", "sumo"):
+                summary = evaluate(controller, model, "random", episodes, 7, switching, None,
+                                   sim=sim, traffic=traffic)  # fmt: skip
+                row = {"controller": controller, "model": model, "sim": sim,
+                       **{k: summary[k] for k in KEYS}}  # fmt: skip
+                if traffic is not None:
+                    row["traffic"], row["switching"] = traffic, switching
+                if sim == "sumo":
+                    row["sumo_collision_episodes"] = summary["sumo_collision_episodes"]
+                    row["assumption_break_episodes"] = summary["assumption_break_episodes"]
+                rows.append(row)
+                print(f"  {row}", file=sys.stderr)
     return rows
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
-    parser.add_argument("--episodes", type=int, default=250, help="per adversary and logic")
-    parser.add_argument("--compare", type=int, default=200, help="episodes per simulator")
-    args = parser.parse_args()
-    result: dict[str, object] = {"machine": _common.machine(), "speed": speed()}
-    rows = safety(args.episodes)
-    result["safety"] = rows
-    result["safety_totals"] = {
-        s: {k: sum(int(r[k]) for r in rows if r["switching"] == s)  # type: ignore[call-overload]
-            for k in ("episodes", "collisions", "sumo_collision_episodes",
-                      "assumption_break_episodes")}
-        for s in ("certified", "paper")
-    }  # fmt: skip
-    print(json.dumps(result["safety_totals"]), file=sys.stderr)
-    result["cross_simulator"] = cross(args.compare)
+    parser.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        help="per adversary and logic (default 250; in traffic 12 per density)",
+    )
+    parser.add_argument(
+        "--compare",
+        type=int,
+        default=None,
+        help="episodes per simulator (default 200; in traffic 100)",
+    )
+    parser.add_argument("--traffic", action="store_true", help="traffic from every leg")
+    args = parser.parse_args()  # fmt: skip
+    previous = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    if args.traffic:
+        episodes, compare = args.episodes or 12, args.compare or 100
+        rows = traffic_safety(episodes)
+        part: dict[str, object] = {
+            "machine": _common.machine(),
+            "speed": speed(steps=1500, traffic="heavy"),
+            "safety": rows,
+            "safety_totals": totals(rows),
+            "safety_by_density": {
+                p: totals([r for r in rows if r["traffic"] == p]) for p in TRAFFIC_PRESETS
+            },
+            "cross_simulator": cross(compare, "medium"),
+        }
+        print(json.dumps(part["safety_totals"]), file=sys.stderr)
+        result = {**previous, "traffic": part}
+    else:
+        episodes, compare = args.episodes or 250, args.compare or 200
+        result = {"machine": _common.machine(), "speed": speed()}
+        rows = safety(episodes)
+        result["safety"] = rows
+        result["safety_totals"] = totals(rows)
+        print(json.dumps(result["safety_totals"]), file=sys.stderr)
+        result["cross_simulator"] = cross(compare)
+        if "traffic" in previous:
+            result["traffic"] = previous["traffic"]
     RESULTS.parent.mkdir(exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=2) + "\n")
     _common.emit(result, args.json)

@@ -20,12 +20,13 @@ import gymnasium as gym  # noqa: E402
 import safeswitch  # noqa: E402
 from safeswitch.evaluation.adversaries import catalogue, constant  # noqa: E402
 from safeswitch.evaluation.rollout import rollout  # noqa: E402
+from safeswitch.leftturn.config import ConfigError  # noqa: E402
 from safeswitch.leftturn.scenarios import named_scenarios  # noqa: E402
-from safeswitch.leftturn.task import LeftTurnTask  # noqa: E402
+from safeswitch.leftturn.task import LeftTurnTask, build_task  # noqa: E402
 from safeswitch.sim.road import IntersectionGeometry  # noqa: E402
 from safeswitch.sumo import network  # noqa: E402
 from safeswitch.sumo.task import (  # noqa: E402
-    ScenarioError,
+    LeftTurnSumoTrafficTask,
     make_sumo_vec_env,
     sumo_task,
 )
@@ -118,8 +119,8 @@ def test_the_gym_environment_runs_an_episode():
 
 
 def test_what_sumo_cannot_do_is_refused_by_name(task):
-    with pytest.raises(ScenarioError, match="traffic"):
-        sumo_task(None, traffic="medium")
+    with pytest.raises(ConfigError, match="rush-hour"):
+        sumo_task(None, traffic="rush-hour")
     with pytest.raises(ValueError, match="batch of 4"):
         task.initial(task.draw_scenarios(0, np.arange(4), np.zeros(4, dtype=np.int64)))
 
@@ -210,3 +211,76 @@ def test_no_worker_outlives_a_dying_parent(how):
     finally:
         if child.poll() is None:
             child.kill()
+
+
+# -- traffic from every leg on SUMO ----------------------------------------------------------
+
+EPISODE = {"episode": {"learned_scope": "episode"}}
+
+
+def _scene(task, k):
+    return task.draw_scenarios(11, np.array([k]), np.zeros(1, dtype=np.int64))
+
+
+def test_sumo_starts_the_embedded_traffic_scene():
+    """The same vehicles on the same routes where the embedded scene has them, at their
+    speeds; the north car and the ego as in the paper's scene."""
+    task = sumo_task(EPISODE, traffic="heavy", switching="certified")
+    ours = build_task(None, EPISODE, traffic="heavy", switching="certified")
+    assert isinstance(task, LeftTurnSumoTrafficTask)
+    try:
+        for k in range(4):
+            on_sumo, embedded = task.initial(_scene(task, k)), ours.initial(_scene(task, k))
+            a, b = on_sumo.traffic, embedded.traffic
+            assert a.active.sum() >= 3
+            assert np.array_equal(a.active, b.active) and np.array_equal(a.route, b.route)
+            assert np.abs(a.progress - b.progress)[a.active].max() < 0.05
+            assert np.abs(a.speed - b.speed)[a.active].max() < 0.05
+            assert np.hypot(a.x - b.x, a.y - b.y)[a.active].max() < 0.1
+            assert abs(on_sumo.world.progress[0, 1] - embedded.world.progress[0, 1]) < 0.3
+    finally:
+        task.close()
+
+
+def test_sumo_drives_the_traffic_and_certified_keeps_the_ego_safe():
+    """Whole episodes in heavy traffic under adversaries: vehicles keep entering and leaving
+    (SUMO's drivers, handed over from the embedded schedule), the ego never collides by our
+    check or SUMO's, the other vehicles never collide with one another, and SUMO's drivers
+    keep the certified assumptions."""
+    task = sumo_task(EPISODE, traffic="heavy", switching="certified")
+    try:
+        for k, name in enumerate(("full_throttle", "enter_then_stop", "creep")):
+            counts, seen = [], set()
+
+            def watch(state, record, tick, counts=counts, seen=seen):
+                tr = state.traffic
+                counts.append(int(tr.active.sum()))
+                seen.update(int(e) for e in tr.entered[0])
+
+            result = rollout(task, _scene(task, k), catalogue(task, 1, k)[name](), on_tick=watch)
+            assert not result.collision[0] and task.sumo_collisions == 0
+            assert max(seen) >= 3  # arrivals were handed over and driven
+            assert max(counts) >= 6 and min(counts) < max(counts)
+            assert not task.assumption_breaks
+    finally:
+        task.close()
+
+
+def test_traffic_on_sumo_is_a_gym_environment():
+    env = gym.make(
+        safeswitch.SUMO_ENV_ID, traffic={"preset": "medium", "observed": 3},
+        switching="certified", learned_scope="episode",
+    )  # fmt: skip
+    embedded = gym.make(safeswitch.TRAFFIC_ENV_ID, traffic={"preset": "medium", "observed": 3})
+    try:
+        assert env.observation_space == embedded.observation_space
+        obs, _ = env.reset(seed=4)
+        assert env.observation_space.contains(obs) and obs[6] == 1.0  # a vehicle is observed
+        done, info = False, {}
+        while not done:
+            obs, _, terminated, truncated, info = env.step(np.array([0.4], dtype=np.float32))
+            done = terminated or truncated
+        assert info["sumo_collisions"] == 0 and not info["assumption_breaks"]
+    finally:
+        env.close()
+        embedded.close()

@@ -6,9 +6,12 @@ worker processes, :func:`~safeswitch.sumo.task.make_sumo_vec_env`, for several).
 
 Vehicles SUMO drives use its default car-following model (Krauss) without dawdling
 (``sigma = 0``: deterministic) and its junction model; a driver that *never yields* (the paper's
-north car, and the traffic's non-yielding share) ignores the right of way of foes approaching
-the junction and of foes inside it (speed mode 55: bits 3 off and 5 on, see SUMO's TraCI
-documentation of ``setSpeedMode``) but still keeps its distance to a leader. The ego is not
+north car) ignores the right of way of foes approaching the junction and of foes inside it
+(speed mode 55: bits 3 off and 5 on, see SUMO's TraCI documentation of ``setSpeedMode``) but
+still keeps its distance to a leader. In traffic, where the other foes are SUMO's own drivers,
+a driver who never yields ignores the ego only (the generic parameter
+``junctionModel.ignoreIDs``, SUMO's "transient junction model parameters") and gives way to
+everyone else by SUMO's rules, as the embedded traffic's non-yielding drivers do. The ego is not
 driven by SUMO: its pose comes from safeswitch's plant every tick (``moveToXY``), so SUMO's
 drivers see it and SUMO's collision detection (junctions included) checks it.
 
@@ -121,18 +124,31 @@ class SumoPlant:
         self.collisions = []
 
     def add(
-        self, vid: str, route: str, progress: float, speed: float, top: float, yields: bool
-    ) -> None:
+        self, vid: str, route: str, progress: float, speed: float, top: float, yields: bool,
+        safe_speed: bool = False, force: bool = False, ignores: str | None = None,
+    ) -> None:  # fmt: skip
         """Insert a vehicle SUMO drives: on ``route`` (``origin->destination``) ``progress``
         metres from the start of its approach (its centre), at ``speed``, never faster than
-        ``top`` [m/s]."""
+        ``top`` [m/s]; ``safe_speed``: at the highest speed up to ``top`` that SUMO finds safe
+        behind the vehicles ahead (``departSpeed="max"``). SUMO inserts it on the next step on
+        which its insertion checks pass (room behind and ahead, able to stop at a give-way
+        line); ``force`` puts it on its lane now whatever they say (``moveTo``; a scene that
+        starts with it there). A driver who does not yield ignores every foe at the junction
+        (speed mode 55), or with ``ignores`` (a vehicle id) that one only and keeps SUMO's
+        rules with the others (``junctionModel.ignoreIDs``)."""
         s = self._sumo
         s.vehicle.add(
             vid, route, "car", depart="now", departLane="first",
-            departPos=f"{progress + self.length / 2:.4f}", departSpeed=f"{speed:.4f}",
+            departPos=f"{progress + self.length / 2:.4f}",
+            departSpeed="max" if safe_speed else f"{speed:.4f}",
         )  # fmt: skip
+        if force:
+            origin = route.split("->")[0]
+            s.vehicle.moveTo(vid, f"{edge_id(origin, True)}_0", progress + self.length / 2)
         s.vehicle.setMaxSpeed(vid, top)
-        if not yields:
+        if not yields and ignores is not None:
+            s.vehicle.setParameter(vid, "junctionModel.ignoreIDs", ignores)
+        elif not yields:
             s.vehicle.setSpeedMode(vid, NEVER_YIELDS)
 
     def add_ego(self, route: str, progress: float, speed: float) -> None:
@@ -158,6 +174,10 @@ class SumoPlant:
         s.simulationStep()
         for c in s.simulation.getCollisions():
             self.collisions.append((c.collider, c.victim))
+
+    def remove(self, vid: str) -> None:
+        """Take a vehicle out of the simulation."""
+        self._sumo.vehicle.remove(vid)
 
     def vehicles(self) -> tuple[str, ...]:
         return tuple(self._sumo.vehicle.getIDList())
