@@ -242,6 +242,22 @@ def test_sumo_starts_the_embedded_traffic_scene():
         task.close()
 
 
+def test_in_traffic_the_north_car_is_sumos_from_the_start():
+    """SUMO's insertion checks may refuse the north car among the other vehicles (a vehicle
+    added but not inserted reads as SUMO's invalid value): it is put where the scene has it."""
+    task = sumo_task(EPISODE, traffic="medium", switching="certified")
+    try:
+        for k in range(12):
+            scene = task.draw_scenarios(2024, np.array([k]), np.zeros(1, dtype=np.int64))
+            state = task.initial(scene)
+            pose = task.plant.read("north")
+            assert pose is not None
+            assert abs(pose.speed - scene.north_speed[0]) < 0.05
+            assert abs(pose.x - state.world.vehicles.x[0, 1]) < 1e-9
+    finally:
+        task.close()
+
+
 def test_sumo_drives_the_traffic_and_certified_keeps_the_ego_safe():
     """Whole episodes in heavy traffic under adversaries: vehicles keep entering and leaving
     (SUMO's drivers, handed over from the embedded schedule), the ego never collides by our

@@ -243,11 +243,15 @@ def traffic_study(
 #: The cross-simulator comparison: controllers (name, kind, shipped policy).
 SUMO_CONTROLLERS = (("ppo-paper", "learned", "paper"), ("ppo-certified", "learned", "certified"),
                     ("rule", "rule", None))  # fmt: skip
+#: ... and in traffic from every leg (SUMO driving every vehicle): (name, kind, policy, logic,
+#: preset) — the shipped paper policy under the certified logic, as in the traffic study.
+SUMO_TRAFFIC = (("ppo-paper", "learned", "paper", "certified", "medium"),)
 
 
 def sumo_study(episodes: int, log: Callable[[str], None]) -> dict[str, Any]:
     """The shipped paper and certified policies and the rule-based controller on the same
-    random scenarios on both simulators (SUMO driving the north car); ``available`` is false
+    random scenarios on both simulators (SUMO driving the north car), then
+    :data:`SUMO_TRAFFIC` in traffic (SUMO driving every other vehicle); ``available`` is false
     (and there are no rows) without the ``safeswitch[sumo]`` extra."""
     from safeswitch.app.evaluate import evaluate
     from safeswitch.sumo.network import SumoMissingError, sumo_home
@@ -259,14 +263,17 @@ def sumo_study(episodes: int, log: Callable[[str], None]) -> dict[str, Any]:
         log(f"  SUMO: skipped ({exc})")
         return {"available": False, "episodes": episodes, "rows": [], "reason": str(exc)}
     rows = []
-    for name, kind, policy in SUMO_CONTROLLERS:
+    runs = [(name, kind, policy, None, None) for name, kind, policy in SUMO_CONTROLLERS]
+    for name, kind, policy, switching, traffic in [*runs, *SUMO_TRAFFIC]:
         model = str(SHIPPED_DIR / policy) if policy else None
         for sim in ("embedded", "sumo"):
-            summary = evaluate(kind, model, "random", episodes, EVAL_SEED, None, None, sim=sim)
-            rows.append({**summary, "controller": name})
+            summary = evaluate(kind, model, "random", episodes, EVAL_SEED, switching, None,
+                               sim=sim, traffic=traffic)  # fmt: skip
+            label = name if switching is None else f"{name} / {switching}"
+            rows.append({**summary, "controller": label, "scene": traffic or "paper's"})
         log(
-            f"  SUMO: {name}: {rows[-1]['collisions']} collisions on SUMO, "
-            f"{rows[-2]['collisions']} embedded"
+            f"  SUMO: {rows[-1]['controller']} ({rows[-1]['scene']}): "
+            f"{rows[-1]['collisions']} collisions on SUMO, {rows[-2]['collisions']} embedded"
         )
     return {"available": True, "episodes": episodes, "rows": rows}
 

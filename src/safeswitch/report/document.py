@@ -200,10 +200,13 @@ SIMULATORS = (
 def sumo_table(summary: dict[str, Any]) -> Table:
     rows, alert = [], []
     for r in summary.get("sumo", {}).get("rows", []):
-        rows.append([r["controller"], r["sim"], *(_cell(r.get(k), f, k) for k, _, f in SIMULATORS)])
+        rows.append(
+            [r.get("scene", "paper's"), r["controller"], r["sim"],
+             *(_cell(r.get(k), f, k) for k, _, f in SIMULATORS)]
+        )  # fmt: skip
         alert.append(r["collisions"] > 0)
-    header = ["controller", "simulator", *(h for _, h, _ in SIMULATORS)]
-    return Table(header, rows, alert, text_columns=(0, 1))
+    header = ["scene", "controller", "simulator", *(h for _, h, _ in SIMULATORS)]
+    return Table(header, rows, alert, text_columns=(0, 1, 2))
 
 
 def figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:

@@ -183,11 +183,14 @@ class SumoPlant:
         return tuple(self._sumo.vehicle.getIDList())
 
     def read(self, vid: str) -> Pose | None:
-        """A vehicle's centre, heading and speed (``None``: it has left the network)."""
+        """A vehicle's centre, heading and speed (``None``: it is not in the network — it has
+        left, or SUMO has not inserted it yet)."""
         v = self._sumo.vehicle
         try:
             x, y = v.getPosition(vid)
         except self._sumo.TraCIException:
+            return None
+        if x == self._sumo.constants.INVALID_DOUBLE_VALUE:  # added but not inserted yet
             return None
         heading = from_sumo_angle(v.getAngle(vid))
         half = self.length / 2

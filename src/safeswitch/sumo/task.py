@@ -66,7 +66,8 @@ class _SumoScene:
         self.north_max_accel = 0.0
         self.north_max_speed = 0.0
 
-    #: Whom the north car ignores at the junction (``None``: every foe, see :class:`SumoPlant`).
+    #: Whom the north car ignores at the junction (``None``: every foe, see :class:`SumoPlant`;
+    #: else it also starts where the scene has it, whatever SUMO's insertion checks say).
     _north_ignores: str | None = None
 
     def _start(self, state: TaskState, before_last: Any = None) -> None:
@@ -89,6 +90,7 @@ class _SumoScene:
         self.plant.add(
             "north", "north->south", north - north_speed * dt * (early + 1), north_speed,
             float(state.scenarios.north_speed[0]), yields=False, ignores=self._north_ignores,
+            force=self._north_ignores is not None,
         )  # fmt: skip
         self.plant.add_ego("south->west", float(world.progress[0, 0]), 0.0)
         v = world.vehicles
