@@ -21,7 +21,7 @@ file and keeps the rest.
 
 Run: ``python benchmarks/bench_sumo.py [--json] [--episodes N] [--compare N] [--traffic]``;
 writes ``benchmarks/results/sumo.json``. Needs ``pip install 'safeswitch[sumo]'``. The
-single-car run takes about 25 minutes, ``--traffic`` about 15 (two cores).
+single-car run takes about 25 minutes, ``--traffic`` about 20 (two cores).
 """
 
 from __future__ import annotations
@@ -156,6 +156,26 @@ def cross(episodes: int, traffic: str | None = None) -> list[dict[str, object]]:
     return rows
 
 
+def patience_check(episodes: int, traffic: str = "medium") -> list[dict[str, object]]:
+    """The rule under ``paper`` on the embedded simulator with drivers who never stop giving
+    way to a waiting ego (``patience_s`` 60 instead of 2): how much of the difference between
+    the simulators under ``paper`` is our drivers' patience (SUMO's have none)."""
+    from safeswitch.app.evaluate import controller_setup
+    from safeswitch.evaluation.evaluate import run_controller, scenario_set
+    from safeswitch.leftturn.task import build_task
+
+    config, rule = controller_setup("rule", None, "paper")
+    rows = []
+    for patience in (2.0, 60.0):
+        task = build_task(None, config, traffic={"preset": traffic, "patience_s": patience})
+        scenes, _ = scenario_set(task, "random", episodes, 7)
+        result, _ = run_controller(task, rule, scenes, trace=False)
+        rows.append({"patience_s": patience, "collisions": int((result.collision > 0).sum()),
+                     "cleared_episodes": int(np.isfinite(result.time_to_clear).sum())})  # fmt: skip
+        print(f"  rule / paper, embedded, patience {patience:g} s: {rows[-1]}", file=sys.stderr)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true")
@@ -186,6 +206,7 @@ def main() -> None:
                 p: totals([r for r in rows if r["traffic"] == p]) for p in TRAFFIC_PRESETS
             },
             "cross_simulator": cross(compare, "medium"),
+            "patience": patience_check(compare),
         }
         print(json.dumps(part["safety_totals"]), file=sys.stderr)
         result = {**previous, "traffic": part}
