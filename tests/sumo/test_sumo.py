@@ -300,3 +300,17 @@ def test_traffic_on_sumo_is_a_gym_environment():
     finally:
         env.close()
         embedded.close()
+
+
+def test_in_traffic_the_oracle_plans_against_the_embedded_scene():
+    """Efficiency on SUMO is measured against the same oracle as on the embedded simulator:
+    it plans against the embedded scene's drivers (not SUMO's, nor SUMO run a second time)."""
+    from safeswitch.app.evaluate import evaluate
+
+    runs = {
+        sim: evaluate("rule", None, "random", 3, 5, "certified", None, sim=sim, traffic="light")
+        for sim in ("embedded", "sumo")
+    }
+    embedded, on_sumo = runs["embedded"], runs["sumo"]
+    assert on_sumo["mean_oracle_time_to_clear_s"] == embedded["mean_oracle_time_to_clear_s"]
+    assert on_sumo["collisions"] == 0 and on_sumo["sumo_collision_episodes"] == 0

@@ -19,6 +19,7 @@ from safeswitch.evaluation.evaluate import (
     scenario_chunks,
 )
 from safeswitch.evaluation.metrics import SummaryAccumulator
+from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.rollout import Policy
 from safeswitch.io import prepare_output_dir, write_json
 from safeswitch.leftturn.config import (
@@ -161,8 +162,14 @@ def evaluate(
     sumo = {"sumo_collision_episodes": 0, "assumption_break_episodes": 0}
     try:
         for names, batch in chunks:
-            for part, scenes in _one_by_one(names, batch, on_sumo is not None):
-                result, plan = run_controller(task, policy, scenes, trace=False)
+            # SUMO runs scene by scene; in traffic the oracle plans against the embedded
+            # scene's drivers, so it is planned once for the whole chunk (one batch).
+            whole, embedded = None, getattr(on_sumo, "embedded", None)
+            if embedded is not None:
+                whole = Oracle(embedded).plan(batch, full=False)
+            for k, (part, scenes) in enumerate(_one_by_one(names, batch, on_sumo is not None)):
+                given = None if whole is None else take_rows(whole, np.array([k]))
+                result, plan = run_controller(task, policy, scenes, plan=given, trace=False)
                 accumulator.add(result, plan.time_to_clear, task.config.episode.horizon_s)
                 if writer is not None:
                     writer.write(part, scenes, result, plan.time_to_clear)

@@ -248,11 +248,14 @@ SUMO_CONTROLLERS = (("ppo-paper", "learned", "paper"), ("ppo-certified", "learne
 SUMO_TRAFFIC = (("ppo-paper", "learned", "paper", "certified", "medium"),)
 
 
-def sumo_study(episodes: int, log: Callable[[str], None]) -> dict[str, Any]:
+def sumo_study(
+    episodes: int, log: Callable[[str], None], traffic_episodes: int | None = None
+) -> dict[str, Any]:
     """The shipped paper and certified policies and the rule-based controller on the same
     random scenarios on both simulators (SUMO driving the north car), then
-    :data:`SUMO_TRAFFIC` in traffic (SUMO driving every other vehicle); ``available`` is false
-    (and there are no rows) without the ``safeswitch[sumo]`` extra."""
+    :data:`SUMO_TRAFFIC` in traffic (SUMO driving every other vehicle; ``traffic_episodes``
+    scenes, default ``episodes``: a 30 s episode in traffic runs about a second on SUMO);
+    ``available`` is false (and there are no rows) without the ``safeswitch[sumo]`` extra."""
     from safeswitch.app.evaluate import evaluate
     from safeswitch.sumo.network import SumoMissingError, sumo_home
 
@@ -266,16 +269,23 @@ def sumo_study(episodes: int, log: Callable[[str], None]) -> dict[str, Any]:
     runs = [(name, kind, policy, None, None) for name, kind, policy in SUMO_CONTROLLERS]
     for name, kind, policy, switching, traffic in [*runs, *SUMO_TRAFFIC]:
         model = str(SHIPPED_DIR / policy) if policy else None
+        count = episodes if traffic is None else (traffic_episodes or episodes)
         for sim in ("embedded", "sumo"):
-            summary = evaluate(kind, model, "random", episodes, EVAL_SEED, switching, None,
+            summary = evaluate(kind, model, "random", count, EVAL_SEED, switching, None,
                                sim=sim, traffic=traffic)  # fmt: skip
             label = name if switching is None else f"{name} / {switching}"
-            rows.append({**summary, "controller": label, "scene": traffic or "paper's"})
+            scene = "paper's scene" if traffic is None else f"{traffic} traffic"
+            rows.append({**summary, "controller": label, "scene": scene})
         log(
             f"  SUMO: {rows[-1]['controller']} ({rows[-1]['scene']}): "
             f"{rows[-1]['collisions']} collisions on SUMO, {rows[-2]['collisions']} embedded"
         )
-    return {"available": True, "episodes": episodes, "rows": rows}
+    return {
+        "available": True,
+        "episodes": episodes,
+        "traffic_episodes": traffic_episodes or episodes,
+        "rows": rows,
+    }
 
 
 def policy_of(name: str) -> bool:
@@ -407,8 +417,11 @@ def reproduce(
     log(f"  traffic from every leg: {traffic_episodes} random scenarios per density")
     traffic = traffic_study(models, traffic_episodes, folder, log)
     sumo_episodes = max(20, episodes // 50)
-    log(f"  SUMO as a second simulator: {sumo_episodes} random scenarios per controller")
-    sumo = sumo_study(sumo_episodes, log)
+    log(
+        f"  SUMO as a second simulator: {sumo_episodes} random scenarios per controller "
+        f"({max(10, episodes // 100)} in traffic)"
+    )
+    sumo = sumo_study(sumo_episodes, log, max(10, episodes // 100))
     log(f"stage {stages}/{stages}: figures and the report")
     comparison_figure(
         rows, oracle_random, offsets, horizon_s, folder / "figures" / "comparison.png"

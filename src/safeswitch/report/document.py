@@ -201,7 +201,7 @@ def sumo_table(summary: dict[str, Any]) -> Table:
     rows, alert = [], []
     for r in summary.get("sumo", {}).get("rows", []):
         rows.append(
-            [r.get("scene", "paper's"), r["controller"], r["sim"],
+            [r.get("scene", "paper's scene"), r["controller"], r["sim"],
              *(_cell(r.get(k), f, k) for k, _, f in SIMULATORS)]
         )  # fmt: skip
         alert.append(r["collisions"] > 0)

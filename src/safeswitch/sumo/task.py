@@ -20,7 +20,8 @@ its pipe closes, so none outlives a crashed or interrupted parent).
 
 With ``traffic`` (:class:`LeftTurnSumoTrafficTask`) SUMO drives every other vehicle of the
 embedded traffic scene (the same vehicles at the start and the same arrivals), and the
-certified assumptions are checked against every one of them.
+certified assumptions are checked against every one of them. The oracle and the logic-aware
+limit plan against the embedded scene's drivers.
 """
 
 from __future__ import annotations
@@ -30,11 +31,12 @@ import math
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.env import LeftTurnEnv
 from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.task import LeftTurnTask, TaskState, build_task
+from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState, build_task
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 from safeswitch.sim.collision import separation as footprint_gap
 from safeswitch.sim.geometry import FloatArray, locate
@@ -213,6 +215,22 @@ class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
         self._seen: set[str] = set()
         self._arrived = 0
         self._poses: dict[int, Pose] = {}
+
+    @property
+    def embedded(self) -> LeftTurnTrafficTask:
+        """The same scene on the embedded simulator (batched; what the oracle plans on)."""
+        if not hasattr(self, "_embedded_task"):
+            self._embedded_task = LeftTurnTrafficTask(self.config, self.traffic)
+        return self._embedded_task
+
+    def others_without_ego(self, scenarios: Scenarios) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """The embedded scene's others without the ego (what the oracle plans against: SUMO's
+        drivers are not replayed, and SUMO runs one scene at a time)."""
+        return self.embedded.others_without_ego(scenarios)
+
+    def conflict_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
+        """The embedded scene's (see :meth:`others_without_ego`)."""
+        return self.embedded.conflict_timeline(scenarios)
 
     def initial(self, scenarios: Scenarios) -> TrafficTaskState:
         state = LeftTurnTrafficTask.initial(self, scenarios)
