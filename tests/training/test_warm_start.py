@@ -206,3 +206,20 @@ def test_the_warm_start_demonstrates_with_its_configured_planner(tmp_path, monke
     assert [c.accel_lat for c in seen] == [2.6]
     saved = (tmp_path / "run" / "config.yaml").read_text()
     assert "accel_lat: 2.6" in saved
+
+
+def test_the_warm_start_clones_in_traffic_with_the_traffic_observation(tmp_path):
+    """In traffic the demonstrations are driven in the training task, so the clone learns on
+    the observation it will see (the paper's six values and the nearest vehicles), and the
+    observation statistics it keeps are those of that observation."""
+    run = config(
+        traffic={"preset": "light", "horizon_s": 4.0, "observed": 2},
+        warm_start={"episodes": 8, "rounds": 1, "epochs": 2},
+    )
+    train(replace(run, timesteps=1024), tmp_path / "run", progress_bar=False)
+    report = json.loads((tmp_path / "run" / "warm_start.json").read_text())
+    assert report["episodes"] == 16 and report["samples"] == 16 * 200
+    with open(tmp_path / "run" / "vecnormalize.pkl", "rb") as handle:
+        stats = pickle.load(handle).obs_rms
+    assert stats.mean.shape == (6 + 2 * 6,)
+    assert np.all(stats.var[6:] > 0)  # the vehicles' features vary across the demonstrations

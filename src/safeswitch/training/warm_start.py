@@ -35,7 +35,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import Policy, rollout
-from safeswitch.leftturn.task import LeftTurnTask, TaskState
+from safeswitch.leftturn.task import TaskState, build_task
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.ppo import SwitchPPO
 
@@ -117,15 +117,19 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
     """
     ws = config.warm_start
     began = time.perf_counter()
-    task = LeftTurnTask(config.env)
+    # the training task, in traffic too (the clone then sees the traffic observation)
+    traffic = config.traffic_settings
+    task = build_task(None, config.env, traffic=traffic)
     planner = Planner(task, ws.planner)
-    learner_task = LeftTurnTask(dataclasses.replace(config.env, switching="certified"))
+    learner_task = build_task(
+        None, dataclasses.replace(config.env, switching="certified"), traffic=traffic
+    )
     store: tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]] = ([], [])
     observations, labels = store
     collisions = safety_episodes = 0
     mse = float("nan")
-    mean = np.zeros(6)
-    std = np.ones(6)
+    size = int(np.prod(task.observation_bounds[0].shape))
+    mean, std = np.zeros(size), np.ones(size)
     for round_ in range(ws.rounds + 1):
         ids = (round_ + 1) * DEMO_ENV_OFFSET + np.arange(ws.episodes)
         scenarios = task.draw_scenarios(config.seed, ids, np.zeros(ws.episodes, dtype=np.int64))
