@@ -149,3 +149,16 @@ def test_resuming_a_run_interrupted_before_its_first_checkpoint_says_what_to_do(
     (run / "config.yaml").write_text(dump_config(TrainConfig()))
     with pytest.raises(RunDirectoryError, match=r"no complete checkpoint.*delete it"):
         train(TrainConfig(), run, resume=True, progress_bar=False)
+
+
+def test_every_packaged_configuration_loads_and_validates():
+    """A packaged recipe (``--config NAME``) that no longer matches the schema would fail only
+    when someone trains with it; each one loads, and survives a dump and reload unchanged."""
+    from safeswitch.training.config import config_path, packaged_config_names
+
+    names = packaged_config_names()
+    assert {"paper", "paper_scratch", "traffic_certified"} <= set(names)
+    for name in names:
+        config = load_config(config_path(name))
+        assert config.timesteps >= 1, name
+        assert load_config(config_path(name)) == config

@@ -247,7 +247,8 @@ def config_path(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.is_file():
         return path
-    packaged = PACKAGED_CONFIGS / f"{Path(str(name_or_path)).with_suffix('')}.yaml"
+    name = str(name_or_path).removesuffix(".yaml")  # not with_suffix: names may hold dots
+    packaged = PACKAGED_CONFIGS / f"{name}.yaml"
     if packaged.is_file():
         return packaged
     raise FileNotFoundError(
