@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
             g = r["oracle_minus_free_s"]
             print(
                 f"  oracle - bound without the logic: median {g['median']:.2f} s, "
-                f"{100 * g['share_within_0.1s']:.0f} % within 0.1 s, max {g['max']:.2f} s"
+                f"{100 * g['share_within_0.1s']:.1f} % within 0.1 s, max {g['max']:.2f} s"
             )
     report = {
         "benchmark": "traffic_limit",

@@ -199,3 +199,38 @@ def test_bad_settings_are_named(setup):
         PaperLogicLimit(task, braking="hard")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="speed_step"):
         PaperLogicLimit(task, speed_step=0.0)
+
+
+def test_clearing_into_a_zone_about_to_be_occupied_does_not_count(setup):
+    """A second conflict zone just past the north car's, occupied from shortly after the ego
+    could first clear: clearing then would leave the ego inside it, so the bound moves later.
+    Occupied only long after the ego is through, it changes nothing."""
+    task, scenarios, _ = setup
+    limit = PaperLogicLimit(task, logic=False)
+    base = limit._north_timeline(scenarios)
+    free = limit.bound(base)
+    clear_at = task.conflict.zone_a[1]
+    dt = task.config.episode.dt
+    batch, ticks, _ = base.present.shape
+
+    def with_zone(start_after: int):
+        inside = np.zeros((batch, ticks, 1), dtype=bool)
+        for b in range(batch):
+            first = round(free[b] / dt) + start_after
+            inside[b, first : first + 150] = True
+        extra = {
+            "present": np.ones((batch, ticks, 1), dtype=bool),
+            "ego_entry": np.full((batch, ticks, 1), clear_at + 0.5),
+            "ego_exit": np.full((batch, ticks, 1), clear_at + 8.0),
+            "ego_point": np.full((batch, ticks, 1), clear_at + 4.0),
+            "other_distance": np.full((batch, ticks, 1), 100.0),
+            "other_inside": inside,
+            "other_window": np.zeros((batch, ticks, 1), dtype=bool),
+            "other_speed": np.zeros((batch, ticks, 1)),
+        }
+        fields = {k: np.concatenate([getattr(base, k), v], axis=2) for k, v in extra.items()}
+        return limit.bound(base._replace(**fields))
+
+    soon, late = with_zone(10), with_zone(400)
+    assert np.all(soon > free + 0.1)
+    assert np.array_equal(late, free)

@@ -30,11 +30,12 @@ are rounded up (positions then run ahead of the true ones by at most ``dv·dt`` 
 every constraint only removes a position if it rules out the whole box of true states it may
 stand for); each speed keeps the hull of its intervals; there are no actuator lags. It knows
 nothing of comfort beyond the oracle's limits, so a controller that exceeds them may be faster.
-In traffic it also stops at the exit of the north car's zone (the time to clear), without
-asking whether the ego could then get past the zones that follow; and where the true plan
-clears on the very tick a vehicle enters, the grid's rounding may let the bound pass first —
-so there it can lie well below the multi-conflict oracle (``benchmarks/traffic_limit.py``
-measures how often). It stays a lower bound.
+In traffic a tick counts as the time to clear only if some state past the north car's zone can
+go on past every later zone (or to the horizon) within the constraints — clearing into a zone
+that is about to be occupied does not count. Where the true plan clears on the very tick a
+vehicle enters, the grid's rounding may still let the bound pass first, so there it can lie
+well below the multi-conflict oracle (``benchmarks/traffic_limit.py`` measures how often). It
+stays a lower bound.
 
 Two braking models: ``"comfort"`` brakes at the oracle's deceleration (any controller that can
 brake), ``"throttle"`` only as hard as a closed throttle slows the plant (engine braking plus
@@ -276,82 +277,134 @@ def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: fl
 
 
 @jit
+def _tick(t: int, lo: FloatArray, hi: FloatArray, new_lo: FloatArray, new_hi: FloatArray,
+          piece_lo: FloatArray, piece_hi: FloatArray, occupied: NDArray[np.int64],
+          firing: NDArray[np.int64], gaps: FloatArray, present: NDArray[np.bool_],
+          ego_entry: FloatArray, ego_exit: FloatArray, ego_point: FloatArray,
+          other_distance: FloatArray, other_inside: NDArray[np.bool_],
+          other_window: NDArray[np.bool_], other_speed: FloatArray, accel: FloatArray,
+          decel: FloatArray, curve: FloatArray, c: LimitLayout,
+          paper: PaperConstants) -> bool:  # fmt: skip
+    """Move the reachable set ``lo``/``hi`` (per grid speed) from tick ``t - 1`` to ``t`` in
+    place, removing what the constraints of tick ``t`` rule out; whether anything is left."""
+    dt, dv = c.dt, c.speed_step
+    bins, conflicts = accel.shape[0], present.shape[1]
+    tol = t * dv * dt  # how far grid positions may run ahead of the true ones
+    n_occ, n_fire = 0, 0
+    for q in range(conflicts):
+        if not present[t, q]:
+            continue
+        if other_inside[t, q]:
+            occupied[n_occ] = q
+            n_occ += 1
+        if c.logic and other_window[t, q]:
+            firing[n_fire] = q
+            gaps[n_fire] = (
+                time_to_reach(other_distance[t, q], other_speed[t, q], paper.min_speed)
+                - paper.ttr_threshold_s
+            )
+            n_fire += 1
+    new_lo[:] = np.inf
+    new_hi[:] = -np.inf
+    for j in range(bins):
+        if lo[j] > hi[j]:
+            continue
+        v = j * dv
+        j_min = max(math.floor((v - decel[j] * dt) / dv) - 1, 0)
+        j_max = min(math.floor((v + accel[j] * dt) / dv) + 1, bins - 1)
+        for j2 in range(j_min, j_max + 1):
+            v2 = j2 * dv
+            ds = 0.5 * (v + v2) * dt
+            piece_lo[0], piece_hi[0] = lo[j] + ds, hi[j] + ds
+            n = 1
+            for r in range(curve.shape[1]):
+                n = _remove(piece_lo, piece_hi, n, curve[j2, r, 0] + tol, curve[j2, r, 1])
+            for i in range(n_occ):
+                q = occupied[i]
+                n = _remove(piece_lo, piece_hi, n, ego_entry[t, q] + tol, ego_exit[t, q])
+            if n_fire and n > 0:
+                # Fires for every true speed in (v2 - dv, v2] from the slowest one's braking
+                # point on, up to where the fastest one's TTR would leave a gap.
+                reach = firing_distance(max(v2 - dv, 0.0), paper)
+                for i in range(n_fire):
+                    q = firing[i]
+                    point = ego_point[t, q]
+                    fire_lo = max(ego_entry[t, q] - reach, point - c.approach_distance)
+                    fire_hi = ego_exit[t, q]
+                    if gaps[i] >= 0:
+                        fire_hi = min(fire_hi, point - gaps[i] * max(v2, paper.min_speed))
+                    n = _remove(piece_lo, piece_hi, n, fire_lo + tol, fire_hi)
+            for i in range(n):
+                new_lo[j2] = min(new_lo[j2], piece_lo[i])
+                new_hi[j2] = max(new_hi[j2], piece_hi[i])
+    lo[:] = new_lo
+    hi[:] = new_hi
+    alive = False
+    for j in range(bins):
+        if lo[j] <= hi[j]:
+            alive = True
+            break
+    return alive
+
+
+@jit
 def _clear_tick(s0: float, v0: float, present: NDArray[np.bool_], ego_entry: FloatArray,
                 ego_exit: FloatArray, ego_point: FloatArray, other_distance: FloatArray,
                 other_inside: NDArray[np.bool_], other_window: NDArray[np.bool_],
                 other_speed: FloatArray, accel: FloatArray, decel: FloatArray, curve: FloatArray,
                 c: LimitLayout, paper: PaperConstants) -> int:  # fmt: skip
-    """First tick on which the ego can be past its conflict zone with the north car, or -1
-    (see the class; the conflicts ``[H + 1, C]`` as in :class:`ConflictTimeline`)."""
-    dt, dv = c.dt, c.speed_step
-    bins, conflicts = accel.shape[0], present.shape[1]
+    """First tick on which the ego can be past its conflict zone with the north car and still
+    get past every later zone without breaking a constraint, or -1 (see the class; the
+    conflicts ``[H + 1, C]`` as in :class:`ConflictTimeline`)."""
+    bins, conflicts, ticks = accel.shape[0], present.shape[1], present.shape[0]
     lo = np.full(bins, np.inf)
     hi = np.full(bins, -np.inf)
-    j0 = min(math.ceil(v0 / dv - 1e-12), bins - 1)
+    j0 = min(math.ceil(v0 / c.speed_step - 1e-12), bins - 1)
     lo[j0], hi[j0] = s0, s0
-    new_lo = np.empty(bins)
-    new_hi = np.empty(bins)
+    new_lo, new_hi = np.empty(bins), np.empty(bins)
+    go_lo, go_hi = np.empty(bins), np.empty(bins)  # the continuation from a clearing tick
     room = 2 + curve.shape[1] + 2 * conflicts + 4
-    piece_lo = np.empty(room)
-    piece_hi = np.empty(room)
-    occupied = np.empty(conflicts, dtype=np.int64)  # this tick's occupied zones
-    firing = np.empty(conflicts, dtype=np.int64)  # this tick's conflicts "at the intersection"
-    gaps = np.empty(conflicts)  # TTR_k − threshold
-    for k in range(present.shape[0] - 1):
-        tol = (k + 1) * dv * dt  # how far grid positions may run ahead of the true ones
-        t = k + 1
-        n_occ, n_fire = 0, 0
+    piece_lo, piece_hi = np.empty(room), np.empty(room)
+    occupied = np.empty(conflicts, dtype=np.int64)
+    firing = np.empty(conflicts, dtype=np.int64)
+    gaps = np.empty(conflicts)
+    last = c.clear_at  # past this, no zone is left ahead of the ego
+    for t in range(ticks):
         for q in range(conflicts):
-            if not present[t, q]:
-                continue
-            if other_inside[t, q]:
-                occupied[n_occ] = q
-                n_occ += 1
-            if c.logic and other_window[t, q]:
-                firing[n_fire] = q
-                gaps[n_fire] = (
-                    time_to_reach(other_distance[t, q], other_speed[t, q], paper.min_speed)
-                    - paper.ttr_threshold_s
-                )
-                n_fire += 1
-        new_lo[:] = np.inf
-        new_hi[:] = -np.inf
-        for j in range(bins):
-            if lo[j] > hi[j]:
-                continue
-            v = j * dv
-            j_min = max(math.floor((v - decel[j] * dt) / dv) - 1, 0)
-            j_max = min(math.floor((v + accel[j] * dt) / dv) + 1, bins - 1)
-            for j2 in range(j_min, j_max + 1):
-                v2 = j2 * dv
-                ds = 0.5 * (v + v2) * dt
-                piece_lo[0], piece_hi[0] = lo[j] + ds, hi[j] + ds
-                n = 1
-                for r in range(curve.shape[1]):
-                    n = _remove(piece_lo, piece_hi, n, curve[j2, r, 0] + tol, curve[j2, r, 1])
-                for i in range(n_occ):
-                    q = occupied[i]
-                    n = _remove(piece_lo, piece_hi, n, ego_entry[t, q] + tol, ego_exit[t, q])
-                if n_fire and n > 0:
-                    # Fires for every true speed in (v2 - dv, v2] from the slowest one's braking
-                    # point on, up to where the fastest one's TTR would leave a gap.
-                    reach = firing_distance(max(v2 - dv, 0.0), paper)
-                    for i in range(n_fire):
-                        q = firing[i]
-                        point = ego_point[t, q]
-                        fire_lo = max(ego_entry[t, q] - reach, point - c.approach_distance)
-                        fire_hi = ego_exit[t, q]
-                        if gaps[i] >= 0:
-                            fire_hi = min(fire_hi, point - gaps[i] * max(v2, paper.min_speed))
-                        n = _remove(piece_lo, piece_hi, n, fire_lo + tol, fire_hi)
-                for i in range(n):
-                    new_lo[j2] = min(new_lo[j2], piece_lo[i])
-                    new_hi[j2] = max(new_hi[j2], piece_hi[i])
-        lo[:] = new_lo
-        hi[:] = new_hi
+            if present[t, q]:
+                last = max(last, ego_exit[t, q])
+    for t in range(1, ticks):
+        if not _tick(t, lo, hi, new_lo, new_hi, piece_lo, piece_hi, occupied, firing, gaps,
+                     present, ego_entry, ego_exit, ego_point, other_distance, other_inside,
+                     other_window, other_speed, accel, decel, curve, c, paper):  # fmt: skip
+            return -1
+        cleared = False
         for j in range(bins):
             if lo[j] <= hi[j] and hi[j] > c.clear_at:
-                return k + 1
+                cleared = True
+                go_lo[j], go_hi[j] = max(lo[j], c.clear_at), hi[j]
+            else:
+                go_lo[j], go_hi[j] = np.inf, -np.inf
+        if not cleared:
+            continue
+        # Viable: some state past the zone can go on past every zone still ahead (or to the
+        # horizon) without breaking a constraint; in the paper's scene there is none ahead.
+        viable, t2 = True, t
+        while viable and t2 + 1 < ticks:
+            far = False
+            for j in range(bins):
+                if go_lo[j] <= go_hi[j] and go_hi[j] > last:
+                    far = True
+                    break
+            if far:
+                break
+            t2 += 1
+            viable = _tick(t2, go_lo, go_hi, new_lo, new_hi, piece_lo, piece_hi, occupied,
+                           firing, gaps, present, ego_entry, ego_exit, ego_point,
+                           other_distance, other_inside, other_window, other_speed, accel,
+                           decel, curve, c, paper)  # fmt: skip
+        if viable:
+            return t
     return -1
 
 
