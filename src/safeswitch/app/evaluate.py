@@ -162,11 +162,11 @@ def evaluate(
     sumo = {"sumo_collision_episodes": 0, "assumption_break_episodes": 0}
     try:
         for names, batch in chunks:
-            # SUMO runs scene by scene; in traffic the oracle plans against the embedded
-            # scene's drivers, so it is planned once for the whole chunk (one batch).
-            whole, embedded = None, getattr(on_sumo, "embedded", None)
-            if embedded is not None:
-                whole = Oracle(embedded).plan(batch, full=False)
+            # SUMO runs scene by scene; in traffic the oracle plans on the embedded twin, so
+            # it is planned once for the whole chunk (one batch).
+            whole = None
+            if getattr(on_sumo, "embedded", None) is not None:
+                whole = Oracle(task).plan(batch, full=False)
             for k, (part, scenes) in enumerate(_one_by_one(names, batch, on_sumo is not None)):
                 given = None if whole is None else take_rows(whole, np.array([k]))
                 result, plan = run_controller(task, policy, scenes, plan=given, trace=False)

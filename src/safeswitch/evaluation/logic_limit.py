@@ -123,8 +123,8 @@ class PaperLogicLimit:
             speed_step,
             "must be in (0, 0.5] m/s",
         )
-        self.task = task
         self.oracle = Oracle(task, limits)
+        self.task = self.oracle.task  # an embedded twin, if ``task`` has one
         self.braking = braking
         lim = self.oracle.limits
         config = task.config
@@ -194,7 +194,7 @@ class PaperLogicLimit:
             rows = [np.arange(i, min(i + chunk, batch)) for i in range(0, batch, chunk)]
             parts = (timeline(scenarios.take(r)) for r in rows)
         out = np.empty(batch)
-        for r, t in zip(rows, parts, strict=False):
+        for r, t in zip(rows, parts, strict=True):
             out[r] = self.bound(t)
         return out
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -121,11 +121,14 @@ class Oracle:
     """Minimum-time crossings of the left-turn task (see the module docstring).
 
     Args:
-        task: The task; its route, conflict zones, plant, tick and horizon are used.
+        task: The task; its route, conflict zones, plant, tick and horizon are used. A task on
+            another simulator that has an embedded twin (``task.embedded``: SUMO in traffic)
+            is planned on the twin — batched, and without restarting the other simulator.
         limits: The limits to plan within (default: :meth:`OracleLimits.from_config`).
     """
 
     def __init__(self, task: LeftTurnTask, limits: OracleLimits | None = None) -> None:
+        task = cast(LeftTurnTask, getattr(task, "embedded", task))
         self.task = task
         self.limits = limits or OracleLimits.from_config(task.config)
         route = task.world.routes[0]

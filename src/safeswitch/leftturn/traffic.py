@@ -454,10 +454,19 @@ class LeftTurnTrafficTask(LeftTurnTask):
             np.ascontiguousarray(new_world.vehicles.speed),
         )  # fmt: skip
         place(self.tables, new)
-        nv = new_world.vehicles
+        return self.with_separations(state, new, new_world, separation)
+
+    def with_separations(
+        self, state: TrafficTaskState, new: TrafficState, new_world: WorldState,
+        separation: FloatArray,
+    ) -> tuple[Any, FloatArray]:  # fmt: skip
+        """What :meth:`advance_others` returns for the others' new state ``new`` (poses
+        placed): it with their collisions among themselves added up, and the ego's separation
+        from the nearest of them or ``separation`` (the north car's) ``[B]``."""
+        nv, p = new_world.vehicles, self.config.vehicle
+        batch = new.route.shape[0]
         gap = np.empty(batch)
         collisions = np.empty(batch, dtype=np.int64)
-        p = self.config.vehicle
         npc_separations(
             new.x, new.y, new.cos_yaw, new.sin_yaw, new.active, p.length, p.width,
             np.ascontiguousarray(nv.x[:, 0]), np.ascontiguousarray(nv.y[:, 0]),

@@ -40,7 +40,7 @@ from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState, 
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 from safeswitch.sim.collision import separation as footprint_gap
 from safeswitch.sim.geometry import FloatArray, locate
-from safeswitch.sim.streams import TrafficState, npc_separations, place
+from safeswitch.sim.streams import TrafficState
 from safeswitch.sim.world import WorldState
 from safeswitch.sumo.network import network_file
 from safeswitch.sumo.plant import Pose, SumoPlant
@@ -145,6 +145,16 @@ class _SumoScene:
         self.sumo_collisions += len(self.plant.collisions) - before
         self._sync_north(new_world)
 
+    def _north_gap(self, new_world: WorldState) -> FloatArray:
+        """The ego's separation from the north car (its pose now SUMO's) [m] ``[1]``."""
+        v, p = new_world.vehicles, self.config.vehicle
+        gap = footprint_gap(
+            float(v.x[0, 1] - v.x[0, 0]), float(v.y[0, 1] - v.y[0, 0]), float(v.cos_yaw[0, 0]),
+            float(v.sin_yaw[0, 0]), p.length, p.width, float(v.cos_yaw[0, 1]),
+            float(v.sin_yaw[0, 1]), p.length, p.width,
+        )  # fmt: skip
+        return np.array([gap])
+
     def close(self) -> None:
         self.plant.close()
 
@@ -170,13 +180,7 @@ class LeftTurnSumoTask(_SumoScene, LeftTurnTask):
         self, state: TaskState, new_world: WorldState, separation: FloatArray
     ) -> tuple[Any, FloatArray]:
         self._step_plant(new_world)
-        v, p = new_world.vehicles, self.config.vehicle
-        gap = footprint_gap(
-            float(v.x[0, 1] - v.x[0, 0]), float(v.y[0, 1] - v.y[0, 0]), float(v.cos_yaw[0, 0]),
-            float(v.sin_yaw[0, 0]), p.length, p.width, float(v.cos_yaw[0, 1]),
-            float(v.sin_yaw[0, 1]), p.length, p.width,
-        )  # fmt: skip
-        return None, np.array([gap])
+        return None, self._north_gap(new_world)
 
 
 class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
@@ -259,8 +263,8 @@ class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
         return state
 
     def _place(self, new: TrafficState) -> None:
-        """Poses of the vehicles: SUMO's (for the collision check and the observation)."""
-        place(self.tables, new)
+        """Poses of the vehicles: SUMO's (for the collision check and the observation; every
+        active vehicle has one)."""
         for i, pose in self._poses.items():
             new.x[0, i], new.y[0, i] = pose.x, pose.y
             new.cos_yaw[0, i], new.sin_yaw[0, i] = math.cos(pose.heading), math.sin(pose.heading)
@@ -333,21 +337,7 @@ class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
         self._step_plant(new_world)
         self._read_traffic(tr, new)
         self._place(new)
-        nv, p = new_world.vehicles, self.config.vehicle
-        gap = np.empty(1)
-        collisions = np.empty(1, dtype=np.int64)
-        npc_separations(
-            new.x, new.y, new.cos_yaw, new.sin_yaw, new.active, p.length, p.width,
-            np.ascontiguousarray(nv.x[:, 0]), np.ascontiguousarray(nv.y[:, 0]),
-            np.ascontiguousarray(nv.cos_yaw[:, 0]), np.ascontiguousarray(nv.sin_yaw[:, 0]),
-            gap, collisions,
-        )  # fmt: skip
-        north_gap = footprint_gap(
-            float(nv.x[0, 1] - nv.x[0, 0]), float(nv.y[0, 1] - nv.y[0, 0]),
-            float(nv.cos_yaw[0, 0]), float(nv.sin_yaw[0, 0]), p.length, p.width,
-            float(nv.cos_yaw[0, 1]), float(nv.sin_yaw[0, 1]), p.length, p.width,
-        )  # fmt: skip
-        return (new, state.npc_collisions + collisions), np.minimum(np.array([north_gap]), gap)
+        return self.with_separations(state, new, new_world, self._north_gap(new_world))
 
 
 def sumo_task(
