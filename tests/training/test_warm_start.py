@@ -18,6 +18,7 @@ from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
+from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.run import build_model, complete_checkpoints, train
 from safeswitch.training.warm_start import FrozenRunningMeanStd
 
@@ -223,3 +224,27 @@ def test_the_warm_start_clones_in_traffic_with_the_traffic_observation(tmp_path)
         stats = pickle.load(handle).obs_rms
     assert stats.mean.shape == (6 + 2 * 6,)
     assert np.all(stats.var[6:] > 0)  # the vehicles' features vary across the demonstrations
+
+
+def test_annealed_exploration_noise_follows_its_schedule_and_is_the_rollouts(tmp_path, monkeypatch):
+    """``log_std_final``: the fixed noise falls linearly over the run, one value per rollout,
+    and the update after a rollout sees the noise its actions were drawn with."""
+    annealed = config(ppo={"learn_log_std": False, "log_std_init": 0.0, "log_std_final": -2.0})
+    seen = []
+    original = SwitchPPO.train
+
+    def record(self):
+        seen.append(float(self.policy.log_std.detach().mean()))
+        original(self)
+
+    monkeypatch.setattr(SwitchPPO, "train", record)
+    train(annealed, tmp_path / "run", progress_bar=False)
+    # 2,048 steps in rollouts of 1,024: the first at the start, the second half-way
+    assert seen == pytest.approx([0.0, -1.0])
+    model = load_policy(tmp_path / "run").model
+    assert float(model.policy.log_std.detach().mean()) == pytest.approx(-1.0)
+
+
+def test_an_annealed_noise_that_would_also_be_learned_is_refused():
+    with pytest.raises(ConfigError, match="log_std_final"):
+        config(ppo={"learn_log_std": True, "log_std_final": -2.0})

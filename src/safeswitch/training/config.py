@@ -46,6 +46,9 @@ class PPOConfig:
             SB3's default 0 makes the first actions mostly noise on a [-1, 1] throttle).
         learn_log_std: Learn the log standard deviation (SB3's default); ``false`` keeps the
             exploration noise at ``log_std_init`` (ours, for a warm-started actor).
+        log_std_final: With ``learn_log_std: false``, the exploration noise is annealed: its
+            log standard deviation falls linearly from ``log_std_init`` at the start to this at
+            the end of the run, set before each rollout (ours; ``null``: a constant noise).
         actor_learning_rate: The actor's own learning rate (``null``: ``learning_rate`` for
             everything, as in Table II). See :mod:`safeswitch.training.ppo`.
         actor_frozen_steps: Timesteps before the actor starts learning (value function only).
@@ -73,6 +76,7 @@ class PPOConfig:
     normalize_rewards: bool = True
     log_std_init: float = 0.0
     learn_log_std: bool = True
+    log_std_final: float | None = None
     actor_learning_rate: float | None = None
     actor_frozen_steps: int = 0
     actor_ramp_steps: int = 0
@@ -96,6 +100,11 @@ class PPOConfig:
         check(
             -5 <= self.log_std_init <= 2, o, "log_std_init", self.log_std_init, "must be in [-5, 2]"
         )
+        if self.log_std_final is not None:
+            check(-5 <= self.log_std_final <= 2, o, "log_std_final", self.log_std_final,
+                  "must be in [-5, 2] or null")  # fmt: skip
+            check(not self.learn_log_std, o, "log_std_final", self.log_std_final,
+                  "anneals a fixed noise: needs learn_log_std: false")  # fmt: skip
         check(
             0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
         )

@@ -32,6 +32,10 @@ class SwitchPPO(PPO):
         actor_ramp_steps: Timesteps over which its rate then rises linearly from 0.
         learn_log_std: Whether the Gaussian's log standard deviation is learned (``False``:
             it stays at ``log_std_init``; exploration noise of a fixed size).
+        log_std_final: With ``learn_log_std=False``, the fixed log standard deviation is
+            annealed linearly from its initial value to this over the run, one value per
+            rollout (set before the rollout, so that the importance ratios of the update that
+            follows are computed under the noise the actions were drawn with).
         *args, **kwargs: Passed to :class:`~stable_baselines3.PPO`.
     """
 
@@ -42,12 +46,15 @@ class SwitchPPO(PPO):
         actor_frozen_steps: int = 0,
         actor_ramp_steps: int = 0,
         learn_log_std: bool = True,
+        log_std_final: float | None = None,
         **kwargs: Any,
     ) -> None:
         self.actor_learning_rate = actor_learning_rate
         self.actor_frozen_steps = actor_frozen_steps
         self.actor_ramp_steps = actor_ramp_steps
         self.learn_log_std = learn_log_std
+        self.log_std_final = log_std_final
+        self.log_std_start: float | None = None
         super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
@@ -77,6 +84,18 @@ class SwitchPPO(PPO):
         if isinstance(log_std, torch.nn.Parameter) and log_std.requires_grad:
             params.append(log_std)
         return params
+
+    def collect_rollouts(self, *args: Any, **kwargs: Any) -> bool:
+        log_std = getattr(self.policy, "log_std", None)
+        if self.log_std_final is not None and isinstance(log_std, torch.nn.Parameter):
+            if self.log_std_start is None:
+                self.log_std_start = float(log_std.detach().mean())
+            done = 1.0 - self._current_progress_remaining
+            value = self.log_std_start + (self.log_std_final - self.log_std_start) * done
+            with torch.no_grad():
+                log_std.fill_(value)
+            self.logger.record("train/log_std", value)
+        return bool(super().collect_rollouts(*args, **kwargs))
 
     def actor_rate(self, timesteps: int) -> float:
         """The actor's learning rate after ``timesteps`` (see the module docstring)."""

@@ -80,6 +80,7 @@ def build_model(
         actor_frozen_steps=ppo.actor_frozen_steps,
         actor_ramp_steps=ppo.actor_ramp_steps,
         learn_log_std=ppo.learn_log_std,
+        log_std_final=ppo.log_std_final,
     )
     if ppo.initial_action is not None:
         with torch.no_grad():
