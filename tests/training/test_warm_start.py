@@ -1,4 +1,5 @@
-"""Warm start (behaviour cloning of the planner) and the actor's own learning-rate schedule."""
+"""Warm start (behaviour cloning of the planner), the actor's own learning-rate schedule and the
+annealed exploration noise (SwitchPPO's additions to PPO)."""
 
 import json
 import pickle
