@@ -54,7 +54,6 @@ class SwitchPPO(PPO):
         self.actor_ramp_steps = actor_ramp_steps
         self.learn_log_std = learn_log_std
         self.log_std_final = log_std_final
-        self.log_std_start: float | None = None
         super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
@@ -88,10 +87,9 @@ class SwitchPPO(PPO):
     def collect_rollouts(self, *args: Any, **kwargs: Any) -> bool:
         log_std = getattr(self.policy, "log_std", None)
         if self.log_std_final is not None and isinstance(log_std, torch.nn.Parameter):
-            if self.log_std_start is None:
-                self.log_std_start = float(log_std.detach().mean())
+            start = float(self.policy_kwargs.get("log_std_init", 0.0))
             done = 1.0 - self._current_progress_remaining
-            value = self.log_std_start + (self.log_std_final - self.log_std_start) * done
+            value = start + (self.log_std_final - start) * done
             with torch.no_grad():
                 log_std.fill_(value)
             self.logger.record("train/log_std", value)
