@@ -134,6 +134,50 @@ def test_followers_never_run_into_a_stopped_ego():
     assert (np.isin(tr.route, south) & tr.active).any(axis=1).mean() > 0.5
 
 
+class _Accelerations:
+    """A rollout's ``on_tick`` recording the other vehicles' accelerations and activity."""
+
+    def __init__(self):
+        self.accel, self.active, self.progress = [], [], []
+
+    def __call__(self, state, record, tick):
+        self.accel.append(state.traffic.accel.copy())
+        self.active.append(state.traffic.active.copy())
+        self.progress.append(state.traffic.progress.copy())
+
+
+def test_drivers_decide_every_action_step_and_hold_in_between():
+    """With the default 0.1 s action step a driver's acceleration changes only on the ticks
+    its scene decides on (every fifth); with one tick it changes on others too."""
+    held = traffic_task("heavy", "paper", horizon_s=6.0)
+    assert held.traffic.action_step_s == 0.1
+    every = traffic_task("heavy", "paper", horizon_s=6.0, action_step_s=0.02)
+    changed = {}
+    for name, task in (("held", held), ("every", every)):
+        batch = scenes(task, 64)
+        seen = _Accelerations()
+        rollout(task, batch, catalogue(task, 64, 3)["noisy_cruise"](), seen)
+        accel, active = np.stack(seen.accel), np.stack(seen.active)
+        progress = np.stack(seen.progress)
+        # the same vehicle on both ticks (a slot emptied and refilled restarts at 0)
+        same = active[1:] & active[:-1] & (progress[1:] >= progress[:-1])
+        # on tick k the state holds the accelerations decided on tick k (k = 0, 1, ...)
+        moved = (accel[1:] != accel[:-1]) & same
+        ticks = np.arange(1, len(accel))
+        changed[name] = (moved.any(axis=(1, 2)), ticks % 5 == 0)
+    moved, decision = changed["held"]
+    assert moved[decision].all() and not moved[~decision].any()
+    moved, decision = changed["every"]
+    assert moved[~decision].any()
+
+
+def test_action_step_must_be_whole_ticks():
+    with pytest.raises(ConfigError, match=r"0\.03"):
+        traffic_task("light", action_step_s=0.03)
+    with pytest.raises(ConfigError, match="action_step_s"):
+        traffic_config({"action_step_s": 0.0})
+
+
 def test_vehicles_keep_arriving_and_leaving():
     task = traffic_task("medium", "certified", horizon_s=30.0)
     batch = scenes(task, 128)

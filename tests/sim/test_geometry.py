@@ -3,7 +3,15 @@ import math
 import numpy as np
 import pytest
 
-from safeswitch.sim.geometry import Route, RouteSet, resample_polyline
+from safeswitch.sim.geometry import (
+    Route,
+    RouteSet,
+    heading_axes,
+    pose,
+    pose_axes,
+    resample_polyline,
+)
+from safeswitch.sim.road import Intersection, IntersectionGeometry
 
 
 def arc_route(radius=10.0, spacing=0.5):
@@ -80,3 +88,28 @@ def test_routes_with_different_spacing_are_refused():
     b = Route.from_polyline(np.array([[0.0, 0.0], [10.0, 0.0]]), 0.25, name="b")
     with pytest.raises(ValueError, match="spacing"):
         RouteSet([a, b])
+
+
+def test_pose_axes_is_the_unit_vector_of_the_pose_heading():
+    """Read from the table on straight segments or computed in curves: the same bits as
+    ``math.cos``/``math.sin`` of :func:`pose`'s heading, everywhere on every route."""
+    intersection = Intersection(IntersectionGeometry())
+    routes = RouteSet([intersection.route(a, b) for a, b in (("south", "west"),
+                                                               ("north", "south"),
+                                                               ("east", "north"))])  # fmt: skip
+    axes = heading_axes(routes.tables)
+    k_max = routes.size - 2
+    straight = curved = 0
+    for r in range(len(routes.routes)):
+        base = r * routes.size
+        for s in np.linspace(-1.0, routes.lengths[r] + 2.0, 1501):
+            x, y, heading = pose(routes.tables, routes.spacing, k_max, base, s)
+            px, py, c, sn = pose_axes(routes.tables, axes, routes.spacing, k_max, base, s)
+            assert (px, py) == (x, y)
+            assert (c, sn) == (math.cos(heading), math.sin(heading))
+            i = base + min(max(math.floor(s / routes.spacing), 0), k_max)
+            if routes.tables[4, i + 1] == routes.tables[4, i]:
+                straight += 1
+            else:
+                curved += 1
+    assert straight > 0 and curved > 0  # both ways were taken

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import jit
+from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
 from safeswitch.leftturn.switching import ConflictState
@@ -52,6 +53,9 @@ from safeswitch.sim.world import WorldState
 BoolArray = NDArray[np.bool_]
 IntArray = NDArray[np.int64]
 
+#: The fields of a :class:`TrafficState` that :func:`traffic_tick` writes whole (every slot):
+#: the next tick's state needs no copy of them.
+_TICK_WRITES = ("progress", "speed", "waited", "accel")
 #: The ego's top speed as the other drivers estimate its earliest arrival [m/s].
 EGO_TOP_SPEED = 15.0
 #: Per observed vehicle: present (1/0), x [m], y [m], speed [m/s], heading cos, heading sin.
@@ -141,6 +145,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
         )  # fmt: skip
         super().__init__(config)
         self._ghost_ego = False
+        self._ext_is_ego = np.array([True, False])
+        dt = config.episode.dt
+        #: Ticks between two decisions of a driver (``traffic.action_step_s``).
+        self._action_ticks = round(traffic.action_step_s / dt)
+        if self._action_ticks < 1 or abs(self._action_ticks * dt - traffic.action_step_s) > 1e-9:
+            raise ConfigError(
+                f"traffic.action_step_s={traffic.action_step_s!r} must be a whole number of "
+                f"ticks of episode.dt={dt!r}"
+            )
         self._point = _zone_middles(self.network)
         #: Where a vehicle leaves the scene, per movement [m].
         self._exit_at = np.minimum(
@@ -285,6 +298,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
             y=np.zeros((batch, slots)),
             cos_yaw=np.ones((batch, slots)),
             sin_yaw=np.zeros((batch, slots)),
+            accel=np.zeros((batch, slots)),
             schedule=schedule,
             entered=np.zeros((batch, len(legs)), dtype=np.int64),
         )
@@ -435,21 +449,21 @@ class LeftTurnTrafficTask(LeftTurnTask):
         top = np.empty((batch, 2))
         top[:, 0] = EGO_TOP_SPEED
         top[:, 1] = state.scenarios.north_speed
-        new = tr.copy()
-        accel = np.empty(tr.route.shape)
+        new = tr.copy(overwritten=_TICK_WRITES)
         ext_progress = _ghost(np.ascontiguousarray(world.progress), self._ghost_ego)
         traffic_tick(
             self.tables, self.rules, self.idm.kernel, self.config.episode.dt, tr.route,
             tr.progress, tr.speed, tr.desired, tr.yields, tr.active, tr.waited, externals,
             ext_progress, np.ascontiguousarray(v.speed), top,
-            np.array([True, False]), new.progress, new.speed, new.waited, accel,
+            self._ext_is_ego, state.tick % self._action_ticks == 0, tr.accel, new.progress,
+            new.speed, new.waited, new.accel,
         )  # fmt: skip
         spawn(
             self.tables, self.rules, self.idm.kernel,
             (state.tick + 1).astype(np.float64) * self.config.episode.dt,
             tr.schedule.time, tr.schedule.route, tr.schedule.desired, tr.schedule.yields,
             new.entered, self._exit_at, new.route, new.progress, new.speed, new.desired,
-            new.yields, new.active, new.waited, externals,
+            new.yields, new.active, new.waited, new.accel, externals,
             _ghost(np.ascontiguousarray(new_world.progress), self._ghost_ego),
             np.ascontiguousarray(new_world.vehicles.speed),
         )  # fmt: skip
@@ -526,18 +540,20 @@ def _nearest(
 ) -> None:  # fmt: skip
     """The ``k`` nearest active other vehicles of every scene into ``out[:, 6:]``."""
     slots = x.shape[1]
+    distance = np.empty(slots)  # squared; inf for an empty slot or one already taken
     for b in range(x.shape[0]):
-        taken = np.zeros(slots, dtype=np.bool_)
+        for i in range(slots):
+            distance[i] = (
+                (x[b, i] - ego_x[b]) ** 2 + (y[b, i] - ego_y[b]) ** 2 if active[b, i] else math.inf
+            )
         for n in range(k):
             best, pick = math.inf, -1
             for i in range(slots):
-                if active[b, i] and not taken[i]:
-                    d = (x[b, i] - ego_x[b]) ** 2 + (y[b, i] - ego_y[b]) ** 2
-                    if d < best:
-                        best, pick = d, i
+                if distance[i] < best:
+                    best, pick = distance[i], i
             if pick < 0:
                 break
-            taken[pick] = True
+            distance[pick] = math.inf
             base = 6 + 6 * n
             out[b, base] = 1.0
             out[b, base + 1] = x[b, pick]

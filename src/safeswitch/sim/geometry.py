@@ -385,6 +385,34 @@ def pose(
 
 
 @jit
+def pose_axes(
+    tables: FloatArray, axes: FloatArray, spacing: float, k_max: int, base: int, s: float
+) -> tuple[float, float, float, float]:
+    """:func:`pose` with the heading as its unit vector ``(cos, sin)``: read from ``axes``
+    (:func:`heading_axes`) where the heading does not change over the segment — on straights,
+    no trigonometry — else computed; the same bits either way."""
+    x, y, heading = pose(tables, spacing, k_max, base, s)
+    i = base + min(max(math.floor(s / spacing), 0), k_max)
+    if tables[4, i + 1] == tables[4, i]:  # then heading is tables[4, i] exactly
+        return x, y, axes[0, i], axes[1, i]
+    return x, y, math.cos(heading), math.sin(heading)
+
+
+def heading_axes(tables: FloatArray) -> FloatArray:
+    """``[2, W]``: the cosine and sine of every waypoint's heading (what :func:`pose_axes`
+    reads), computed by the same compiled ``math.cos``/``math.sin`` as its fallback."""
+    out = np.empty((2, tables.shape[1]))
+    _cos_sin(np.ascontiguousarray(tables[4]), out)
+    return out
+
+
+@jit
+def _cos_sin(angles: FloatArray, out: FloatArray) -> None:
+    for i in range(angles.shape[0]):
+        out[0, i], out[1, i] = math.cos(angles[i]), math.sin(angles[i])
+
+
+@jit
 def _map_locate(
     tables: FloatArray,
     spacing: float,

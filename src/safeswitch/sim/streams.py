@@ -2,8 +2,10 @@
 
 Every scene has ``N`` slots of other vehicles (a fixed maximum; unused slots are inactive). A
 vehicle drives along the centre line of its route as a point mass (what SUMO's default model
-does too), ``s' = v``, ``v' = a``, and ``a`` comes from its driver, every tick, in one compiled
-loop over the scenes:
+does too), ``s' = v``, ``v' = a``, advanced every tick in one compiled loop over the scenes.
+``a`` comes from its driver, who decides every ``action_step`` ticks (SUMO's *action step
+length*: on the scene's ticks with ``tick % action_step == 0``) and holds it in between —
+drivers react, they do not re-plan every 20 ms. A decision is:
 
 1. **Car following** — the Intelligent Driver Model (:mod:`safeswitch.sim.idm`) behind the
    nearest vehicle ahead on the same lane: any vehicle, the automated ego included, on a shared
@@ -49,7 +51,7 @@ from numpy.typing import NDArray
 
 from safeswitch.core.arrays import jit
 from safeswitch.sim.collision import separation
-from safeswitch.sim.geometry import FloatArray, pose
+from safeswitch.sim.geometry import FloatArray, heading_axes, pose_axes
 from safeswitch.sim.idm import IDMKernel, idm_accel
 from safeswitch.sim.network import RoadNetwork
 
@@ -98,6 +100,7 @@ class NetworkTables(NamedTuple):
     zones_from: FloatArray  # [R]: where the route's first conflict zone starts
     zones_to: FloatArray  # [R]: where its last one ends
     route_tables: FloatArray  # RouteSet.tables
+    axes: FloatArray  # heading_axes(route_tables)
     spacing: float
     k_max: int
     size: int
@@ -111,8 +114,7 @@ def network_tables(network: RoadNetwork) -> NetworkTables:
         np.ascontiguousarray(network.conflicts),
         network.ranks, network.lengths, network.box_exits,
         np.nanmin(network.conflicts[..., 0], axis=1), np.nanmax(network.conflicts[..., 1], axis=1),
-        routes.tables, routes.spacing,
-        routes.size - 2, routes.size,
+        routes.tables, heading_axes(routes.tables), routes.spacing, routes.size - 2, routes.size,
     )  # fmt: skip
 
 
@@ -147,6 +149,8 @@ class TrafficState:
         yields: Whether the driver yields to the ego (else it ignores the ego at conflicts).
         active: Whether the slot holds a vehicle.
         waited: Time spent slower than :attr:`RightOfWay.slow_speed` before leaving the box [s].
+        accel: The acceleration its driver last decided on, held until the next decision
+            [m/s²] (0 for a vehicle that entered since).
         x: Position east [m].
         y: Position north [m].
         cos_yaw: Heading cosine.
@@ -166,6 +170,7 @@ class TrafficState:
     y: FloatArray
     cos_yaw: FloatArray
     sin_yaw: FloatArray
+    accel: FloatArray
     schedule: ArrivalSchedule
     entered: IntArray
 
@@ -173,11 +178,15 @@ class TrafficState:
     def batch_size(self) -> int:
         return int(self.route.shape[0])
 
-    def copy(self, schedule: bool = False) -> TrafficState:
+    def copy(self, schedule: bool = False, overwritten: tuple[str, ...] = ()) -> TrafficState:
         """A copy of the vehicles (the schedule shared unless ``schedule``: it never changes
-        while a scene runs, and copying it every tick would cost more than the tick)."""
+        while a scene runs, and copying it every tick would cost more than the tick); the
+        fields named in ``overwritten`` are allocated but not filled (for a caller that
+        writes every element of them)."""
         values = {
-            f.name: getattr(self, f.name).copy() for f in fields(self) if f.name != "schedule"
+            f.name: (np.empty_like if f.name in overwritten else np.copy)(getattr(self, f.name))
+            for f in fields(self)
+            if f.name != "schedule"
         }
         plan = self.schedule
         if schedule:
@@ -203,11 +212,9 @@ def _place(
         for i in range(route.shape[1]):
             if not active[b, i]:
                 continue
-            px, py, heading = pose(
-                t.route_tables, t.spacing, t.k_max, route[b, i] * t.size, progress[b, i]
+            x[b, i], y[b, i], c[b, i], s[b, i] = pose_axes(
+                t.route_tables, t.axes, t.spacing, t.k_max, route[b, i] * t.size, progress[b, i]
             )
-            x[b, i], y[b, i] = px, py
-            c[b, i], s[b, i] = math.cos(heading), math.sin(heading)
 
 
 @jit
@@ -245,7 +252,7 @@ def traffic_tick(
     route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
     yields: BoolArray, active: BoolArray, waited: FloatArray,
     ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
-    ext_top: FloatArray, ext_is_ego: BoolArray,
+    ext_top: FloatArray, ext_is_ego: BoolArray, decide: BoolArray, held: FloatArray,
     new_progress: FloatArray, new_speed: FloatArray, new_waited: FloatArray,
     accel_out: FloatArray,
 ) -> None:  # fmt: skip
@@ -253,18 +260,32 @@ def traffic_tick(
     ``ext_*`` arrays ``[B, E]`` are vehicles driven by the plant — the ego, the paper's north
     car — seen by the drivers as they are: their route, arc length, speed and top speed
     [m/s]; ``ext_is_ego`` ``[E]`` marks the automated ego (a non-yielding driver ignores it at
-    conflicts; every other one is given way to by the rules)."""
+    conflicts; every other one is given way to by the rules). Where ``decide`` ``[B]`` is
+    false the drivers of that scene hold their last accelerations ``held`` ``[B, N]``;
+    ``accel_out`` gets each vehicle's acceleration over the tick."""
     scenes, slots = route.shape
     externals = ext_route.shape[1]
+    # A scene's active vehicles gathered first: the pair loops below then skip no empty slots
+    # (visiting them in slot order, as ties between equally near leaders are broken).
+    index = np.empty(slots, dtype=np.int64)
     for b in range(scenes):
+        n = 0
         for i in range(slots):
-            if not active[b, i]:
+            if active[b, i]:
+                index[n] = i
+                n += 1
+            else:
                 new_progress[b, i], new_speed[b, i], accel_out[b, i] = (
                     progress[b, i], speed[b, i], 0.0,
                 )  # fmt: skip
                 new_waited[b, i] = waited[b, i]
-                continue
+        for k in range(n):
+            i = index[k]
             ri, si, vi = route[b, i], progress[b, i], speed[b, i]
+            if not decide[b]:  # between two of its driver's decisions: the last one holds
+                _advance(b, i, ri, si, vi, held[b, i], dt, t, rules, waited, new_progress,
+                         new_speed, new_waited, accel_out)  # fmt: skip
+                continue
             gap, lead_v = math.inf, 0.0
             # 1. the nearest vehicle ahead on the same lane (the ego included)
             for e in range(externals):
@@ -273,8 +294,9 @@ def traffic_tick(
                 g = _leader(t, ri, si, ext_route[b, e], ext_progress[b, e])
                 if g < gap:
                     gap, lead_v = g, ext_speed[b, e]
-            for j in range(slots):
-                if j == i or not active[b, j] or not t.shares[ri, route[b, j]]:
+            for m in range(n):
+                j = index[m]
+                if j == i or not t.shares[ri, route[b, j]]:
                     continue
                 g = _leader(t, ri, si, route[b, j], progress[b, j])
                 if g < gap:
@@ -286,8 +308,9 @@ def traffic_tick(
             my_rank = t.ranks[ri]
             impatient = waited[b, i] >= rules.patience
             heeds = t.zones_from[ri] - si <= rules.look_ahead and si <= t.zones_to[ri]
-            for j in range(-externals, slots if heeds else -externals):
-                if j >= 0 and (j == i or not active[b, j]):
+            for m in range(-externals, n if heeds else -externals):
+                j = index[m] if m >= 0 else m  # an external vehicle when negative
+                if j == i:
                     continue
                 e = j + externals  # the external vehicle's index when j < 0
                 rj = ext_route[b, e] if j < 0 else route[b, j]
@@ -341,16 +364,28 @@ def traffic_tick(
                 # one to follow when it is nearer: it may wait beyond that point)
                 gap, lead_v = stop_at - si, 0.0
             a = idm_accel(vi, desired[b, i], gap if gap < 1e8 else math.inf, lead_v, idm)
-            v_next = vi + a * dt
-            if v_next < 0.0:  # stops within the tick
-                new_progress[b, i] = si + vi * vi / (2.0 * max(-a, 1e-9))
-                new_speed[b, i] = 0.0
-            else:
-                new_progress[b, i] = si + vi * dt + 0.5 * a * dt * dt
-                new_speed[b, i] = v_next
-            accel_out[b, i] = a
-            in_queue = si <= t.box_exits[ri] and new_speed[b, i] < rules.slow_speed
-            new_waited[b, i] = waited[b, i] + dt if in_queue else waited[b, i]
+            _advance(b, i, ri, si, vi, a, dt, t, rules, waited, new_progress, new_speed, new_waited,
+                     accel_out)  # fmt: skip
+
+
+@jit
+def _advance(
+    b: int, i: int, ri: int, si: float, vi: float, a: float, dt: float, t: NetworkTables,
+    rules: RightOfWay, waited: FloatArray, new_progress: FloatArray, new_speed: FloatArray,
+    new_waited: FloatArray, accel_out: FloatArray,
+) -> None:  # fmt: skip
+    """Vehicle ``i`` of scene ``b`` over one tick at acceleration ``a`` [m/s²] (stopping, not
+    reversing, when the speed would go negative)."""
+    v_next = vi + a * dt
+    if v_next < 0.0:  # stops within the tick
+        new_progress[b, i] = si + vi * vi / (2.0 * max(-a, 1e-9))
+        new_speed[b, i] = 0.0
+    else:
+        new_progress[b, i] = si + vi * dt + 0.5 * a * dt * dt
+        new_speed[b, i] = v_next
+    accel_out[b, i] = a
+    in_queue = si <= t.box_exits[ri] and new_speed[b, i] < rules.slow_speed
+    new_waited[b, i] = waited[b, i] + dt if in_queue else waited[b, i]
 
 
 @jit
@@ -364,31 +399,38 @@ def npc_separations(
     first, the separating-axis test only for close pairs."""
     scenes, slots = x.shape
     reach = length + width  # beyond this centre distance two cars cannot touch
+    # The active vehicles of a scene gathered first (their positions side by side): the pair
+    # loop then has no empty slots to skip.
+    index = np.empty(slots, dtype=np.int64)
+    px, py = np.empty(slots), np.empty(slots)
     for b in range(scenes):
-        best = math.inf
+        n = 0
         for i in range(slots):
-            if not active[b, i]:
-                continue
-            dx, dy = x[b, i] - ego_x[b], y[b, i] - ego_y[b]
-            if dx * dx + dy * dy < reach * reach:
+            if active[b, i]:
+                index[n], px[n], py[n] = i, x[b, i], y[b, i]
+                n += 1
+        best, far = math.inf, math.inf  # far: the smallest squared distance beyond reach
+        for k in range(n):
+            dx, dy = px[k] - ego_x[b], py[k] - ego_y[b]
+            square = dx * dx + dy * dy
+            if square < reach * reach:
+                i = index[k]
                 gap = separation(
                     dx, dy, ego_cos[b], ego_sin[b], length, width, cos_yaw[b, i],
                     sin_yaw[b, i], length, width,
                 )  # fmt: skip
                 best = min(best, gap)
             else:
-                best = min(best, math.sqrt(dx * dx + dy * dy) - reach)
-        ego_gap[b] = best
+                far = min(far, square)
+        # one square root for the nearest of the far ones (the root is monotonic)
+        ego_gap[b] = min(best, math.sqrt(far) - reach)
         count = 0
-        for i in range(slots):
-            if not active[b, i]:
-                continue
-            for j in range(i + 1, slots):
-                if not active[b, j]:
-                    continue
-                dx, dy = x[b, j] - x[b, i], y[b, j] - y[b, i]
+        for k in range(n):
+            for m in range(k + 1, n):
+                dx, dy = px[m] - px[k], py[m] - py[k]
                 if dx * dx + dy * dy >= reach * reach:
                     continue
+                i, j = index[k], index[m]
                 if separation(dx, dy, cos_yaw[b, i], sin_yaw[b, i], length, width,
                               cos_yaw[b, j], sin_yaw[b, j], length, width) <= 0.0:  # fmt: skip
                     count += 1
@@ -401,7 +443,7 @@ def spawn(
     arrive_time: FloatArray, arrive_route: IntArray, arrive_desired: FloatArray,
     arrive_yields: BoolArray, entered: IntArray, exit_at: FloatArray,
     route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
-    yields: BoolArray, active: BoolArray, waited: FloatArray,
+    yields: BoolArray, active: BoolArray, waited: FloatArray, accel: FloatArray,
     ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
 ) -> None:  # fmt: skip
     """Retire the vehicles past their exit (``exit_at`` per movement [m]) and let in the
@@ -443,5 +485,5 @@ def spawn(
             route[b, free], progress[b, free], speed[b, free] = r, 0.0, v
             desired[b, free] = arrive_desired[b, leg, n]
             yields[b, free] = arrive_yields[b, leg, n]
-            active[b, free], waited[b, free] = True, 0.0
+            active[b, free], waited[b, free], accel[b, free] = True, 0.0, 0.0
             entered[b, leg] = n + 1
