@@ -1,7 +1,8 @@
 """Traffic from every leg: throughput with many vehicles, and the switching logics' safety.
 
 1. **Throughput.** The batched VecEnv at 4,096 scenes of the ``heavy`` preset (8 to 9 other
-   vehicles per scene on average; the mean is measured and printed) and of the ``dense``
+   vehicles per scene on average; the mean is measured and printed), of the same with drivers
+   deciding every tick instead of every 0.1 s (``traffic.action_step_s``) and of the ``dense``
    setting below (about 12) against the paper's scene in the same run, uniform random actions,
    one core, 250 ticks into the episodes; the single Env likewise.
 2. **Safety.** Every adversary of ``safeswitch.evaluation.adversaries`` drives whole 30 s
@@ -83,6 +84,7 @@ def env_throughput(traffic: object, seconds: float) -> float:
 def throughput(seconds: float) -> dict[str, object]:
     plain, _ = vec_throughput(None, seconds)
     heavy, heavy_vehicles = vec_throughput("heavy", seconds)
+    per_tick, _ = vec_throughput({"preset": "heavy", "action_step_s": 0.02}, seconds)
     dense, vehicles = vec_throughput(DENSE, seconds)
     single_plain = env_throughput(None, seconds)
     single_heavy = env_throughput("heavy", seconds)
@@ -90,6 +92,8 @@ def throughput(seconds: float) -> dict[str, object]:
         "vec_env_4096_paper_scene_steps_per_s": plain,
         "vec_env_4096_heavy_traffic_steps_per_s": heavy,
         "heavy_mean_other_vehicles": heavy_vehicles,
+        "vec_env_4096_heavy_traffic_drivers_every_tick_steps_per_s": per_tick,
+        "action_step_speedup": heavy / per_tick,
         "vec_env_4096_dense_traffic_steps_per_s": dense,
         "dense_mean_other_vehicles": vehicles,
         "heavy_to_paper_scene_ratio": heavy / plain,
@@ -98,7 +102,8 @@ def throughput(seconds: float) -> dict[str, object]:
     }
     print(
         f"VecEnv 4096: paper scene {plain:,.0f} steps/s; heavy traffic {heavy:,.0f} steps/s "
-        f"({heavy_vehicles:.1f} other vehicles per scene on average; ratio {heavy / plain:.2f}); "
+        f"({heavy_vehicles:.1f} other vehicles per scene on average; ratio {heavy / plain:.2f}; "
+        f"drivers deciding every tick {per_tick:,.0f}, {heavy / per_tick:.2f}x slower); "
         f"dense {dense:,.0f} ({vehicles:.1f} vehicles); single Env {single_plain:,.0f} / "
         f"{single_heavy:,.0f} steps/s",
         file=sys.stderr,
