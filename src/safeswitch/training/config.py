@@ -167,6 +167,34 @@ class WarmStartConfig:
 
 
 @dataclass(frozen=True)
+class ValidationConfig:
+    """Model selection on a validation set (ours; off by default). Every ``every`` timesteps
+    the deterministic policy drives ``episodes`` random scenarios that are neither trained on
+    nor tested on, and the run keeps the policy with the highest mean return there — the
+    paper's own criterion: "the non-normalized cumulative reward is the main criteria for
+    learned model validation" (Section V). PPO's policy moves between basins late in a run
+    (docs/learning_experiments.md); the last policy is not always the best one.
+
+    Attributes:
+        every: Timesteps between two validations (0: none; the run's policy is its last).
+        episodes: Scenarios of the validation set.
+        seed: Their seed (differs from the training seed and from ``eval_seed``).
+        start: Timesteps before the first validation (early policies are no candidates).
+    """
+
+    every: int = 0
+    episodes: int = 500
+    seed: int = 2_000_003
+    start: int = 0
+
+    def __post_init__(self) -> None:
+        o = "validation"
+        check(self.every >= 0, o, "every", self.every, "must be >= 0 (0: no validation)")
+        check(self.episodes >= 1, o, "episodes", self.episodes, "must be >= 1")
+        check(self.start >= 0, o, "start", self.start, "must be >= 0")
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     """One training run.
 
@@ -180,6 +208,7 @@ class TrainConfig:
         eval_seed: Seed of the final evaluation's scenarios (never used in training).
         ppo: PPO hyper-parameters.
         warm_start: Behaviour cloning of the planner before PPO (off by default).
+        validation: Selection of the run's policy on a validation set (off by default).
         env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
         traffic: Traffic from every leg (``null``: the paper's scene): a preset's name or a
             mapping of :class:`~safeswitch.leftturn.config.TrafficConfig` settings (``preset``
@@ -195,6 +224,7 @@ class TrainConfig:
     eval_seed: int = 1_000_003
     ppo: PPOConfig = field(default_factory=PPOConfig)
     warm_start: WarmStartConfig = field(default_factory=WarmStartConfig)
+    validation: ValidationConfig = field(default_factory=ValidationConfig)
     env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
     traffic: str | dict[str, Any] | None = None
 
@@ -223,6 +253,10 @@ class TrainConfig:
             self.n_envs,
             f"times ppo.n_steps ({self.ppo.n_steps}) must be divisible by ppo.n_minibatches",
         )
+        v = self.validation
+        if v.every:
+            check(v.seed not in (self.seed, self.eval_seed), "validation", "seed", v.seed,
+                  "must differ from the training seed and eval_seed")  # fmt: skip
 
     @property
     def batch_size(self) -> int:

@@ -5,10 +5,13 @@ Run directory::
 
     config.yaml          the resolved configuration
     progress.csv         one row per rollout (see training.callbacks)
+    validation.csv       one row per validation (with ``validation.every``; training.validation)
+    best/                the best validated policy so far (model.zip, vecnormalize.pkl, its score)
+    last/                the last policy, when the run's policy is the best validated one
     tb/                  TensorBoard logs
     checkpoints/step_N/  model.zip, vecnormalize.pkl, state.json (written whole, then renamed)
     warm_start.json      what the warm start did (if configured; written before PPO starts)
-    model.zip            final policy
+    model.zip            the run's policy: the last one, or the best validated one
     vecnormalize.pkl     its observation/reward statistics
     training_curves.png  the paper's Fig. 5 from progress.csv (drawn by the train command)
     metrics.json         written last: a run is complete exactly when this file exists
@@ -37,6 +40,7 @@ from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
+from safeswitch.training.validation import Validator, select_best
 from safeswitch.training.warm_start import warm_start
 
 
@@ -270,12 +274,18 @@ def train(
     if checkpoint is None and config.warm_start.episodes > 0:
         write_atomic(run / "warm_start.json", json.dumps(warm_start(model, env, config), indent=2))
         _save_checkpoint(run, model, env, vec, monitor)  # --resume starts after the warm start
+    validator = Validator(config, run) if config.validation.every else None
     learn(
         model, run, config.timesteps, monitor,
         lambda: _save_checkpoint(run, model, env, vec, monitor), resume, progress_bar,
+        extra=[validator] if validator is not None else None,
     )  # fmt: skip
     wall = monitor.wall_time_s
     save_final(run, model, env)
+    selected = None
+    if validator is not None and validator.state["best_timesteps"] is not None:
+        select_best(run)
+        selected = {"validation_seed": config.validation.seed, **validator.state}
 
     started = time.perf_counter()
     evaluation = (
@@ -298,6 +308,7 @@ def train(
             if (run / "warm_start.json").is_file()
             else None
         ),
+        "selected": selected,
         "training": {
             "collisions": int(t["collisions"]),
             "collision_episodes": int(t["collision_episodes"]),

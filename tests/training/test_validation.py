@@ -1,0 +1,81 @@
+"""Model selection on a validation set: the run's policy is the best validated one."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from safeswitch.cli import main
+from safeswitch.core.config import ConfigError, from_dict
+from safeswitch.evaluation.evaluate import run_controller
+from safeswitch.leftturn.task import build_task
+from safeswitch.training.config import TrainConfig
+from safeswitch.training.policies import load_policy
+from safeswitch.training.run import train
+
+SMALL = {
+    "timesteps": 4096,
+    "n_envs": 8,
+    "seed": 3,
+    "checkpoint_every": 2048,
+    "eval_episodes": 20,
+    "torch_threads": 1,
+    "validation": {"every": 1024, "episodes": 30, "seed": 2_000_003},
+    "env": {"episode": {"learned_scope": "episode", "horizon_s": 2.0}},
+}
+
+
+def rows(run):
+    with open(run / "validation.csv", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
+def validation_return(run, config):
+    """The run's policy on the validation scenarios, evaluated afresh from its files."""
+    task = build_task(None, config.env)
+    v = config.validation
+    scenarios = task.draw_scenarios(v.seed, np.arange(v.episodes), np.zeros(v.episodes, int))
+    result, _ = run_controller(task, load_policy(run).as_policy(), scenarios, trace=False)
+    return float(result.episode_return.mean())
+
+
+def test_the_best_validated_policy_becomes_the_runs_policy(tmp_path):
+    config = from_dict(TrainConfig, SMALL)
+    run = tmp_path / "run"
+    metrics = train(config, run, progress_bar=False)
+    table = rows(run)
+    assert [int(r["timesteps"]) for r in table] == [1024, 2048, 3072, 4096]
+    returns = [float(r["mean_return"]) for r in table]
+    # a row is flagged exactly when it beats every earlier one
+    assert [r["best"] == "1" for r in table] == [
+        k == 0 or returns[k] > max(returns[:k]) for k in range(len(returns))
+    ]
+    chosen = int(np.argmax(returns))
+    assert metrics["selected"]["best_timesteps"] == int(table[chosen]["timesteps"])
+    assert metrics["selected"]["best_return"] == pytest.approx(returns[chosen])
+    assert (run / "model.zip").read_bytes() == (run / "best" / "model.zip").read_bytes()
+    assert (run / "last" / "model.zip").is_file()
+    # the files that ship are the policy that was validated: same return on the same scenarios
+    assert validation_return(run, config) == pytest.approx(returns[chosen], rel=1e-9)
+
+
+def test_a_resumed_run_keeps_the_best_it_had(tmp_path, interrupted_training):
+    config = from_dict(TrainConfig, SMALL | {"timesteps": 6144})
+    run = tmp_path / "run"
+    interrupted_training(config, run, at=3072)
+    before = json.loads((run / "best" / "state.json").read_text())
+    assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["selected"]["best_return"] >= before["best_return"]
+    returns = [float(r["mean_return"]) for r in rows(run)]
+    assert metrics["selected"]["best_return"] == pytest.approx(max(returns))
+
+
+def test_the_validation_set_is_neither_trained_nor_tested_on():
+    with pytest.raises(ConfigError, match=r"validation\.seed"):
+        from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "seed": 1_000_003}})
+    with pytest.raises(ConfigError, match=r"validation\.seed"):
+        from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "seed": 3}})
+    with pytest.raises(ConfigError, match="every"):
+        from_dict(TrainConfig, SMALL | {"validation": {"every": -1}})
