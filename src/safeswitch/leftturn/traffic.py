@@ -301,6 +301,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
             accel=np.zeros((batch, slots)),
             schedule=schedule,
             entered=np.zeros((batch, len(legs)), dtype=np.int64),
+            next_arrival=schedule.time[:, :, 0].min(axis=1),
         )
         place(self.tables, state)
         return state
@@ -462,8 +463,8 @@ class LeftTurnTrafficTask(LeftTurnTask):
             self.tables, self.rules, self.idm.kernel,
             (state.tick + 1).astype(np.float64) * self.config.episode.dt,
             tr.schedule.time, tr.schedule.route, tr.schedule.desired, tr.schedule.yields,
-            new.entered, self._exit_at, new.route, new.progress, new.speed, new.desired,
-            new.yields, new.active, new.waited, new.accel, externals,
+            new.entered, new.next_arrival, self._exit_at, new.route, new.progress, new.speed,
+            new.desired, new.yields, new.active, new.waited, new.accel, externals,
             _ghost(np.ascontiguousarray(new_world.progress), self._ghost_ego),
             np.ascontiguousarray(new_world.vehicles.speed),
         )  # fmt: skip

@@ -157,6 +157,8 @@ class TrafficState:
         sin_yaw: Heading sine.
         schedule: The vehicles still to come (read-only while a scene runs).
         entered: How many of each leg's scheduled vehicles have entered ``[B, L]``.
+        next_arrival: When the next scheduled vehicle of the scene is due [s] ``[B]`` (what
+            :func:`spawn` checks before it reads the schedule; :func:`soonest_arrival`).
     """
 
     route: IntArray
@@ -173,6 +175,7 @@ class TrafficState:
     accel: FloatArray
     schedule: ArrivalSchedule
     entered: IntArray
+    next_arrival: FloatArray
 
     @property
     def batch_size(self) -> int:
@@ -271,21 +274,20 @@ def traffic_tick(
     for b in range(scenes):
         n = 0
         for i in range(slots):
-            if active[b, i]:
-                index[n] = i
-                n += 1
-            else:
+            if not active[b, i]:
                 new_progress[b, i], new_speed[b, i], accel_out[b, i] = (
                     progress[b, i], speed[b, i], 0.0,
                 )  # fmt: skip
                 new_waited[b, i] = waited[b, i]
+            elif not decide[b]:  # between two of its driver's decisions: the last one holds
+                _advance(b, i, route[b, i], progress[b, i], speed[b, i], held[b, i], dt, t,
+                         rules, waited, new_progress, new_speed, new_waited, accel_out)  # fmt: skip
+            else:
+                index[n] = i
+                n += 1
         for k in range(n):
             i = index[k]
             ri, si, vi = route[b, i], progress[b, i], speed[b, i]
-            if not decide[b]:  # between two of its driver's decisions: the last one holds
-                _advance(b, i, ri, si, vi, held[b, i], dt, t, rules, waited, new_progress,
-                         new_speed, new_waited, accel_out)  # fmt: skip
-                continue
             gap, lead_v = math.inf, 0.0
             # 1. the nearest vehicle ahead on the same lane (the ego included)
             for e in range(externals):
@@ -441,19 +443,23 @@ def npc_separations(
 def spawn(
     t: NetworkTables, rules: RightOfWay, idm: IDMKernel, now: FloatArray,
     arrive_time: FloatArray, arrive_route: IntArray, arrive_desired: FloatArray,
-    arrive_yields: BoolArray, entered: IntArray, exit_at: FloatArray,
+    arrive_yields: BoolArray, entered: IntArray, next_arrival: FloatArray, exit_at: FloatArray,
     route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
     yields: BoolArray, active: BoolArray, waited: FloatArray, accel: FloatArray,
     ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
 ) -> None:  # fmt: skip
     """Retire the vehicles past their exit (``exit_at`` per movement [m]) and let in the
-    scheduled ones whose time ``now`` ``[B]`` has come (see the module docstring), in place."""
+    scheduled ones whose time ``now`` ``[B]`` has come (see the module docstring), in place;
+    ``next_arrival`` ``[B]`` is kept at the soonest time a scene's schedule has anything due
+    (scenes with nothing due skip their schedule: reading it is a cache miss per leg)."""
     scenes, slots = route.shape
     legs, most = arrive_time.shape[1], arrive_time.shape[2]
     for b in range(scenes):
         for i in range(slots):
             if active[b, i] and progress[b, i] >= exit_at[route[b, i]]:
                 active[b, i] = False
+        if next_arrival[b] > now[b]:
+            continue
         for leg in range(legs):
             n = entered[b, leg]
             if n >= most or arrive_time[b, leg, n] > now[b]:
@@ -487,3 +493,17 @@ def spawn(
             yields[b, free] = arrive_yields[b, leg, n]
             active[b, free], waited[b, free], accel[b, free] = True, 0.0, 0.0
             entered[b, leg] = n + 1
+        next_arrival[b] = soonest_arrival(arrive_time, entered, b)
+
+
+@jit
+def soonest_arrival(arrive_time: FloatArray, entered: IntArray, b: int) -> float:
+    """The soonest time a vehicle is due to enter scene ``b`` [s] (``inf``: none left): the
+    earliest of every leg's next scheduled arrival (one that has not found room yet stays
+    due)."""
+    soonest = math.inf
+    for leg in range(arrive_time.shape[1]):
+        n = entered[b, leg]
+        if n < arrive_time.shape[2]:
+            soonest = min(soonest, arrive_time[b, leg, n])
+    return soonest
