@@ -2,10 +2,11 @@
 
 Trains ``--config`` (default ``experimental/scratch_annealed_noise``) once per ``--seeds``
 value (optionally under another ``--switching``) into a temporary run directory, one torch
-thread, and collects each run's ``metrics.json``: training collisions and safety episodes, and
-the deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic
+thread, and collects each run's ``metrics.json``: training collisions and safety episodes, the
+step of the policy the run selected on its validation set (if it validates), and the
+deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic
 trained with): collisions, safety episodes, comfort, full stops, cuts, cleared, efficiency.
-Every seed's row is reported, none is selected. About 2 minutes per seed alone on an idle
+Every seed's row is reported (no seed is picked over another). About 2 minutes per seed alone on an idle
 two-core machine.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
@@ -39,6 +40,7 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         "training_collision_episodes": t["collision_episodes"],
         "training_safety_episodes": t["safety_activation_episodes"],
         "training_episodes": t["episodes"],
+        "selected_timesteps": (metrics.get("selected") or {}).get("best_timesteps"),
         **{k: e[k] for k in (
             "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
             "cut_episodes", "cleared_episodes", "mean_efficiency",

@@ -399,7 +399,7 @@ class TrafficConfig:
             length*; the plant, the ego and its switching logic keep the episode's tick). A
             multiple of the tick; one tick decides on every tick. Ours: 0.1 s, five times
             finer than human reaction times (about 1 s) and than SUMO's default one-second
-            step, and 1.3 times the throughput of deciding every 20 ms
+            step, and about 1.7 times the throughput of deciding every 20 ms
             (``benchmarks/bench_traffic.py``).
         exit_distance_m: A vehicle leaves the scene this far past the box [m].
         horizon_s: Episode length in traffic [s], in place of ``episode.horizon_s`` (waiting
