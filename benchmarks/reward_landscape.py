@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import sys
 from typing import Any
 
@@ -73,7 +74,7 @@ def by_offset(model: str, task: Any, scenarios: Any, plan: Any, limit: Any) -> d
     bound = efficiency(plan.time_to_clear, limit, horizon)
     offset = scenarios.arrival_offset
     bins = []
-    for low, high in zip(OFFSETS[:-1], OFFSETS[1:], strict=True):
+    for low, high in itertools.pairwise(OFFSETS):
         m = (offset >= low) & (offset < high)
         bins.append({
             "offset_s": [float(low), float(high)],
@@ -121,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print(f"reward of {args.config}; {EPISODES} scenarios, seed {SEED}")
     for row in result["planners"]:
-        print(f"  planner {str(row['planner']):45} return {row['mean_return']:7.1f}  "
+        print(f"  planner {row['planner']!s:45} return {row['mean_return']:7.1f}  "
               f"efficiency {row['mean_efficiency']:.3f}  cuts {row['cut_episodes']:3}  "
               f"safety {row['safety_activation_episodes']}")  # fmt: skip
     for entry in result["models"]:

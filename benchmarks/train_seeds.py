@@ -6,8 +6,8 @@ thread, and collects each run's ``metrics.json``: training collisions and safety
 step of the policy the run selected on its validation set (if it validates), and the
 deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic
 trained with): collisions, safety episodes, comfort, full stops, cuts, cleared, efficiency.
-Every seed's row is reported (no seed is picked over another). About 2 minutes per seed alone on an idle
-two-core machine.
+Every seed's row is reported (no seed is picked over another). 2 to 4 minutes per seed on a
+two-core machine, by recipe.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
 [--out FILE]``; writes ``benchmarks/results/train_seeds_<config>[_<switching>].json``.
