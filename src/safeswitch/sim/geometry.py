@@ -368,14 +368,20 @@ def _map_pose(
 
 
 @jit
+def _segment(spacing: float, k_max: int, base: int, s: float) -> tuple[int, float]:
+    """The flat index of the waypoint that starts the segment holding arc length ``s`` on the
+    route starting at ``base``, and how far into the segment ``s`` lies [m]."""
+    k = min(max(math.floor(s / spacing), 0), k_max)
+    return base + k, s - k * spacing
+
+
+@jit
 def pose(
     tables: FloatArray, spacing: float, k_max: int, base: int, s: float
 ) -> tuple[float, float, float]:
     """Position [m] and heading [rad] at arc length ``s`` on the route starting at flat
     waypoint ``base`` (linear between waypoints)."""
-    k = min(max(math.floor(s / spacing), 0), k_max)
-    i = base + k
-    frac = s - k * spacing
+    i, frac = _segment(spacing, k_max, base, s)
     h0 = tables[4, i]
     return (
         tables[0, i] + frac * tables[2, i],
@@ -392,7 +398,7 @@ def pose_axes(
     (:func:`heading_axes`) where the heading does not change over the segment — on straights,
     no trigonometry — else computed; the same bits either way."""
     x, y, heading = pose(tables, spacing, k_max, base, s)
-    i = base + min(max(math.floor(s / spacing), 0), k_max)
+    i, _ = _segment(spacing, k_max, base, s)
     if tables[4, i + 1] == tables[4, i]:  # then heading is tables[4, i] exactly
         return x, y, axes[0, i], axes[1, i]
     return x, y, math.cos(heading), math.sin(heading)

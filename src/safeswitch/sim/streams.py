@@ -158,7 +158,7 @@ class TrafficState:
         schedule: The vehicles still to come (read-only while a scene runs).
         entered: How many of each leg's scheduled vehicles have entered ``[B, L]``.
         next_arrival: When the next scheduled vehicle of the scene is due [s] ``[B]`` (what
-            :func:`spawn` checks before it reads the schedule; :func:`soonest_arrival`).
+            :func:`spawn` checks before it reads the schedule).
     """
 
     route: IntArray
@@ -268,8 +268,9 @@ def traffic_tick(
     ``accel_out`` gets each vehicle's acceleration over the tick."""
     scenes, slots = route.shape
     externals = ext_route.shape[1]
-    # A scene's active vehicles gathered first: the pair loops below then skip no empty slots
-    # (visiting them in slot order, as ties between equally near leaders are broken).
+    # On a decision tick a scene's active vehicles are gathered first: the pair loops below
+    # then skip no empty slots (visiting them in slot order, as ties between equally near
+    # leaders are broken).
     index = np.empty(slots, dtype=np.int64)
     for b in range(scenes):
         n = 0
@@ -493,11 +494,11 @@ def spawn(
             yields[b, free] = arrive_yields[b, leg, n]
             active[b, free], waited[b, free], accel[b, free] = True, 0.0, 0.0
             entered[b, leg] = n + 1
-        next_arrival[b] = soonest_arrival(arrive_time, entered, b)
+        next_arrival[b] = _soonest_arrival(arrive_time, entered, b)
 
 
 @jit
-def soonest_arrival(arrive_time: FloatArray, entered: IntArray, b: int) -> float:
+def _soonest_arrival(arrive_time: FloatArray, entered: IntArray, b: int) -> float:
     """The soonest time a vehicle is due to enter scene ``b`` [s] (``inf``: none left): the
     earliest of every leg's next scheduled arrival (one that has not found room yet stays
     due)."""
