@@ -175,6 +175,13 @@ def test_evaluate_in_traffic_and_on_sumo(capsys):
     assert summary["mean_min_pet_s"] is None or summary["mean_min_pet_s"] > 0
     assert main(["evaluate", "--controller", "rule", "--traffic", "rush", "--episodes", "4"]) == 2
     assert "rush" in error_line(capsys)
+    # the gap planner: certified by default, never needs the filter; only in traffic
+    assert main(["evaluate", "--controller", "gap_planner", "--traffic", "train", "--episodes",
+                 "6", "--json"]) == 0  # fmt: skip
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["switching"] == "certified" and summary["safety_activation_episodes"] == 0
+    assert main(["evaluate", "--controller", "gap_planner", "--episodes", "2"]) == 2
+    assert "needs a task in traffic" in error_line(capsys)
     pytest.importorskip("libsumo")
     assert main(["evaluate", "--model", "shipped", "--sim", "sumo", "--episodes", "3",
                  "--json"]) == 0  # fmt: skip

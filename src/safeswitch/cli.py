@@ -402,10 +402,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument(
         "--controller",
-        choices=("learned", "rule", "planner", "oracle"),
+        choices=("learned", "rule", "planner", "gap_planner", "oracle"),
         default="learned",
         help="learned: a trained policy (--model); rule: PID_th under the paper switching logic; "
         "planner: a throttle-only rule-based planner that avoids the paper logic's braking; "
+        "gap_planner: in traffic (--traffic), waits for a gap the certified filter accepts; "
         "oracle: the minimum-time crossing planned with knowledge of the north car",
     )
     ev.add_argument("--env", help=f"a Gymnasium id (default {LEFT_TURN})")
@@ -435,7 +436,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     render = sub.add_parser("render", help="animate one episode of a controller as a GIF")
     render.add_argument("--model", help="a trained policy (as for evaluate)")
-    render.add_argument("--controller", choices=("learned", "rule", "planner"), default="learned")
+    render.add_argument(
+        "--controller", choices=("learned", "rule", "planner", "gap_planner"), default="learned"
+    )
     render.add_argument(
         "--scenario",
         default="cut",

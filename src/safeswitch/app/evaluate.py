@@ -21,6 +21,7 @@ from safeswitch.evaluation.evaluate import (
 from safeswitch.evaluation.metrics import SummaryAccumulator
 from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.rollout import Policy
+from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.io import prepare_output_dir, write_json
 from safeswitch.leftturn.config import (
     SCENARIO_NAMES,
@@ -93,12 +94,14 @@ def traffic_setup(
 def fit_observations(policy: Policy | None, model: str | None, task: LeftTurnTask) -> Policy | None:
     """A trained policy's observations cut to what it was trained on: a policy trained in the
     paper's scene sees the paper's six values of a scene with traffic (the other vehicles
-    reach it only through the switching logic).
+    reach it only through the switching logic). The gap planner is bound to ``task`` here.
 
     Raises:
         ValueError: The policy expects more than the task observes (trained in traffic,
             evaluated without, or with fewer observed vehicles).
     """
+    if isinstance(policy, UnboundGapPlanner):
+        return policy.bind(task)
     if policy is None or model is None:
         return policy
     expected = int(np.prod(load_policy(model).model.observation_space.shape or (6,)))

@@ -22,6 +22,7 @@ from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import Oracle, OraclePlan
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
+from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.leftturn.config import SCENARIO_NAMES, LearnedScope, LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask, StepRecord, TaskState
@@ -32,7 +33,7 @@ from safeswitch.sim.geometry import FloatArray
 CHUNK = 4096
 
 #: The rule-based controllers and the oracle (``safeswitch evaluate --controller``).
-BASELINES: tuple[str, ...] = ("rule", "planner", "oracle")
+BASELINES: tuple[str, ...] = ("rule", "planner", "gap_planner", "oracle")
 
 
 def _rule_policy(obs: Any, state: Any, tick: int) -> Any:
@@ -63,16 +64,21 @@ def baseline_setup(
 ) -> tuple[LeftTurnConfig, Policy | None]:
     """The task configuration and policy of a rule-based controller: ``rule`` (``PID_th``
     proposes throughout), ``planner`` (drives with the learned controller's throttle
-    throughout) or ``oracle`` (plans instead of acting: the policy is ``None``), under the
-    ``paper`` logic unless ``switching`` names another."""
+    throughout), ``gap_planner`` (the same, in traffic; unbound until its task is built:
+    :func:`~safeswitch.app.evaluate.fit_observations` binds it) or ``oracle`` (plans instead of
+    acting: the policy is ``None``), under the ``paper`` logic (``certified`` for the gap
+    planner) unless ``switching`` names another."""
     if controller not in BASELINES:
         raise ValueError(f"controller {controller!r} is not one of {', '.join(BASELINES)}")
-    scope: LearnedScope = "episode" if controller == "planner" else "never"
-    env_config = replace(LeftTurnConfig(), switching=switching or "paper")
+    scope: LearnedScope = "episode" if controller in ("planner", "gap_planner") else "never"
+    default = "certified" if controller == "gap_planner" else "paper"
+    env_config = replace(LeftTurnConfig(), switching=switching or default)
     env_config = replace(env_config, episode=replace(env_config.episode, learned_scope=scope))
     policy: Policy | None = None
     if controller == "planner":
         policy = Planner(LeftTurnTask(env_config))
+    elif controller == "gap_planner":
+        policy = UnboundGapPlanner()
     elif controller == "rule":
         policy = _rule_policy
     return replace(env_config, scenario=None), policy

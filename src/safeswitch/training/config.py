@@ -19,6 +19,7 @@ import yaml
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
 from safeswitch.core.registry import logic_names
 from safeswitch.evaluation.planner import PlannerConfig
+from safeswitch.evaluation.traffic_planner import GapPlannerConfig
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig, traffic_config
 
 
@@ -128,6 +129,10 @@ class PPOConfig:
             raise ConfigError(f"ppo.activation={self.activation!r} is not 'tanh' or 'relu'")
 
 
+#: Values of ``warm_start.teacher``.
+TEACHERS = ("planner", "gap_planner")
+
+
 @dataclass(frozen=True)
 class WarmStartConfig:
     """Behaviour cloning of the planner before PPO (ours; see
@@ -139,9 +144,14 @@ class WarmStartConfig:
             the certified switching logic, and the planner labels).
         epochs: Passes over all labels so far after each round.
         learning_rate: Adam step size of the cloning.
+        teacher: Who demonstrates and labels: ``planner`` (the single-car scene's planner,
+            which sees only the north car) or ``gap_planner`` (the gap planner of
+            :mod:`safeswitch.evaluation.traffic_planner`, which waits for a gap the certified
+            filter accepts among all the traffic; needs ``traffic``).
         planner: Tuning of the planner that demonstrates and labels (default: the evaluation
             baseline's). A lower ``accel_lat`` leaves the clone, which tracks the planner's
             turn speed only approximately, a margin below the lateral comfort limit.
+        gap_planner: Tuning of the gap planner (``teacher: gap_planner``).
         freeze_obs_stats: Keep ``VecNormalize``'s observation statistics at the
             demonstrations' for the rest of the run. The clone was fitted to inputs normalised
             with exactly these; left running, they drift with PPO's state distribution and
@@ -153,7 +163,9 @@ class WarmStartConfig:
     rounds: int = 2
     epochs: int = 8
     learning_rate: float = 1e-3
+    teacher: str = "planner"
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    gap_planner: GapPlannerConfig = field(default_factory=GapPlannerConfig)
     freeze_obs_stats: bool = True
 
     def __post_init__(self) -> None:
@@ -161,6 +173,7 @@ class WarmStartConfig:
         check(self.episodes >= 0, o, "episodes", self.episodes, "must be >= 0")
         check(self.rounds >= 0, o, "rounds", self.rounds, "must be >= 0")
         check(self.epochs >= 1, o, "epochs", self.epochs, "must be >= 1")
+        check(self.teacher in TEACHERS, o, "teacher", self.teacher, f"must be one of {TEACHERS}")
         check(
             0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
         )
@@ -253,6 +266,9 @@ class TrainConfig:
             self.n_envs,
             f"times ppo.n_steps ({self.ppo.n_steps}) must be divisible by ppo.n_minibatches",
         )
+        if self.warm_start.episodes and self.warm_start.teacher == "gap_planner":
+            check(self.traffic is not None, "warm_start", "teacher", self.warm_start.teacher,
+                  "needs traffic (the single-car scene has teacher: planner)")  # fmt: skip
         v = self.validation
         if v.every:
             check(v.seed not in (self.seed, self.eval_seed), "validation", "seed", v.seed,

@@ -1,4 +1,4 @@
-"""Warm start: behaviour cloning of the planner into the PPO actor before PPO begins (ours).
+"""Warm start: behaviour cloning of a planner into the PPO actor before PPO begins (ours).
 
 PPO from a random initialisation lands, on this task, in one of two basins: always yield
 (safe, comfortable, slow) or cut and lean on the Safety controller (README, Training). The
@@ -14,6 +14,10 @@ under the paper logic, so the actor first learns to imitate it:
    filter's backup keeps its states near the ones it will meet;
 3. after each round the actor is fitted to all labels so far (mean squared error of the
    Gaussian's mean, ``epochs`` passes, Adam).
+
+In traffic the teacher can be the gap planner (``teacher: gap_planner``,
+:mod:`safeswitch.evaluation.traffic_planner`), which waits for a gap the certified filter
+accepts among all the vehicles; the planner sees only the north car.
 
 The observation statistics of ``VecNormalize`` are set from the demonstrations, so the clone
 sees exactly the inputs PPO will give it, and by default stay so for the whole run
@@ -35,6 +39,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import Policy, rollout
+from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.leftturn.task import TaskState, build_task
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.ppo import SwitchPPO
@@ -87,7 +92,7 @@ def fit_actor(
 
 
 def _labelling_driver(
-    planner: Planner,
+    planner: Policy,
     learner: tuple[SwitchPPO, NDArray[np.float64], NDArray[np.float64]] | None,
     store: tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]],
 ) -> Policy:
@@ -120,7 +125,11 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
     # the training task, in traffic too (the clone then sees the traffic observation)
     traffic = config.traffic_settings
     task = build_task(None, config.env, traffic=traffic)
-    planner = Planner(task, ws.planner)
+    planner: Policy = (
+        GapPlanner(task, ws.gap_planner)
+        if ws.teacher == "gap_planner"
+        else Planner(task, ws.planner)
+    )
     learner_task = build_task(
         None, dataclasses.replace(config.env, switching="certified"), traffic=traffic
     )

@@ -1,0 +1,62 @@
+"""Driving in traffic from every leg under the certified filter: who clears, and how often the
+filter has to act.
+
+On the same random scenes (seed 1000003, the README's) of the ``train`` and ``test`` traffic
+families, under ``certified``: the gap planner (``--controller gap_planner``), the rule-based
+system (``PID_th`` proposing throughout) and any trained policies given with ``--model`` (run
+directories; each under the logic it was trained with). Every row is ``safeswitch evaluate``'s
+summary, cut to the fields the README quotes.
+
+Run: ``python benchmarks/traffic_certified.py [--episodes N] [--model RUN ...] [--json]``
+(about five minutes at the default 1,000 scenes per family); writes
+``benchmarks/results/traffic_certified.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import _common
+from safeswitch.app.evaluate import evaluate
+from safeswitch.app.reproduce import EVAL_SEED
+from safeswitch.io import write_json
+
+RESULTS = Path(__file__).parent / "results" / "traffic_certified.json"
+FAMILIES = ("train", "test")
+FIELDS = ("switching", "episodes", "collisions", "safety_activation_episodes", "cleared_episodes",
+          "stops", "comfort_violation_fraction", "mean_efficiency", "mean_time_to_clear_s")  # fmt: skip
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--model", nargs="*", default=[], help="trained runs to add")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args(argv)
+    runs: list[tuple[str, str, str | None, str | None]] = [
+        ("gap_planner", "gap_planner", None, None),
+        ("rule", "rule", None, "certified"),
+        *((f"learned:{m}", "learned", m, None) for m in args.model),
+    ]
+    rows = []
+    for family in FAMILIES:
+        for name, controller, model, switching in runs:
+            began = time.perf_counter()
+            summary = evaluate(controller, model, "random", args.episodes, EVAL_SEED, switching,
+                               None, traffic=family)  # fmt: skip
+            row = {"controller": name, "traffic": family, **{k: summary[k] for k in FIELDS}}
+            row["wall_time_s"] = round(time.perf_counter() - began, 1)
+            rows.append(row)
+            print(row, file=sys.stderr, flush=True)
+    result = {"benchmark": "traffic_certified", **_common.machine(), "seed": EVAL_SEED,
+              "rows": rows}  # fmt: skip
+    write_json(RESULTS, result)
+    _common.emit(result, args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""The gap planner: in traffic, a throttle-only controller that waits for a gap the certified
+filter accepts, so that the filter never has to act."""
+
+import numpy as np
+import pytest
+
+from safeswitch.core.config import ConfigError, from_dict
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.evaluation.traffic_planner import GapPlanner, GapPlannerConfig
+from safeswitch.leftturn.task import build_task
+from safeswitch.training.config import TrainConfig
+
+SCENES = 24
+CERTIFIED = {"switching": "certified", "episode": {"learned_scope": "episode"}}
+
+
+@pytest.fixture(scope="module")
+def drive():
+    """24 `train` scenes (20 s) under `certified` driven by the gap planner, with each tick's
+    ego progress and whether the planner had decided to go."""
+    task = build_task(None, CERTIFIED, traffic={"preset": "train", "horizon_s": 20.0})
+    planner = GapPlanner(task)
+    scenes = task.draw_scenarios(7, np.arange(SCENES), np.zeros(SCENES, dtype=np.int64))
+    progress, going, actions = [], [], []
+
+    def drive_and_record(obs, state, tick):
+        action = planner(obs, state, tick)
+        progress.append(state.world.progress[:, 0].copy())
+        going.append(planner._decision.copy())
+        actions.append(action)
+        return action
+
+    result = rollout(task, scenes, drive_and_record)
+    return planner, result, np.array(progress), np.array(going), np.array(actions)
+
+
+def test_the_certified_filter_never_acts_on_it(drive):
+    _, result, _, _, _ = drive
+    assert result.collision.sum() == 0
+    assert np.all(result.safety_steps == 0)
+
+
+def test_it_clears_where_a_gap_comes_and_waits_before_every_crossing_zone_otherwise(drive):
+    planner, result, progress, going, _ = drive
+    cleared = np.isfinite(result.time_to_clear)
+    assert 0 < cleared.sum() < SCENES  # some scenes give a gap within 20 s, some do not
+    # A scene enters the first crossing zone only after the planner decided to go.
+    for b in range(SCENES):
+        inside = np.flatnonzero(progress[:, b] > planner.first_entry)
+        if inside.size:
+            assert going[: inside[0], b].any()
+        else:
+            assert progress[:, b].max() <= planner.first_entry - 0.5  # stopped short of it
+
+
+def test_a_wait_closes_the_throttle_near_its_stop(drive):
+    """Within ``coast_band_m`` of where a wait stops the throttle is closed (-1), not the
+    throttle of a walking pace that would creep on into the filter's stop."""
+    planner, _, progress, going, actions = drive
+    c = planner.config
+    stop = planner.first_entry - c.stop_extra_m
+    near = ~going & (progress > stop - c.coast_band_m) & (progress <= planner.first_entry)
+    assert near.sum() > 100
+    assert np.all(actions[near] == -1.0)
+    far = ~going & (progress < stop - c.coast_band_m - 5.0)
+    assert np.any(actions[far] > -1.0)  # further back it tracks its approach speed
+
+
+def test_it_needs_a_task_in_traffic():
+    with pytest.raises(ValueError, match="needs a task in traffic"):
+        GapPlanner(build_task(None, None))
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("coast_decel", 0.0), ("stop_extra_m", -1.0), ("recheck_ticks", 0)]
+)
+def test_bad_tuning_is_refused_by_name(field, value):
+    with pytest.raises(ConfigError, match=field):
+        GapPlannerConfig(**{field: value})
+
+
+def test_the_gap_planner_teaches_only_in_traffic_and_unknown_teachers_are_refused():
+    ws = {"episodes": 8, "teacher": "gap_planner"}
+    with pytest.raises(ConfigError, match="needs traffic"):
+        from_dict(TrainConfig, {"warm_start": ws})
+    with pytest.raises(ConfigError, match="'oracle'"):
+        from_dict(TrainConfig, {"warm_start": {**ws, "teacher": "oracle"}, "traffic": "light"})
+    config = from_dict(TrainConfig, {"warm_start": ws, "traffic": "light"})
+    assert config.warm_start.teacher == "gap_planner"
