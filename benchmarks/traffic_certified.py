@@ -26,8 +26,10 @@ from safeswitch.io import write_json
 
 RESULTS = Path(__file__).parent / "results" / "traffic_certified.json"
 FAMILIES = ("train", "test")
-FIELDS = ("switching", "episodes", "collisions", "safety_activation_episodes", "cleared_episodes",
-          "stops", "comfort_violation_fraction", "mean_efficiency", "mean_time_to_clear_s")  # fmt: skip
+FIELDS = (
+    "switching", "episodes", "collisions", "safety_activation_episodes", "cleared_episodes",
+    "stops", "comfort_violation_fraction", "mean_efficiency", "mean_time_to_clear_s",
+)  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
