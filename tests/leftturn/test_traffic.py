@@ -14,7 +14,7 @@ from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
 from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, traffic_config
 from safeswitch.leftturn.task import LeftTurnTask, build_task
-from safeswitch.leftturn.traffic import OBSERVED_FEATURES, LeftTurnTrafficTask
+from safeswitch.leftturn.traffic import CONFLICT_FEATURES, OBSERVED_FEATURES, LeftTurnTrafficTask
 from safeswitch.sim.idm import IDMParams, idm_accel
 from safeswitch.sim.network import RoadNetwork, priority_rank
 
@@ -221,6 +221,47 @@ def test_traffic_env_observation_has_k_padded_vehicles():
     assert env.observation_space.contains(obs)
 
 
+def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances():
+    """``observe: conflicts``: each slot is a vehicle whose route crosses the ego's and that
+    neither it nor the ego has got past, with its distances to its zone and the ego's to its
+    own, soonest to reach its zone first; every conflict not shown comes later."""
+    k = 3
+    config = {"switching": "certified", "episode": {"learned_scope": "episode"}}
+    traffic = {"preset": "heavy", "observe": "conflicts", "observed": k}
+    task = build_task(None, config, traffic=traffic)
+    scenes = task.draw_scenarios(5, np.arange(16), np.zeros(16, dtype=np.int64))
+    state = task.initial(scenes)
+    low, high = task.observation_bounds
+    f = len(CONFLICT_FEATURES)
+    checked = 0
+    for tick in range(400):
+        if tick % 40 == 0:
+            obs = task.observe(state)
+            assert np.all((obs >= low) & (obs <= high))
+            v = task.logic_view(state, task.conflict_state(state))
+            for b in range(16):
+                s_e = v.ego_progress[b]
+                rows = []
+                for j in np.flatnonzero(v.present[b]):
+                    zone, ego = v.other_cert_zone[b, j], v.ego_cert_zone[b, j]
+                    if v.other_progress[b, j] <= zone[1] and s_e <= ego[1]:
+                        ahead = max(zone[0] - v.other_progress[b, j], 0.0)
+                        soon = ahead / max(v.other_speed[b, j], 1.0)
+                        s_j = v.other_progress[b, j]
+                        features = [1.0, zone[0] - s_j, zone[1] - s_j, v.other_speed[b, j],
+                                    ego[0] - s_e, ego[1] - s_e]  # fmt: skip
+                        rows.append((soon, features))
+                rows.sort(key=lambda r: r[0])
+                slots = obs[b, 6:].reshape(k, f)
+                shown = min(len(rows), k)
+                for n in range(shown):
+                    np.testing.assert_allclose(slots[n], rows[n][1], rtol=1e-5, atol=1e-3)
+                assert not slots[shown:].any()  # padding
+                checked += shown
+        state, _ = task.step(state, np.full(16, 0.2))
+    assert checked > 50
+
+
 def test_traffic_vec_env_resets_and_is_seeded():
     def run(seed):
         env = make_vec_env(8, traffic="medium", switching="certified", seed=seed)
@@ -244,6 +285,7 @@ def test_traffic_vec_env_resets_and_is_seeded():
         ({"max_vehicles": 4, "observed": 9}, "observed"),
         ({"preset": "rush-hour"}, "rush-hour"),
         ({"non_yielding_share": (0.5, 0.2)}, "non_yielding_share"),
+        ({"observe": "closest"}, "closest"),
     ],
 )
 def test_bad_traffic_settings_name_the_value(settings, named):

@@ -407,7 +407,14 @@ class TrafficConfig:
         max_vehicles: Slots for other vehicles per scene (besides the paper's north car): the
             streams' farthest vehicles are dropped beyond it at the start, and a vehicle due
             to enter waits outside while every slot is taken.
-        observed: How many other vehicles the observation holds (``K``, nearest first).
+        observed: How many other vehicles the observation holds (``K``).
+        observe: What the observation holds of them: ``nearest`` (the ``K`` nearest by
+            distance, in map coordinates: present, x, y, speed, heading) or ``conflicts`` (the
+            ``K`` vehicles whose routes cross the ego's and that have not yet left their
+            conflict zone with it, the north car included, soonest to reach that zone first, in
+            conflict coordinates: present, the vehicle's distance to its zone and to the zone's
+            end, its speed, the ego's distance to its own zone with it and to that zone's end;
+            ours, :data:`~safeswitch.leftturn.traffic.CONFLICT_FEATURES`).
     """
 
     main_flow_veh_h: tuple[float, float] = (300.0, 450.0)
@@ -422,6 +429,7 @@ class TrafficConfig:
     horizon_s: float | None = 30.0
     max_vehicles: int = 12
     observed: int = 4
+    observe: str = "nearest"
 
     def __post_init__(self) -> None:
         o = "traffic"
@@ -454,7 +462,12 @@ class TrafficConfig:
               "must be in [1, 32]")  # fmt: skip
         check(0 <= self.observed <= self.max_vehicles + 1, o, "observed", self.observed,
               f"must be in [0, max_vehicles + 1 = {self.max_vehicles + 1}]")  # fmt: skip
+        check(self.observe in OBSERVATIONS, o, "observe", self.observe,
+              f"must be one of {OBSERVATIONS}")  # fmt: skip
 
+
+#: Values of ``traffic.observe``.
+OBSERVATIONS = ("nearest", "conflicts")
 
 #: Named traffic settings: densities from light to heavy, and a train/test split of the space
 #: (the test family is denser and less courteous than anything trained on).

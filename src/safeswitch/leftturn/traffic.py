@@ -12,7 +12,9 @@ vehicles follow the traffic rules and their own car-following, and
   (:attr:`TrafficTaskState.npc_collisions`; they must stay 0);
 * the observation is the paper's six values followed by the ``K`` nearest other vehicles
   (:data:`OBSERVED_FEATURES` each, nearest first, zeros and ``present = 0`` where there are
-  fewer).
+  fewer), or with ``traffic.observe: conflicts`` the ``K`` conflicting vehicles soonest to
+  reach their conflict zone with the ego, in distances along the routes
+  (:data:`CONFLICT_FEATURES`).
 
 With ``traffic=None`` none of this exists: the environments build the plain
 :class:`~safeswitch.leftturn.task.LeftTurnTask` (bit-identical to the paper's scene).
@@ -60,6 +62,12 @@ _TICK_WRITES = ("progress", "speed", "waited", "accel")
 EGO_TOP_SPEED = 15.0
 #: Per observed vehicle: present (1/0), x [m], y [m], speed [m/s], heading cos, heading sin.
 OBSERVED_FEATURES = ("present", "x", "y", "speed", "cos_yaw", "sin_yaw")
+
+#: Per observed vehicle with ``traffic.observe: conflicts`` (distances along the routes, zones
+#: with the certified margin, negative once inside): present (1/0), the vehicle's distance to
+#: its conflict zone with the ego [m] and to the zone's end [m], its speed [m/s], the ego's
+#: distance to its own zone with the vehicle [m] and to that zone's end [m].
+CONFLICT_FEATURES = ("present", "to_zone", "to_zone_end", "speed", "ego_to_zone", "ego_to_zone_end")
 #: Candidates drawn per approach before the nearest ``max_vehicles`` are kept.
 _PER_LEG = 8
 #: Uniforms per candidate: headway, turn, desired speed, yielding.
@@ -164,12 +172,12 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self._pair_zones = np.ascontiguousarray(
             np.stack([self.network.conflicts, self.cert_network.conflicts])
         )
-        self._observed_low = np.tile(
-            np.array([0, -150, -150, 0, -1, -1], dtype=np.float32), traffic.observed
-        )
-        self._observed_high = np.tile(
-            np.array([1, 150, 150, 60, 1, 1], dtype=np.float32), traffic.observed
-        )
+        if traffic.observe == "conflicts":
+            low, high = [0, -50, -50, 0, -250, -250], [1, 250, 250, 60, 250, 250]
+        else:
+            low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
+        self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
+        self._observed_high = np.tile(np.array(high, dtype=np.float32), traffic.observed)
 
     # -- scenarios and the start ------------------------------------------------------------
 
@@ -502,6 +510,13 @@ class LeftTurnTrafficTask(LeftTurnTask):
         k = self.traffic.observed
         out = np.zeros((observation.shape[0], 6 + len(OBSERVED_FEATURES) * k), dtype=np.float32)
         out[:, :6] = observation
+        if self.traffic.observe == "conflicts":
+            v = self.logic_view(state, self.conflict_state(state))
+            _soonest_conflicts(
+                v.present, v.ego_progress, v.ego_cert_zone, v.other_progress,
+                v.other_cert_zone, v.other_speed, k, out,
+            )  # fmt: skip
+            return out
         tr = state.traffic
         _nearest(
             observation[:, 0].astype(np.float64), observation[:, 1].astype(np.float64),
@@ -562,6 +577,45 @@ def _nearest(
             out[b, base + 3] = speed[b, pick]
             out[b, base + 4] = cos_yaw[b, pick]
             out[b, base + 5] = sin_yaw[b, pick]
+
+
+@jit
+def _soonest_conflicts(
+    present: BoolArray, ego_progress: FloatArray, ego_zone: FloatArray,
+    other_progress: FloatArray, other_zone: FloatArray, other_speed: FloatArray, k: int,
+    out: NDArray[np.float32],
+) -> None:  # fmt: skip
+    """The ``k`` conflicting vehicles of every scene that neither they nor the ego have got
+    past, soonest to reach their zone first (distance over speed, the speed floored at
+    1 m/s), into ``out[:, 6:]`` (:data:`CONFLICT_FEATURES`)."""
+    columns = present.shape[1]
+    soon = np.empty(columns)  # inf: not a conflict, or one already taken
+    for b in range(present.shape[0]):
+        s_e = ego_progress[b]
+        for j in range(columns):
+            soon[j] = math.inf
+            if (
+                present[b, j]
+                and other_progress[b, j] <= other_zone[b, j, 1]
+                and (s_e <= ego_zone[b, j, 1])
+            ):
+                ahead = max(other_zone[b, j, 0] - other_progress[b, j], 0.0)
+                soon[j] = ahead / max(other_speed[b, j], 1.0)
+        for n in range(k):
+            best, pick = math.inf, -1
+            for j in range(columns):
+                if soon[j] < best:
+                    best, pick = soon[j], j
+            if pick < 0:
+                break
+            soon[pick] = math.inf
+            base = 6 + 6 * n
+            out[b, base] = 1.0
+            out[b, base + 1] = other_zone[b, pick, 0] - other_progress[b, pick]
+            out[b, base + 2] = other_zone[b, pick, 1] - other_progress[b, pick]
+            out[b, base + 3] = other_speed[b, pick]
+            out[b, base + 4] = ego_zone[b, pick, 0] - s_e
+            out[b, base + 5] = ego_zone[b, pick, 1] - s_e
 
 
 @jit
