@@ -14,12 +14,11 @@ SCENES = 24
 CERTIFIED = {"switching": "certified", "episode": {"learned_scope": "episode"}}
 
 
-@pytest.fixture(scope="module")
-def drive():
+def drive_scenes(config=None):
     """24 `train` scenes (20 s) under `certified` driven by the gap planner, with each tick's
-    ego progress and whether the planner had decided to go."""
+    ego progress, whether the planner had decided to go, and its action."""
     task = build_task(None, CERTIFIED, traffic={"preset": "train", "horizon_s": 20.0})
-    planner = GapPlanner(task)
+    planner = GapPlanner(task, config)
     scenes = task.draw_scenarios(7, np.arange(SCENES), np.zeros(SCENES, dtype=np.int64))
     progress, going, actions = [], [], []
 
@@ -32,6 +31,11 @@ def drive():
 
     result = rollout(task, scenes, drive_and_record)
     return planner, result, np.array(progress), np.array(going), np.array(actions)
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return drive_scenes()
 
 
 def test_the_certified_filter_never_acts_on_it(drive):
@@ -66,13 +70,25 @@ def test_a_wait_closes_the_throttle_near_its_stop(drive):
     assert np.any(actions[far] > -1.0)  # further back it tracks its approach speed
 
 
+def test_a_go_margin_starts_no_sooner_and_the_filter_still_never_acts(drive):
+    """``go_margin_s``: a drive starts only if it would also pass begun later; until the
+    planner without the margin first goes both drive alike, so the margin never goes sooner."""
+    _, _, _, going, _ = drive
+    _, result, _, margin_going, _ = drive_scenes(GapPlannerConfig(go_margin_s=0.6))
+    assert np.all(result.safety_steps == 0)
+    first = np.where(going.any(axis=0), going.argmax(axis=0), len(going))
+    later = np.where(margin_going.any(axis=0), margin_going.argmax(axis=0), len(going))
+    assert np.all(later >= first) and np.any(later > first)
+
+
 def test_it_needs_a_task_in_traffic():
     with pytest.raises(ValueError, match="needs a task in traffic"):
         GapPlanner(build_task(None, None))
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("coast_decel", 0.0), ("stop_extra_m", -1.0), ("recheck_ticks", 0)]
+    ("field", "value"),
+    [("coast_decel", 0.0), ("stop_extra_m", -1.0), ("go_margin_s", -0.1), ("recheck_ticks", 0)],
 )
 def test_bad_tuning_is_refused_by_name(field, value):
     with pytest.raises(ConfigError, match=field):

@@ -64,6 +64,9 @@ class GapPlannerConfig:
             instead of tracking its ever slower target (the throttle of a walking pace is
             above the one that holds the car still, and a clone of it creeps on into the
             filter's stop).
+        go_margin_s: Go only if the fast drive would also pass when begun this much later
+            [s] (a clone of the planner, which cannot see everything the check does, goes a
+            little late or a little slowly; a gap that would just pass labels it wrong).
         recheck_ticks: Ticks between two go checks (the decision holds in between).
     """
 
@@ -75,6 +78,7 @@ class GapPlannerConfig:
     stop_extra_m: float = 4.0
     coast_decel: float = 0.6
     coast_band_m: float = 10.0
+    go_margin_s: float = 0.0
     recheck_ticks: int = 5
 
     def __post_init__(self) -> None:
@@ -82,7 +86,7 @@ class GapPlannerConfig:
         for name in ("top_speed_kmh", "accel_lat", "curve_decel", "speed_gain", "coast_decel"):
             value = getattr(self, name)
             check(math.isfinite(value) and value > 0, o, name, value, "must be > 0")
-        for name in ("preview_s", "stop_extra_m", "coast_band_m"):
+        for name in ("preview_s", "stop_extra_m", "coast_band_m", "go_margin_s"):
             value = getattr(self, name)
             check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
         check(self.recheck_ticks >= 1, o, "recheck_ticks", self.recheck_ticks, "must be >= 1")
@@ -122,6 +126,7 @@ class GapPlanner:
         self.last_exit = float(zones[:, 1].max())
         self._vehicle = tc.vehicle
         self._horizon = tc.episode.horizon_ticks
+        self._dt = tc.episode.dt
         self._check_task = LeftTurnTrafficTask(
             dataclasses.replace(tc, switching="certified"), task.traffic
         )
@@ -140,7 +145,7 @@ class GapPlanner:
         s, v = state.world.progress[:, 0], state.world.vehicles.speed[:, 0]
         fast = self._fast(s, v)
         if self._decision is None or self._decision.shape != s.shape or tick % c.recheck_ticks == 0:
-            self._decision = self.goes(state)
+            self._decision = self.goes(state, self._decision if tick > 0 else None)
         go = self._decision | (s > self.first_entry)
         room = np.maximum(self.first_entry - c.stop_extra_m - s, 0.0)
         wait = np.minimum(fast, np.sqrt(2.0 * c.coast_decel * room))
@@ -148,11 +153,27 @@ class GapPlanner:
         closed = ~go & ((room < c.coast_band_m) | (wait <= 0.0))
         return np.where(go, fast, wait), closed
 
-    def goes(self, state: TaskState) -> NDArray[np.bool_]:
+    def goes(self, state: TaskState, going: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
         """Whether the fast drive from ``state`` gets past the last conflict zone with no
-        collision and without the certified filter acting. Only episodes whose decision
-        matters are simulated (the ego before its first zone); the batch shrinks as their
-        drives fail or get past."""
+        collision and without the certified filter acting. With ``go_margin_s`` an episode
+        not already ``going`` starts only if the drive would also pass when begun that much
+        later (the throttle closed until then); one that is going keeps going while the
+        drive from where it is passes."""
+        ok = self._passes(state, 0)
+        margin = round(self.config.go_margin_s / self._dt)
+        if margin > 0:
+            starting = ok & (state.world.progress[:, 0] <= self.first_entry)
+            if going is not None and going.shape == ok.shape:
+                starting &= ~going
+            rows = np.flatnonzero(starting)
+            ok[rows] &= self._passes(state.take(rows), margin)
+        return ok
+
+    def _passes(self, state: TaskState, delay: int) -> NDArray[np.bool_]:
+        """Whether the fast drive from ``state``, begun after ``delay`` ticks of a closed
+        throttle, passes (see :meth:`goes`). Only episodes whose decision matters are
+        simulated (the ego before its first zone); the batch shrinks as their drives fail or
+        get past."""
         ok = np.ones(state.batch_size, dtype=bool)
         rows = np.flatnonzero(state.world.progress[:, 0] <= self.first_entry)
         state = state.take(rows)
@@ -160,7 +181,8 @@ class GapPlanner:
             if rows.size == 0:
                 break
             s, v = state.world.progress[:, 0], state.world.vehicles.speed[:, 0]
-            state, record = self._check_task.step(state, self._track(self._fast(s, v), v))
+            action = self._track(self._fast(s, v), v) if tick >= delay else np.full(rows.size, -1.0)
+            state, record = self._check_task.step(state, action)
             ok[rows[record.safety_active | record.collision]] = False
             going = (
                 ok[rows]
