@@ -188,3 +188,27 @@ def test_evaluate_in_traffic_and_on_sumo(capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["sim"] == "sumo" and summary["episodes"] == 3
     assert summary["collisions"] == 0 and summary["sumo_collision_episodes"] == 0
+
+
+def test_a_traffic_policy_keeps_its_observation_in_other_traffic(tmp_path, capsys):
+    """``--traffic test`` for a policy trained with ``observe: conflicts``: the scene is the
+    test family's, the observation still the policy's (same size either way, so a mix-up
+    would not fail — it would feed the policy the wrong features)."""
+    from dataclasses import replace
+
+    from safeswitch.app.evaluate import traffic_setup
+    from safeswitch.core.config import from_dict
+    from safeswitch.training.run import train
+
+    run = from_dict(TrainConfig, {
+        "timesteps": 1024, "n_envs": 8, "seed": 5, "eval_episodes": 0, "torch_threads": 1,
+        "env": {"switching": "certified", "episode": {"learned_scope": "episode"}},
+        "traffic": {"preset": "light", "horizon_s": 4.0, "observe": "conflicts", "observed": 2},
+    })  # fmt: skip
+    train(replace(run, timesteps=1024), tmp_path / "run", progress_bar=False)
+    settings, label = traffic_setup("learned", str(tmp_path / "run"), "test")
+    assert label == "test" and settings.main_flow_veh_h == (500.0, 800.0)
+    assert settings.observe == "conflicts" and settings.observed == 2
+    assert main(["evaluate", "--model", str(tmp_path / "run"), "--traffic", "test",
+                 "--episodes", "3", "--json"]) == 0  # fmt: skip
+    assert json.loads(capsys.readouterr().out)["traffic"] == "test"

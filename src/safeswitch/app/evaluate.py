@@ -80,14 +80,23 @@ def traffic_setup(
 ) -> tuple[TrafficConfig | None, str | None]:
     """The traffic to evaluate in and its label: ``traffic`` (a preset's name, or ``none`` for
     the paper's scene), else the traffic a trained policy was trained in (none for the
-    baselines)."""
+    baselines). A policy trained in traffic keeps what it observes (``observe``,
+    ``observed``) in any other traffic: the observation belongs to the policy, not to the
+    scene."""
+    trained = None
+    if controller == "learned" and model is not None:
+        config = load_policy(model).config
+        if isinstance(config, TrainConfig) and config.traffic is not None:
+            trained = config
     if traffic is not None:
         settings = None if traffic == "none" else traffic_config(traffic)
+        if settings is not None and trained is not None:
+            seen = trained.traffic_settings
+            assert seen is not None
+            settings = replace(settings, observe=seen.observe, observed=seen.observed)
         return settings, None if settings is None else traffic
-    if controller == "learned" and model is not None:
-        trained = load_policy(model)
-        if isinstance(trained.config, TrainConfig) and trained.config.traffic is not None:
-            return trained.config.traffic_settings, str(trained.config.traffic)
+    if trained is not None:
+        return trained.traffic_settings, str(trained.traffic)
     return None, None
 
 
