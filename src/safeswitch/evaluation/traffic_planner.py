@@ -15,7 +15,8 @@ every ``recheck_ticks`` ticks:
   the filter's own gap acceptance, not a guess about the drivers.
 - **Otherwise wait**: roll towards the first conflict zone of any crossing movement and stop
   ``stop_extra_m`` before it, never faster than a closed throttle (``coast_decel``) can still
-  stop from, so that the filter's stop backup stays available and never has to act.
+  stop from and with the throttle closed for the last ``coast_band_m``, so that the filter's
+  stop backup stays available and never has to act.
 - **Once in a conflict zone** the car drives fast: slowing down there can only make things
   worse (for a cloned policy that hesitated: labels of states the planner itself never
   reaches).
