@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,14 +121,9 @@ class Planner:
     def __init__(self, task: LeftTurnTask, config: PlannerConfig | None = None) -> None:
         self.config = c = config or PlannerConfig()
         tc = task.config
-        limits = dataclasses.replace(
-            OracleLimits.from_config(tc),
-            max_speed=c.top_speed_kmh / 3.6,
-            accel_lat=c.accel_lat,
-            max_decel=c.curve_decel,
+        self._drive = FastDrive(
+            task, c.top_speed_kmh, c.accel_lat, c.curve_decel, c.preview_s, c.speed_gain
         )
-        oracle = Oracle(task, limits)
-        self._grid, self._cap_sq = oracle.grid, oracle.brake_profile_sq
         geo = task.conflict
         self._zone_entry, self._zone_exit = geo.zone_a[0], geo.zone_a[1]
         self._north_exit = geo.zone_b[1]
@@ -136,7 +132,6 @@ class Planner:
         self._yield_constants = PaperSwitching(
             yield_paper, tc.controllers.emergency_decel
         ).constants
-        self._vehicle = tc.vehicle
         self._horizon = tc.episode.horizon_ticks
         check_paper = dataclasses.replace(
             paper, ttr_threshold_s=paper.ttr_threshold_s + c.ttr_margin_s
@@ -174,27 +169,14 @@ class Planner:
         Only episodes whose decision matters are simulated (the ego not yet in its zone, the
         north car not yet out of its own; the others drive fast anyway and get True), and the
         batch shrinks as their drives leave the zone."""
-        ok = np.ones(state.batch_size, dtype=bool)
         s, s_n = state.world.progress[:, 0], state.world.progress[:, 1]
         rows = np.flatnonzero((s <= self._zone_entry) & (s_n <= self._north_exit))
-        state = state.take(rows)
-        for tick in range(self._horizon):
-            if rows.size == 0:
-                break
-            v = state.world.vehicles.speed[:, 0]
-            inside = state.world.progress[:, 0] <= self._zone_exit
-            action = self._track(self._fast(state.world.progress[:, 0], v), v)
-            state, record = self._check_task.step(state, action)
-            ok[rows[inside & (record.safety_active | record.collision)]] = False
-            going = ok[rows] & (state.world.progress[:, 0] <= self._zone_exit)
-            if not going.all() and (tick % 10 == 9 or not going.any()):
-                keep = np.flatnonzero(going)
-                rows, state = rows[keep], state.take(keep)
-        return ok
+        return drive_passes(
+            self._check_task, state, rows, self._zone_exit, self._horizon, self._drive.action
+        )
 
     def _fast(self, s: FloatArray, v: FloatArray) -> FloatArray:
-        ahead = s + v * self.config.preview_s
-        return np.sqrt(np.maximum(np.interp(ahead, self._grid, self._cap_sq), 0.0))
+        return self._drive.speed(s, v)
 
     def _firing_distance(self, v: FloatArray) -> FloatArray:
         """How far before the zone the paper logic fires at speed ``v`` (Eq. 3 + latency +
@@ -215,4 +197,72 @@ class Planner:
         return np.clip(target, 0.0, fast)
 
     def _track(self, target: FloatArray, speed: FloatArray) -> FloatArray:
-        return speed_tracking_action(self._vehicle, target, speed, self.config.speed_gain)
+        return self._drive.track(target, speed)
+
+
+class FastDrive:
+    """The planners' fast drive: the speed limit plus the tolerated speeding on the straight,
+    the lateral limit in the turn, slowing for it at ``curve_decel`` (the oracle's braking
+    profile with these limits, read ``preview_s`` ahead), tracked with the learned
+    controller's throttle.
+
+    Args:
+        task: The task (its route, plant and limits).
+        top_speed_kmh: Speed on the straight [km/h].
+        accel_lat: Lateral acceleration the turn is planned for [m/s²].
+        curve_decel: Deceleration the speed target assumes when slowing for the turn [m/s²].
+        preview_s: The speed target is read this far ahead along the route [s].
+        speed_gain: Throttle per m/s of speed error.
+    """
+
+    def __init__(
+        self, task: LeftTurnTask, top_speed_kmh: float, accel_lat: float, curve_decel: float,
+        preview_s: float, speed_gain: float,
+    ) -> None:  # fmt: skip
+        limits = dataclasses.replace(
+            OracleLimits.from_config(task.config),
+            max_speed=top_speed_kmh / 3.6,
+            accel_lat=accel_lat,
+            max_decel=curve_decel,
+        )
+        oracle = Oracle(task, limits)
+        self._grid, self._cap_sq = oracle.grid, oracle.brake_profile_sq
+        self._vehicle = task.config.vehicle
+        self._preview, self._gain = preview_s, speed_gain
+
+    def speed(self, s: FloatArray, v: FloatArray) -> FloatArray:
+        """The fast drive's speed target at arc length ``s`` and speed ``v`` [m/s]."""
+        ahead = s + v * self._preview
+        return np.sqrt(np.maximum(np.interp(ahead, self._grid, self._cap_sq), 0.0))
+
+    def track(self, target: FloatArray, speed: FloatArray) -> FloatArray:
+        """The throttle action that tracks ``target``."""
+        return speed_tracking_action(self._vehicle, target, speed, self._gain)
+
+    def action(self, state: TaskState, tick: int) -> FloatArray:
+        """The fast drive's action in ``state`` (``tick`` unused: a rollout policy's shape)."""
+        s, v = state.world.progress[:, 0], state.world.vehicles.speed[:, 0]
+        return self.track(self.speed(s, v), v)
+
+
+def drive_passes(
+    task: LeftTurnTask, state: TaskState, rows: NDArray[np.int64], exit_at: float,
+    horizon: int, act: Callable[[TaskState, int], FloatArray],
+) -> NDArray[np.bool_]:  # fmt: skip
+    """The planners' check: whether driving ``act`` on ``task`` from the episodes ``rows`` of
+    ``state`` takes the ego past ``exit_at`` [m] with no collision and no safety action on the
+    way (the other episodes, and those still short of it after ``horizon`` ticks, get True).
+    The simulated batch shrinks as drives fail or get past (every tenth tick)."""
+    ok = np.ones(state.batch_size, dtype=bool)
+    state = state.take(rows)
+    for tick in range(horizon):
+        if rows.size == 0:
+            break
+        inside = state.world.progress[:, 0] <= exit_at
+        state, record = task.step(state, act(state, tick))
+        ok[rows[inside & (record.safety_active | record.collision)]] = False
+        going = ok[rows] & (state.world.progress[:, 0] <= exit_at)
+        if not going.all() and (tick % 10 == 9 or not going.any()):
+            keep = np.flatnonzero(going)
+            rows, state = rows[keep], state.take(keep)
+    return ok

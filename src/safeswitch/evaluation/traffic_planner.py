@@ -37,8 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.config import check
-from safeswitch.evaluation.oracle import Oracle, OracleLimits
-from safeswitch.leftturn.spaces import speed_tracking_action
+from safeswitch.evaluation.planner import FastDrive, drive_passes
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 
@@ -112,20 +111,14 @@ class GapPlanner:
             )
         self.config = c = config or GapPlannerConfig()
         tc = task.config
-        limits = dataclasses.replace(
-            OracleLimits.from_config(tc),
-            max_speed=c.top_speed_kmh / 3.6,
-            accel_lat=c.accel_lat,
-            max_decel=c.curve_decel,
+        self._drive = FastDrive(
+            task, c.top_speed_kmh, c.accel_lat, c.curve_decel, c.preview_s, c.speed_gain
         )
-        oracle = Oracle(task, limits)
-        self._grid, self._cap_sq = oracle.grid, oracle.brake_profile_sq
         zones, _ = task.crossing_zones()
         #: Where the first crossing movement's zone begins and the last one ends on the ego's
         #: route [m].
         self.first_entry = float(zones[:, 0].min())
         self.last_exit = float(zones[:, 1].max())
-        self._vehicle = tc.vehicle
         self._horizon = tc.episode.horizon_ticks
         self._dt = tc.episode.dt
         self._check_task = LeftTurnTrafficTask(
@@ -137,14 +130,14 @@ class GapPlanner:
         """Throttle actions in [-1, 1] for every episode of ``state``."""
         speed = state.world.vehicles.speed[:, 0]
         target, closed = self.plan(state, tick)
-        return np.where(closed, -1.0, self._track(target, speed))
+        return np.where(closed, -1.0, self._drive.track(target, speed))
 
     def plan(self, state: TaskState, tick: int) -> tuple[FloatArray, NDArray[np.bool_]]:
         """The speed the planner steers for [m/s] and where it closes the throttle instead
         (waiting within ``coast_band_m`` of its stop, or at it), each ``[B]``."""
         c = self.config
         s, v = state.world.progress[:, 0], state.world.vehicles.speed[:, 0]
-        fast = self._fast(s, v)
+        fast = self._drive.speed(s, v)
         if self._decision is None or self._decision.shape != s.shape or tick % c.recheck_ticks == 0:
             self._decision = self.goes(state, self._decision if tick > 0 else None)
         go = self._decision | (s > self.first_entry)
@@ -172,35 +165,15 @@ class GapPlanner:
 
     def _passes(self, state: TaskState, delay: int) -> NDArray[np.bool_]:
         """Whether the fast drive from ``state``, begun after ``delay`` ticks of a closed
-        throttle, passes (see :meth:`goes`). Only episodes whose decision matters are
-        simulated (the ego before its first zone); the batch shrinks as their drives fail or
-        get past."""
-        ok = np.ones(state.batch_size, dtype=bool)
+        throttle, passes (see :meth:`goes`); only episodes before their first zone are
+        simulated."""
+
+        def act(now: TaskState, tick: int) -> FloatArray:
+            closed = np.full(now.batch_size, -1.0)
+            return self._drive.action(now, tick) if tick >= delay else closed
+
         rows = np.flatnonzero(state.world.progress[:, 0] <= self.first_entry)
-        state = state.take(rows)
-        for tick in range(self._horizon):
-            if rows.size == 0:
-                break
-            s, v = state.world.progress[:, 0], state.world.vehicles.speed[:, 0]
-            action = self._track(self._fast(s, v), v) if tick >= delay else np.full(rows.size, -1.0)
-            state, record = self._check_task.step(state, action)
-            ok[rows[record.safety_active | record.collision]] = False
-            going = (
-                ok[rows]
-                & (state.world.progress[:, 0] <= self.last_exit)
-                & ~(record.terminated | record.truncated)
-            )
-            if not going.all() and (tick % 10 == 9 or not going.any()):
-                keep = np.flatnonzero(going)
-                rows, state = rows[keep], state.take(keep)
-        return ok
-
-    def _fast(self, s: FloatArray, v: FloatArray) -> FloatArray:
-        ahead = s + v * self.config.preview_s
-        return np.sqrt(np.maximum(np.interp(ahead, self._grid, self._cap_sq), 0.0))
-
-    def _track(self, target: FloatArray, speed: FloatArray) -> FloatArray:
-        return speed_tracking_action(self._vehicle, target, speed, self.config.speed_gain)
+        return drive_passes(self._check_task, state, rows, self.last_exit, self._horizon, act)
 
 
 class UnboundGapPlanner:

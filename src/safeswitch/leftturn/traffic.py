@@ -549,6 +549,19 @@ def _zone_middles(network: RoadNetwork) -> FloatArray:
 
 
 @jit
+def _take_smallest(values: FloatArray) -> int:
+    """The index of the smallest finite value, then set to ``inf`` (taken); -1 if none is
+    left. The first of equal values wins."""
+    best, pick = math.inf, -1
+    for i in range(values.shape[0]):
+        if values[i] < best:
+            best, pick = values[i], i
+    if pick >= 0:
+        values[pick] = math.inf
+    return pick
+
+
+@jit
 def _nearest(
     ego_x: FloatArray, ego_y: FloatArray, x: FloatArray, y: FloatArray, speed: FloatArray,
     cos_yaw: FloatArray, sin_yaw: FloatArray, active: BoolArray, k: int,
@@ -563,13 +576,9 @@ def _nearest(
                 (x[b, i] - ego_x[b]) ** 2 + (y[b, i] - ego_y[b]) ** 2 if active[b, i] else math.inf
             )
         for n in range(k):
-            best, pick = math.inf, -1
-            for i in range(slots):
-                if distance[i] < best:
-                    best, pick = distance[i], i
+            pick = _take_smallest(distance)
             if pick < 0:
                 break
-            distance[pick] = math.inf
             base = 6 + 6 * n
             out[b, base] = 1.0
             out[b, base + 1] = x[b, pick]
@@ -602,13 +611,9 @@ def _soonest_conflicts(
                 ahead = max(other_zone[b, j, 0] - other_progress[b, j], 0.0)
                 soon[j] = ahead / max(other_speed[b, j], 1.0)
         for n in range(k):
-            best, pick = math.inf, -1
-            for j in range(columns):
-                if soon[j] < best:
-                    best, pick = soon[j], j
+            pick = _take_smallest(soon)
             if pick < 0:
                 break
-            soon[pick] = math.inf
             base = 6 + 6 * n
             out[b, base] = 1.0
             out[b, base + 1] = other_zone[b, pick, 0] - other_progress[b, pick]
