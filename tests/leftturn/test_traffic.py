@@ -12,9 +12,15 @@ from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
+from safeswitch.leftturn.certified import certified_logic
 from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, traffic_config
 from safeswitch.leftturn.task import LeftTurnTask, build_task
-from safeswitch.leftturn.traffic import CONFLICT_FEATURES, OBSERVED_FEATURES, LeftTurnTrafficTask
+from safeswitch.leftturn.traffic import (
+    CONFLICT_FEATURES,
+    MARGIN_FEATURES,
+    OBSERVED_FEATURES,
+    LeftTurnTrafficTask,
+)
 from safeswitch.sim.idm import IDMParams, idm_accel
 from safeswitch.sim.network import RoadNetwork, priority_rank
 
@@ -221,18 +227,40 @@ def test_traffic_env_observation_has_k_padded_vehicles():
     assert env.observation_space.contains(obs)
 
 
-def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances():
+def _earliest_entry(progress, speed, enter, leave, accel, top):
+    """Reference: the soonest a vehicle at ``progress`` [m] and ``speed`` can enter its zone
+    accelerating at ``accel`` up to ``top`` [s] (0 inside, inf once past)."""
+    if progress > leave:
+        return math.inf
+    top = max(top, speed)
+    distance = max(enter - progress, 0.0)
+    t_top = (top - speed) / accel
+    d_top = (speed + top) / 2 * t_top
+    if distance <= d_top:  # reached before top speed: distance = v t + a t² / 2
+        return (-speed + math.sqrt(speed**2 + 2 * accel * distance)) / accel
+    return t_top + (distance - d_top) / top
+
+
+@pytest.mark.parametrize("observe", ["conflicts", "margins"])
+def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances(observe):
     """``observe: conflicts``: each slot is a vehicle whose route crosses the ego's and that
     neither it nor the ego has got past, with its distances to its zone and the ego's to its
-    own, soonest to reach its zone first; every conflict not shown comes later."""
+    own, soonest to reach its zone first; every conflict not shown comes later. ``margins``
+    adds the certified filter's reckoning for each: the vehicle's earliest entry into its zone
+    and the time left over when the ego clears its own at full throttle."""
     k = 3
     config = {"switching": "certified", "episode": {"learned_scope": "episode"}}
-    traffic = {"preset": "heavy", "observe": "conflicts", "observed": k}
+    traffic = {"preset": "heavy", "observe": observe, "observed": k}
     task = build_task(None, config, traffic=traffic)
     scenes = task.draw_scenarios(5, np.arange(16), np.zeros(16, dtype=np.int64))
     state = task.initial(scenes)
     low, high = task.observation_bounds
-    f = len(CONFLICT_FEATURES)
+    f = len(CONFLICT_FEATURES if observe == "conflicts" else MARGIN_FEATURES)
+    cert = task.config.certified
+    accel, top = cert.north_max_accel, cert.north_max_speed_kmh / 3.6
+    filter_ = certified_logic(task)
+    factor, margin = cert.progress_factor, cert.time_margin_s
+    margins_seen = []
     checked = 0
     for tick in range(400):
         if tick % 40 == 0:
@@ -250,6 +278,16 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
                         s_j = v.other_progress[b, j]
                         features = [1.0, zone[0] - s_j, zone[1] - s_j, v.other_speed[b, j],
                                     ego[0] - s_e, ego[1] - s_e]  # fmt: skip
+                        if observe == "margins":
+                            arrive = _earliest_entry(s_j, v.other_speed[b, j], *zone, accel, top)
+                            clear = filter_.clear_time(
+                                np.array([factor * max(ego[1] - s_e, 0.0)]),
+                                v.ego_speed[b : b + 1], v.ego_throttle[b : b + 1],
+                                v.ego_brake[b : b + 1],
+                            )[0]  # fmt: skip
+                            slack = arrive - margin - clear
+                            features += [min(arrive, 30.0), float(np.clip(slack, -30, 30))]
+                            margins_seen.append(slack)
                         rows.append((soon, features))
                 rows.sort(key=lambda r: r[0])
                 slots = obs[b, 6:].reshape(k, f)
@@ -260,6 +298,8 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
                 checked += shown
         state, _ = task.step(state, np.full(16, 0.2))
     assert checked > 50
+    if observe == "margins":  # both signs occur: gaps full throttle would and would not take
+        assert min(margins_seen) < 0 < max(margins_seen)
 
 
 def test_traffic_vec_env_resets_and_is_seeded():

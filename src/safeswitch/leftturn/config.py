@@ -414,7 +414,10 @@ class TrafficConfig:
             conflict zone with it, the north car included, soonest to reach that zone first, in
             conflict coordinates: present, the vehicle's distance to its zone and to the zone's
             end, its speed, the ego's distance to its own zone with it and to that zone's end;
-            ours, :data:`~safeswitch.leftturn.traffic.CONFLICT_FEATURES`).
+            ours, :data:`~safeswitch.leftturn.traffic.CONFLICT_FEATURES`) or ``margins`` (the
+            same vehicles with two more values each, what the certified filter reckons for
+            them: the earliest they can enter their zone and its certificate's slack against
+            them, in seconds; ours, :data:`~safeswitch.leftturn.traffic.MARGIN_FEATURES`).
     """
 
     main_flow_veh_h: tuple[float, float] = (300.0, 450.0)
@@ -467,7 +470,7 @@ class TrafficConfig:
 
 
 #: Values of ``traffic.observe``.
-OBSERVATIONS = ("nearest", "conflicts")
+OBSERVATIONS = ("nearest", "conflicts", "margins")
 
 #: Named traffic settings: densities from light to heavy, and a train/test split of the space
 #: (the test family is denser and less courteous than anything trained on).

@@ -68,6 +68,17 @@ OBSERVED_FEATURES = ("present", "x", "y", "speed", "cos_yaw", "sin_yaw")
 #: its conflict zone with the ego [m] and to the zone's end [m], its speed [m/s], the ego's
 #: distance to its own zone with the vehicle [m] and to that zone's end [m].
 CONFLICT_FEATURES = ("present", "to_zone", "to_zone_end", "speed", "ego_to_zone", "ego_to_zone_end")
+#: With ``traffic.observe: margins``: :data:`CONFLICT_FEATURES`, then what the certified filter
+#: reckons for the vehicle: the earliest it can enter its zone within the filter's assumptions
+#: [s] and the certificate's slack against it [s] (that time less the filter's margin and the
+#: clear backup's time for the ego to leave its own zone from now; both capped at
+#: :data:`MARGIN_CAP_S`).
+MARGIN_FEATURES = (*CONFLICT_FEATURES, "arrival_s", "slack_s")
+#: The cap on :data:`MARGIN_FEATURES`' times [s].
+MARGIN_CAP_S = 30.0
+#: The features per observed vehicle of each ``traffic.observe``.
+FEATURES = {"nearest": OBSERVED_FEATURES, "conflicts": CONFLICT_FEATURES,
+            "margins": MARGIN_FEATURES}  # fmt: skip
 #: Candidates drawn per approach before the nearest ``max_vehicles`` are kept.
 _PER_LEG = 8
 #: Uniforms per candidate: headway, turn, desired speed, yielding.
@@ -172,8 +183,12 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self._pair_zones = np.ascontiguousarray(
             np.stack([self.network.conflicts, self.cert_network.conflicts])
         )
-        if traffic.observe == "conflicts":
+        low: list[float]
+        high: list[float]
+        if traffic.observe in ("conflicts", "margins"):
             low, high = [0, -50, -50, 0, -250, -250], [1, 250, 250, 60, 250, 250]
+            if traffic.observe == "margins":
+                low, high = [*low, 0, -MARGIN_CAP_S], [*high, MARGIN_CAP_S, MARGIN_CAP_S]
         else:
             low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
@@ -507,14 +522,20 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self, state: TaskState, observation: NDArray[np.float32]
     ) -> NDArray[np.float32]:
         assert isinstance(state, TrafficTaskState)
-        k = self.traffic.observed
-        out = np.zeros((observation.shape[0], 6 + len(OBSERVED_FEATURES) * k), dtype=np.float32)
+        k, observe = self.traffic.observed, self.traffic.observe
+        width = len(FEATURES[observe])
+        out = np.zeros((observation.shape[0], 6 + width * k), dtype=np.float32)
         out[:, :6] = observation
-        if self.traffic.observe == "conflicts":
+        if observe in ("conflicts", "margins"):
             v = self.logic_view(state, self.conflict_state(state))
+            extra = np.zeros((*v.present.shape, width - 6))
+            if observe == "margins":
+                arrival, slack = self._certificate.margins(v)
+                extra[..., 0] = np.minimum(arrival, MARGIN_CAP_S)
+                extra[..., 1] = np.clip(slack, -MARGIN_CAP_S, MARGIN_CAP_S)
             _soonest_conflicts(
                 v.present, v.ego_progress, v.ego_cert_zone, v.other_progress,
-                v.other_cert_zone, v.other_speed, k, out,
+                v.other_cert_zone, v.other_speed, extra, k, out,
             )  # fmt: skip
             return out
         tr = state.traffic
@@ -526,6 +547,16 @@ class LeftTurnTrafficTask(LeftTurnTask):
 
     def observe(self, state: TaskState) -> NDArray[np.float32]:
         return self.extend_observation(state, super().observe(state))
+
+    @property
+    def _certificate(self) -> Any:
+        """The certified filter whose reckoning ``observe: margins`` shows (whatever logic the
+        task runs: the observation belongs to the policy)."""
+        if not hasattr(self, "_margins_logic"):
+            from safeswitch.leftturn.certified import certified_logic
+
+            self._margins_logic = certified_logic(self)
+        return self._margins_logic
 
     @property
     def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -591,13 +622,15 @@ def _nearest(
 @jit
 def _soonest_conflicts(
     present: BoolArray, ego_progress: FloatArray, ego_zone: FloatArray,
-    other_progress: FloatArray, other_zone: FloatArray, other_speed: FloatArray, k: int,
-    out: NDArray[np.float32],
+    other_progress: FloatArray, other_zone: FloatArray, other_speed: FloatArray,
+    extra: FloatArray, k: int, out: NDArray[np.float32],
 ) -> None:  # fmt: skip
     """The ``k`` conflicting vehicles of every scene that neither they nor the ego have got
     past, soonest to reach their zone first (distance over speed, the speed floored at
-    1 m/s), into ``out[:, 6:]`` (:data:`CONFLICT_FEATURES`)."""
+    1 m/s), into ``out[:, 6:]`` (:data:`CONFLICT_FEATURES`, then the vehicle's ``extra``
+    values ``[B, C, E]``)."""
     columns = present.shape[1]
+    width = 6 + extra.shape[2]
     soon = np.empty(columns)  # inf: not a conflict, or one already taken
     for b in range(present.shape[0]):
         s_e = ego_progress[b]
@@ -614,13 +647,15 @@ def _soonest_conflicts(
             pick = _take_smallest(soon)
             if pick < 0:
                 break
-            base = 6 + 6 * n
+            base = 6 + width * n
             out[b, base] = 1.0
             out[b, base + 1] = other_zone[b, pick, 0] - other_progress[b, pick]
             out[b, base + 2] = other_zone[b, pick, 1] - other_progress[b, pick]
             out[b, base + 3] = other_speed[b, pick]
             out[b, base + 4] = ego_zone[b, pick, 0] - s_e
             out[b, base + 5] = ego_zone[b, pick, 1] - s_e
+            for e in range(extra.shape[2]):
+                out[b, base + 6 + e] = extra[b, pick, e]
 
 
 @jit

@@ -144,6 +144,23 @@ class CertifiedTrafficSwitching(CertifiedSwitching):
             config.north_max_speed_kmh / 3.6
         )
 
+    def margins(self, state: Any) -> tuple[FloatArray, FloatArray]:
+        """Per conflict of a logic view ``[B, C]``: the earliest time the vehicle can enter its
+        zone within the assumptions [s] (0 inside, ``inf`` once it has left or where there is
+        no conflict), and the certificate's slack for it [s]: that time less the margin and
+        the clear backup's time to leave the ego's zone from now (negative: full throttle now
+        would not clear it in time)."""
+        s = state
+        arrival = np.full(s.present.shape, np.inf)
+        slack = np.full(s.present.shape, np.inf)
+        _margins_many(
+            s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake, s.present,
+            np.ascontiguousarray(s.ego_cert_zone), s.other_progress,
+            np.ascontiguousarray(s.other_cert_zone), s.other_speed, *self._tables, arrival,
+            slack,
+        )  # fmt: skip
+        return arrival, slack
+
     def decide(self, state: Any, learned: FloatArray, safe: FloatArray) -> Decision:
         batch = learned.shape[0]
         use = np.zeros(batch, dtype=np.bool_)
@@ -173,6 +190,28 @@ def _arrival(progress: float, speed: float, enter: float, leave: float, c: Certi
     if distance <= to_top:
         return (math.sqrt(speed * speed + 2.0 * a * distance) - speed) / a
     return (top - speed) / a + (distance - to_top) / top
+
+
+@jit
+def _margins_many(
+    progress: FloatArray, speed: FloatArray, throttle: FloatArray, brake: FloatArray,
+    present: NDArray[np.bool_], zones: FloatArray, other_progress: FloatArray,
+    other_zones: FloatArray, other_speed: FloatArray, c: CertifiedConstants, rho_t: FloatArray,
+    rho_b: FloatArray, arrival: FloatArray, slack: FloatArray,
+) -> None:  # fmt: skip
+    """Fill :meth:`CertifiedTrafficSwitching.margins` (``inf`` where there is no conflict)."""
+    for b in range(present.shape[0]):
+        for j in range(present.shape[1]):
+            if not present[b, j]:
+                continue
+            arrive = _arrival(other_progress[b, j], other_speed[b, j], other_zones[b, j, 0],
+                              other_zones[b, j, 1], c)  # fmt: skip
+            arrival[b, j] = arrive
+            if math.isinf(arrive):
+                continue
+            distance = c.progress_factor * max(zones[b, j, 1] - progress[b], 0.0)
+            clear = _clear_time(distance, speed[b], throttle[b], brake[b], c, rho_t, rho_b)
+            slack[b, j] = arrive - c.time_margin - clear
 
 
 @jit
