@@ -81,6 +81,35 @@ def test_a_go_margin_starts_no_sooner_and_the_filter_still_never_acts(drive):
     assert np.all(later >= first) and np.any(later > first)
 
 
+def test_an_observed_foresight_ignores_what_no_car_could_see():
+    """``foresight: observed``: the go check runs on a copy with no vehicle still to come and
+    every driver rude, so changing the drivers' yielding or the vehicles still to come changes
+    none of its decisions, and the state it is given is left as it was."""
+    task = build_task(None, CERTIFIED, traffic={"preset": "test", "horizon_s": 20.0})
+    scenes = task.draw_scenarios(3, np.arange(64), np.zeros(64, dtype=np.int64))
+    state = task.initial(scenes)
+    for _ in range(60):  # up to the junction, where the decisions are taken
+        state, _ = task.step(state, np.full(64, 0.4))
+    every = np.arange(64)
+    hidden = state.take(every)  # the same scenes with another hidden future
+    hidden.traffic.yields[:] = ~hidden.traffic.yields
+    hidden.traffic.schedule.time[:] = np.minimum(hidden.traffic.schedule.time, 1.0)
+    hidden.traffic.next_arrival[:] = hidden.traffic.schedule.time[:, :, 0].min(axis=1)
+    blind = state.take(every)  # what a car knows, by hand
+    blind.traffic.yields[:] = False
+    blind.traffic.schedule.time[:] = np.inf
+    blind.traffic.next_arrival[:] = np.inf
+    before = (state.traffic.yields.copy(), state.traffic.schedule.time.copy())
+    observed = GapPlanner(task, GapPlannerConfig(foresight="observed"))
+    full = GapPlanner(task, GapPlannerConfig(foresight="full"))
+    goes = observed.goes(state)
+    assert 0 < goes.sum() < 64
+    np.testing.assert_array_equal(goes, observed.goes(hidden))
+    np.testing.assert_array_equal(goes, full.goes(blind))
+    np.testing.assert_array_equal(state.traffic.yields, before[0])
+    np.testing.assert_array_equal(state.traffic.schedule.time, before[1])
+
+
 def test_it_needs_a_task_in_traffic():
     with pytest.raises(ValueError, match="needs a task in traffic"):
         GapPlanner(build_task(None, None))
@@ -88,7 +117,13 @@ def test_it_needs_a_task_in_traffic():
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("coast_decel", 0.0), ("stop_extra_m", -1.0), ("go_margin_s", -0.1), ("recheck_ticks", 0)],
+    [
+        ("coast_decel", 0.0),
+        ("stop_extra_m", -1.0),
+        ("go_margin_s", -0.1),
+        ("recheck_ticks", 0),
+        ("foresight", "perfect"),
+    ],
 )
 def test_bad_tuning_is_refused_by_name(field, value):
     with pytest.raises(ConfigError, match=field):

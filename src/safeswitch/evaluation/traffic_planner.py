@@ -39,9 +39,11 @@ from numpy.typing import NDArray
 from safeswitch.core.config import check
 from safeswitch.evaluation.planner import FastDrive, drive_passes
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
-from safeswitch.leftturn.traffic import LeftTurnTrafficTask
+from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 
 FloatArray = NDArray[np.float64]
+#: What the gap planner's go check may know of the other vehicles (:class:`GapPlannerConfig`).
+FORESIGHTS = ("full", "observed")
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,12 @@ class GapPlannerConfig:
             [s] (a clone of the planner, which cannot see everything the check does, goes a
             little late or a little slowly; a gap that would just pass labels it wrong).
         recheck_ticks: Ticks between two go checks (the decision holds in between).
+        foresight: What the go check knows of the other vehicles. ``full``: everything the
+            simulation holds, their drivers' yielding and the vehicles still to come included
+            (a reference no onboard controller could be). ``observed``: only what a car could
+            see, the vehicles on the approaches now, each assumed never to yield (the
+            certified filter's own assumption); a teacher whose decisions a policy observing
+            the traffic can learn.
     """
 
     top_speed_kmh: float = 30.0
@@ -80,6 +88,7 @@ class GapPlannerConfig:
     coast_band_m: float = 10.0
     go_margin_s: float = 0.0
     recheck_ticks: int = 5
+    foresight: str = "full"
 
     def __post_init__(self) -> None:
         o = "gap_planner"
@@ -90,6 +99,8 @@ class GapPlannerConfig:
             value = getattr(self, name)
             check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
         check(self.recheck_ticks >= 1, o, "recheck_ticks", self.recheck_ticks, "must be >= 1")
+        check(self.foresight in FORESIGHTS, o, "foresight", self.foresight,
+              f"must be one of {', '.join(FORESIGHTS)}")  # fmt: skip
 
 
 class GapPlanner:
@@ -173,7 +184,25 @@ class GapPlanner:
             return self._drive.action(now, tick) if tick >= delay else closed
 
         rows = np.flatnonzero(state.world.progress[:, 0] <= self.first_entry)
-        return drive_passes(self._check_task, state, rows, self.last_exit, self._horizon, act)
+        if self.config.foresight == "full":
+            return drive_passes(self._check_task, state, rows, self.last_exit, self._horizon, act)
+        ok = np.ones(state.batch_size, dtype=bool)
+        seen = _as_observed(state.take(rows))
+        every = np.arange(rows.size)
+        ok[rows] = drive_passes(self._check_task, seen, every, self.last_exit, self._horizon, act)
+        return ok
+
+
+def _as_observed(state: TaskState) -> TaskState:
+    """``state`` (a copy, changed in place) as an onboard controller knows it: no vehicle still
+    to come, and every driver on the approaches one who never yields."""
+    if not isinstance(state, TrafficTaskState):
+        raise TypeError("the gap planner checks states in traffic")
+    traffic = state.traffic
+    traffic.yields[:] = False
+    traffic.schedule.time[:] = np.inf
+    traffic.next_arrival[:] = np.inf
+    return state
 
 
 class UnboundGapPlanner:
