@@ -1,7 +1,7 @@
 """Reproduce the shipped policies: train each from its configuration and copy the run's
 artefacts into ``src/safeswitch/policies/<name>/`` with a README of how it was made.
 
-Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all five).
+Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all seven).
 Training is the same as ``safeswitch train --config <name> --out runs/<name>``;
 ``--from-runs`` only copies already finished runs from ``runs/``.
 """
@@ -17,18 +17,30 @@ from safeswitch.training.config import load_config
 from safeswitch.training.run import train
 
 ROOT = Path(__file__).resolve().parent.parent
-NAMES = ("paper", "paper_scratch", "no_adas", "certified", "none")
+NAMES = (
+    "paper", "paper_scratch", "no_adas", "certified", "none", "traffic_paper", "traffic_certified"
+)  # fmt: skip
 ARTEFACTS = ("model.zip", "vecnormalize.pkl", "config.yaml", "metrics.json", "training_curves.png")
 
 
-def policy_readme(name: str, metrics: dict) -> str:
+def policy_readme(
+    name: str, metrics: dict, traffic: str | None = None, teacher: str = "planner"
+) -> str:
     t, e, warm = metrics["training"], metrics["evaluation"], metrics.get("warm_start")
     warm_note = ""
     if warm:
         warm_note = (
             f"\n\nIt is warm-started: before PPO, {warm['episodes']:,} scenarios were driven by "
-            f"the\nplanner or its clone ({warm['collisions']} collisions; "
+            f"the\n{teacher.replace('_', ' ')} or its clone ({warm['collisions']} collisions; "
             f"{warm['wall_time_s']:.0f} s of the wall time above)."
+        )
+    scene, horizon = "random scenarios", "12 s"
+    if traffic:
+        scene, horizon = f"random scenes of the `{traffic}` traffic family", "30 s"
+        warm_note += (
+            "\n\nIn traffic from every leg. On the denser, ruder `test` family: "
+            "`python benchmarks/traffic_certified.py`\n"
+            "(`benchmarks/results/traffic_certified.json`) and the README's traffic section."
         )
     return f"""# Shipped policy `{name}`
 
@@ -44,11 +56,11 @@ floating point across machines.{warm_note}
 During training: {t["collisions"]} collisions, a safety action in {t["safety_activation_episodes"]}
 of {t["episodes"]} episodes.
 
-Evaluation on {e["episodes"]} unseen random scenarios (seed {e["seed"]}): {e["collisions"]}
+Evaluation on {e["episodes"]} unseen {scene} (seed {e["seed"]}): {e["collisions"]}
 collisions, safety action in {e["safety_activation_episodes"]} episodes, comfort limits exceeded
 on {100 * e["comfort_violation_fraction"]:.2f} % of ticks, {e["stops"]} episodes with a full
 stop, mean time to clear the conflict zone {e["mean_time_to_clear_s"]:.2f} s (NaN: it never
-cleared it within the 12 s episode), crossed first in {e["cut_episodes"]} episodes and after
+cleared it within the {horizon} episode), crossed first in {e["cut_episodes"]} episodes and after
 the north car in {e["yield_episodes"]}.
 
 Files: `model.zip` (SB3 PPO), `vecnormalize.pkl` (observation statistics), `config.yaml`
@@ -63,7 +75,11 @@ def ship(name: str) -> None:
     for artefact in ARTEFACTS:
         shutil.copy2(run / artefact, target / artefact)
     metrics = json.loads((run / "metrics.json").read_text())
-    (target / "README.md").write_text(policy_readme(name, metrics))
+    config = load_config(run / "config.yaml")
+    traffic = config.traffic
+    preset = traffic.get("preset", "custom") if isinstance(traffic, dict) else traffic
+    readme = policy_readme(name, metrics, preset, config.warm_start.teacher)
+    (target / "README.md").write_text(readme)
 
 
 def main(argv: list[str]) -> int:

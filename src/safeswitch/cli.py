@@ -398,7 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--model",
         help="a run directory, one of its checkpoints (run/checkpoints/step_…), or a shipped "
-        "policy: shipped (the paper policy), paper, paper-scratch, no-adas, certified, none",
+        "policy: shipped (the paper policy), paper, paper-scratch, no-adas, certified, none, "
+        "traffic-paper, traffic-certified (in traffic)",
     )
     ev.add_argument(
         "--controller",

@@ -131,3 +131,56 @@ def test_the_paper_policy_is_within_85_percent_of_the_oracle(paper):
 
 def test_the_paper_policy_clears_the_zone_no_later_than_the_rule_on_average(paper, rule):
     assert paper["mean_time_to_clear_s"] <= rule["mean_time_to_clear_s"]
+
+
+# -- in traffic from every leg ------------------------------------------------------------------
+
+TRAFFIC_EVAL = {**EVAL, "traffic": "test"}  # the denser, ruder family it was not trained on
+
+
+@pytest.fixture(scope="module")
+def traffic_runs():
+    """The two traffic-trained policies and the rule under each one's logic, on the same 1,000
+    unseen scenes of the `test` family."""
+    return {
+        "certified": evaluate("learned", "traffic-certified", switching=None, **TRAFFIC_EVAL),
+        "paper": evaluate("learned", "traffic-paper", switching=None, **TRAFFIC_EVAL),
+        "rule_certified": evaluate("rule", None, switching="certified", **TRAFFIC_EVAL),
+        "rule_paper": evaluate("rule", None, switching="paper", **TRAFFIC_EVAL),
+    }
+
+
+def test_the_traffic_policies_were_trained_in_traffic_as_clones_of_the_gap_planner():
+    for name in ("traffic_paper", "traffic_certified"):
+        config = load_config(SHIPPED_DIR / name / "config.yaml")
+        assert config.traffic_settings is not None and config.traffic_settings.observe == "margins"
+        assert config.warm_start.teacher == "gap_planner"
+        assert config.warm_start.gap_planner.foresight == "observed"
+    assert load_config(SHIPPED_DIR / "traffic_certified" / "config.yaml").env.switching == (
+        "certified"
+    )
+    # under the certified filter neither the demonstrations nor PPO collided
+    m = metrics("traffic_certified")
+    assert m["training"]["collisions"] == 0 and m["warm_start"]["collisions"] == 0
+
+
+def test_the_certified_traffic_policy_meets_its_targets_on_the_test_family(traffic_runs):
+    """The issue's targets in traffic: no collision, the safety action in at most 5 % of the
+    episodes; and it clears more scenes than the rule under the same filter, which leans on
+    the filter in most of them."""
+    ours, rule = traffic_runs["certified"], traffic_runs["rule_certified"]
+    assert ours["episodes"] == 1000
+    assert ours["collisions"] == 0
+    assert ours["safety_activation_episodes"] <= 50
+    assert rule["safety_activation_episodes"] > 500
+    assert ours["cleared_episodes"] > rule["cleared_episodes"]
+    assert ours["comfort_violation_fraction"] <= 0.01
+
+
+def test_the_paper_traffic_policy_collides_far_less_than_the_rule_under_that_logic(traffic_runs):
+    """Under the paper logic (a heuristic) collisions stay possible in traffic; the policy that
+    waits for the gaps the certified filter would accept has a fraction of the rule's."""
+    ours, rule = traffic_runs["paper"], traffic_runs["rule_paper"]
+    assert rule["collisions"] > 100
+    assert ours["collisions"] <= rule["collisions"] / 10
+    assert ours["safety_activation_episodes"] < rule["safety_activation_episodes"] / 5

@@ -37,6 +37,8 @@ SHIPPED = {
     "no-adas": "no_adas",
     "certified": "certified",
     "none": "none",
+    "traffic-paper": "traffic_paper",
+    "traffic-certified": "traffic_certified",
 }
 
 
@@ -161,7 +163,8 @@ class _Spaces(VecEnv):
 
 def resolve_model_dir(model: str | Path) -> Path:
     """The folder holding ``model.zip``: a shipped policy by name (``shipped``, ``paper``,
-    ``paper-scratch``, ``no-adas``, ``certified``, ``none``), a run directory, one of its
+    ``paper-scratch``, ``no-adas``, ``certified``, ``none``; in traffic ``traffic-paper``,
+    ``traffic-certified``), a run directory, one of its
     checkpoints (``run/checkpoints/step_…``), or — for a run that was interrupted before it
     finished — its latest complete checkpoint."""
     path = SHIPPED_DIR / SHIPPED[str(model)] if str(model) in SHIPPED else Path(model)
