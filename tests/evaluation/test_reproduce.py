@@ -9,7 +9,7 @@ from html.parser import HTMLParser
 import pytest
 from PIL import Image
 
-from safeswitch.app.reproduce import ENTRIES
+from safeswitch.app.reproduce import ENTRIES, TRAFFIC_PRESETS
 from safeswitch.cli import main
 from safeswitch.leftturn.config import SCENARIO_NAMES
 from safeswitch.report.document import COMPARISON, DEFINITIONS, figure_list
@@ -137,6 +137,13 @@ def test_the_raw_results_hold_one_row_per_episode(report):
     reckless = {r["switching"]: r for r in summary["reckless_full_throttle"]}
     assert reckless["none"]["collisions"] > 0
     assert reckless["certified"]["collisions"] == 0
+    # In traffic: the policies trained there beside the paper policy, each under its logic;
+    # under the certified filter none collides at any density.
+    traffic = {(r["preset"], r["controller"], r["switching"]): r
+               for r in summary["traffic"]["rows"]}  # fmt: skip
+    for preset in TRAFFIC_PRESETS:
+        assert (preset, "ppo-traffic-paper", "paper") in traffic
+        assert traffic[preset, "ppo-traffic-certified", "certified"]["collisions"] == 0
 
 
 def test_reproduce_refuses_to_overwrite_a_report_without_overwrite(report, capsys):

@@ -194,34 +194,48 @@ def _reckless(episodes: int) -> list[dict[str, Any]]:
     return rows
 
 
-#: The traffic study: densities, and the paper policy under each logic (it sees the paper's six
-#: values; the other vehicles reach it only through the switching logic) beside the oracle.
+#: The traffic study: densities, the paper policy under each logic (it sees the paper's six
+#: values; the other vehicles reach it only through the switching logic), the policies trained
+#: in traffic (shipped; each under its own logic) and the oracle.
 TRAFFIC_PRESETS = ("light", "medium", "heavy", "test")
-TRAFFIC_CONTROLLERS = (("ppo-paper", "paper"), ("ppo-paper", "certified"), ("oracle", None))
+TRAFFIC_CONTROLLERS = (
+    ("ppo-paper", "paper"), ("ppo-paper", "certified"), ("ppo-traffic-paper", "paper"),
+    ("ppo-traffic-certified", "certified"), ("oracle", None),
+)  # fmt: skip
+#: The shipped policy behind each trained controller of the traffic study (the paper policy:
+#: the one this report evaluates, trained or shipped).
+TRAFFIC_POLICIES = {"ppo-traffic-paper": "traffic_paper",
+                    "ppo-traffic-certified": "traffic_certified"}  # fmt: skip
+#: The controller the traffic animation shows (in medium traffic).
+TRAFFIC_ANIMATED = ("ppo-traffic-certified", "certified")
 
 
 def traffic_study(
     models: dict[str, str], episodes: int, folder: Path, log: Callable[[str], None]
 ) -> list[dict[str, Any]]:
-    """The paper policy in traffic from every leg, under the paper and the certified logic,
-    and the oracle, at each density of :data:`TRAFFIC_PRESETS`; an animation of the certified
-    run in medium traffic. Rows: preset, controller, switching and the summary."""
-    from safeswitch.app.evaluate import fit_observations
+    """The controllers of :data:`TRAFFIC_CONTROLLERS` in traffic from every leg at each density
+    of :data:`TRAFFIC_PRESETS`; an animation of :data:`TRAFFIC_ANIMATED` in medium traffic.
+    Rows: preset, controller, switching and the summary."""
+    from safeswitch.app.evaluate import fit_observations, traffic_setup
     from safeswitch.evaluation.evaluate import summary_against_oracle
     from safeswitch.leftturn.task import build_task
 
     rows = []
-    model = models["paper"]
     for preset in TRAFFIC_PRESETS:
         plan = None
         for name, switching in TRAFFIC_CONTROLLERS:
             kind = "learned" if name != "oracle" else "oracle"
-            config, policy = controller_setup(kind, model if policy_of(name) else None, switching)
-            task = build_task(None, config, traffic=preset)
-            policy = fit_observations(policy, model if policy_of(name) else None, task)
+            model = None
+            if policy_of(name):
+                shipped = TRAFFIC_POLICIES.get(name)
+                model = models["paper"] if shipped is None else str(SHIPPED_DIR / shipped)
+            config, policy = controller_setup(kind, model, switching)
+            traffic, _ = traffic_setup(kind, model, preset)  # a policy keeps what it observes
+            task = build_task(None, config, traffic=traffic)
+            policy = fit_observations(policy, model, task)
             batch, _ = scenario_set(task, "random", episodes, EVAL_SEED)
             busiest = int(np.argmax(batch.traffic.active.sum(axis=1)))  # type: ignore[attr-defined]
-            animate = preset == "medium" and switching == "certified"
+            animate = preset == "medium" and (name, switching) == TRAFFIC_ANIMATED
             trace = Trace(task, animate=(busiest,)) if animate else None
             result, plan = run_controller(
                 task, policy, batch, trace.on_tick if trace else None, plan=plan, trace=False

@@ -308,7 +308,8 @@ def traffic_figure(rows: list[dict[str, Any]], presets: tuple[str, ...], path: P
         for k, p in enumerate(presets):
             if by[p]["collisions"]:
                 left.annotate(
-                    f"{by[p]['collisions']} collisions", (x[k], cleared[k]), color="red",
+                    f"{by[p]['collisions']} collision{'s' * (by[p]['collisions'] != 1)}",
+                    (x[k], cleared[k]), color="red",
                     fontsize=8, xytext=(4, -10), textcoords="offset points",
                 )  # fmt: skip
     for ax, title in ((left, "episodes that cleared the conflict zone"),
