@@ -1,14 +1,15 @@
-"""Driving in traffic from every leg under the certified filter: who clears, and how often the
-filter has to act.
+"""Driving in traffic from every leg: who clears, how often the safety action is needed, who
+collides — the shipped traffic policies beside the gap planner and the rule.
 
 On the same random scenes (seed 1000003, the README's) of the ``train`` and ``test`` traffic
-families, under ``certified``: the gap planner (``--controller gap_planner``), the rule-based
-system (``PID_th`` proposing throughout) and any trained policies given with ``--model`` (run
-directories; each under the logic it was trained with). Every row is ``safeswitch evaluate``'s
-summary, cut to the fields the README quotes.
+families: the gap planner (``--controller gap_planner``, under ``certified``), the rule-based
+system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the shipped
+``traffic-certified`` and ``traffic-paper`` policies (each under the logic it was trained with)
+and any trained runs given with ``--model``. Every row is ``safeswitch evaluate``'s summary, cut
+to the fields the README quotes.
 
 Run: ``python benchmarks/traffic_certified.py [--episodes N] [--model RUN ...] [--json]``
-(about five minutes at the default 1,000 scenes per family); writes
+(about six minutes at the default 1,000 scenes per family); writes
 ``benchmarks/results/traffic_certified.json``.
 """
 
@@ -41,6 +42,9 @@ def main(argv: list[str] | None = None) -> int:
     runs: list[tuple[str, str, str | None, str | None]] = [
         ("gap_planner", "gap_planner", None, None),
         ("rule", "rule", None, "certified"),
+        ("rule", "rule", None, "paper"),
+        ("learned:traffic-certified", "learned", "traffic-certified", None),
+        ("learned:traffic-paper", "learned", "traffic-paper", None),
         *((f"learned:{m}", "learned", m, None) for m in args.model),
     ]
     rows = []
