@@ -7,6 +7,7 @@ import pytest
 
 from safeswitch.leftturn import LeftTurnTask
 from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.task import build_task
 from safeswitch.training.policies import SHIPPED, load_policy
 
 
@@ -14,7 +15,8 @@ from safeswitch.training.policies import SHIPPED, load_policy
 def test_the_fast_deterministic_path_acts_as_sb3_predict(name):
     policy = load_policy(name.replace("_", "-"))
     assert policy._actor is not None  # the shipped policies take the fast path
-    task = LeftTurnTask(LeftTurnConfig())
+    traffic = policy.config.traffic_settings  # the traffic policies observe their traffic
+    task = build_task(None, None, traffic=traffic) if traffic else LeftTurnTask(LeftTurnConfig())
     rng = np.random.default_rng(0)
     # observations from real scenes, and far outside them (the clip to [-1, 1] matters there)
     obs = task.observe(task.initial(task.draw_scenarios(0, np.arange(2048), np.zeros(2048, int))))
