@@ -332,6 +332,8 @@ def campaign(
         where.map(run_shard, [(shards[i], space, str(folder)) for i in todo], finished, failed)
         startup = where.startup_s
     bar.close()
+    # in shard order, not in the order the workers happened to report them
+    failures.sort(key=lambda f: (f.cell, f.shard))
     per_cell: dict[str, Any] = {}
     for cell in cells:
         accumulator = SummaryAccumulator()
