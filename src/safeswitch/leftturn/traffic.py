@@ -36,6 +36,7 @@ from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
 from safeswitch.leftturn.switching import ConflictState
 from safeswitch.leftturn.task import ConflictArrays, ConflictTimeline, LeftTurnTask, TaskState
+from safeswitch.leftturn.traffic_logics import CertifiedTrafficSwitching
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.idm import IDMParams
 from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
@@ -191,6 +192,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
                 low, high = [*low, 0, -MARGIN_CAP_S], [*high, MARGIN_CAP_S, MARGIN_CAP_S]
         else:
             low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
+        #: The certified filter whose reckoning ``observe: margins`` shows, whatever logic the
+        #: task runs (the observation belongs to the policy).
+        self._margins: CertifiedTrafficSwitching | None = None
+        if traffic.observe == "margins":
+            from safeswitch.leftturn.certified import certified_logic
+
+            logic = certified_logic(self)
+            assert isinstance(logic, CertifiedTrafficSwitching)
+            self._margins = logic
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
         self._observed_high = np.tile(np.array(high, dtype=np.float32), traffic.observed)
 
@@ -528,9 +538,9 @@ class LeftTurnTrafficTask(LeftTurnTask):
         out[:, :6] = observation
         if observe in ("conflicts", "margins"):
             v = self.logic_view(state, self.conflict_state(state))
-            extra = np.zeros((*v.present.shape, width - 6))
-            if observe == "margins":
-                arrival, slack = self._certificate.margins(v)
+            extra = np.zeros((*v.present.shape, width - len(CONFLICT_FEATURES)))
+            if self._margins is not None:
+                arrival, slack = self._margins.margins(v)
                 extra[..., 0] = np.minimum(arrival, MARGIN_CAP_S)
                 extra[..., 1] = np.clip(slack, -MARGIN_CAP_S, MARGIN_CAP_S)
             _soonest_conflicts(
@@ -547,16 +557,6 @@ class LeftTurnTrafficTask(LeftTurnTask):
 
     def observe(self, state: TaskState) -> NDArray[np.float32]:
         return self.extend_observation(state, super().observe(state))
-
-    @property
-    def _certificate(self) -> Any:
-        """The certified filter whose reckoning ``observe: margins`` shows (whatever logic the
-        task runs: the observation belongs to the policy)."""
-        if not hasattr(self, "_margins_logic"):
-            from safeswitch.leftturn.certified import certified_logic
-
-            self._margins_logic = certified_logic(self)
-        return self._margins_logic
 
     @property
     def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:

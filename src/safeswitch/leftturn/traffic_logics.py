@@ -207,11 +207,21 @@ def _margins_many(
             arrive = _arrival(other_progress[b, j], other_speed[b, j], other_zones[b, j, 0],
                               other_zones[b, j, 1], c)  # fmt: skip
             arrival[b, j] = arrive
-            if math.isinf(arrive):
-                continue
-            distance = c.progress_factor * max(zones[b, j, 1] - progress[b], 0.0)
-            clear = _clear_time(distance, speed[b], throttle[b], brake[b], c, rho_t, rho_b)
-            slack[b, j] = arrive - c.time_margin - clear
+            if not math.isinf(arrive):
+                slack[b, j] = _clear_slack(progress[b], zones[b, j, 1], arrive, speed[b],
+                                           throttle[b], brake[b], c, rho_t, rho_b)  # fmt: skip
+
+
+@jit
+def _clear_slack(
+    progress: float, leave: float, arrive: float, speed: float, throttle: float, brake: float,
+    c: CertifiedConstants, rho_t: FloatArray, rho_b: FloatArray,
+) -> float:  # fmt: skip
+    """The clear backup's time to spare against a vehicle that can enter its zone ``arrive``
+    seconds from now [s]: that time less the margin and the backup's time for the ego at
+    ``progress`` to leave its own zone at ``leave`` (negative: the backup fails)."""
+    distance = c.progress_factor * max(leave - progress, 0.0)
+    return arrive - c.time_margin - _clear_time(distance, speed, throttle, brake, c, rho_t, rho_b)
 
 
 @jit
@@ -239,11 +249,9 @@ def _safe_many(
                 continue
         relevant = True
         first_entry = min(first_entry, enter)
-        distance = c.progress_factor * max(leave - low, 0.0)
-        if clear_ok:
-            t = _clear_time(distance, speed, throttle, brake, c, rho_t, rho_b)
-            if t > arrive - c.time_margin:
-                clear_ok = False
+        if clear_ok and _clear_slack(low, leave, arrive, speed, throttle, brake, c, rho_t,
+                                     rho_b) < 0.0:  # fmt: skip
+            clear_ok = False
     if not relevant:
         return True, True
     room = (first_entry - high) / c.progress_factor
