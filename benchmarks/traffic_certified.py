@@ -5,7 +5,8 @@ On the same random scenes (seed 1000003, the README's) of the ``train`` and ``te
 families: the gap planner (``--controller gap_planner``, under ``certified``), the rule-based
 system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the shipped
 ``traffic-certified`` and ``traffic-paper`` policies (each under the logic it was trained with)
-and any trained runs given with ``--model``. Every row is ``safeswitch evaluate``'s summary, cut
+and any trained runs given with ``--model``; and the shipped ``traffic-certified`` policy in
+``light``, ``medium`` and ``heavy`` traffic too. Every row is ``safeswitch evaluate``'s summary, cut
 to the fields the README quotes.
 
 Run: ``python benchmarks/traffic_certified.py [--episodes N] [--model RUN ...] [--json]``
@@ -27,6 +28,8 @@ from safeswitch.io import write_json
 
 RESULTS = Path(__file__).parent / "results" / "traffic_certified.json"
 FAMILIES = ("train", "test")
+#: The densities the shipped certified policy is also measured at.
+DENSITIES = ("light", "medium", "heavy")
 FIELDS = (
     "switching", "episodes", "collisions", "safety_activation_episodes", "cleared_episodes",
     "stops", "comfort_violation_fraction", "mean_efficiency", "mean_time_to_clear_s",
@@ -39,24 +42,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", nargs="*", default=[], help="trained runs to add")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
+    shipped = ("learned:traffic-certified", "learned", "traffic-certified", None)
     runs: list[tuple[str, str, str | None, str | None]] = [
         ("gap_planner", "gap_planner", None, None),
         ("rule", "rule", None, "certified"),
         ("rule", "rule", None, "paper"),
-        ("learned:traffic-certified", "learned", "traffic-certified", None),
+        shipped,
         ("learned:traffic-paper", "learned", "traffic-paper", None),
         *((f"learned:{m}", "learned", m, None) for m in args.model),
     ]
+    # every family for every controller; the shipped certified policy at every density too
+    cells = [(family, run) for family in FAMILIES for run in runs]
+    cells += [(preset, shipped) for preset in DENSITIES]
     rows = []
-    for family in FAMILIES:
-        for name, controller, model, switching in runs:
-            began = time.perf_counter()
-            summary = evaluate(controller, model, "random", args.episodes, EVAL_SEED, switching,
-                               None, traffic=family)  # fmt: skip
-            row = {"controller": name, "traffic": family, **{k: summary[k] for k in FIELDS}}
-            row["wall_time_s"] = round(time.perf_counter() - began, 1)
-            rows.append(row)
-            print(row, file=sys.stderr, flush=True)
+    for family, (name, controller, model, switching) in cells:
+        began = time.perf_counter()
+        summary = evaluate(controller, model, "random", args.episodes, EVAL_SEED, switching,
+                           None, traffic=family)  # fmt: skip
+        row = {"controller": name, "traffic": family, **{k: summary[k] for k in FIELDS}}
+        row["wall_time_s"] = round(time.perf_counter() - began, 1)
+        rows.append(row)
+        print(row, file=sys.stderr, flush=True)
     result = {"benchmark": "traffic_certified", **_common.machine(), "seed": EVAL_SEED,
               "rows": rows}  # fmt: skip
     write_json(RESULTS, result)
