@@ -184,13 +184,9 @@ class GapPlanner:
             return self._drive.action(now, tick) if tick >= delay else closed
 
         rows = np.flatnonzero(state.world.progress[:, 0] <= self.first_entry)
-        if self.config.foresight == "full":
-            return drive_passes(self._check_task, state, rows, self.last_exit, self._horizon, act)
-        ok = np.ones(state.batch_size, dtype=bool)
-        seen = _as_observed(state.take(rows))
-        every = np.arange(rows.size)
-        ok[rows] = drive_passes(self._check_task, seen, every, self.last_exit, self._horizon, act)
-        return ok
+        if self.config.foresight == "observed":
+            state = _as_observed(state.take(np.arange(state.batch_size)))
+        return drive_passes(self._check_task, state, rows, self.last_exit, self._horizon, act)
 
 
 def _as_observed(state: TaskState) -> TaskState:
