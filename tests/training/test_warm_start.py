@@ -156,6 +156,16 @@ def test_the_actor_rate_is_zero_then_ramps_then_holds(tmp_path):
     assert len(plain.policy.optimizer.param_groups) == 1  # Table II: one rate for everything
 
 
+def test_a_frozen_actor_without_its_own_rate_thaws_to_the_configured_one():
+    """Value-function pre-training from a random start: ``actor_frozen_steps`` alone (it once
+    did nothing without ``actor_learning_rate``)."""
+    c = config(ppo={"actor_frozen_steps": 1000, "learning_rate": 3e-4})
+    model = build_model(c, VecNormalize(LeftTurnVecEnv(2, config=c.env, seed=0)), None)
+    assert len(model.policy.optimizer.param_groups) == 2
+    assert model.actor_rate(999) == 0.0
+    assert model.actor_rate(1000) == pytest.approx(3e-4)
+
+
 def test_an_interrupted_warm_started_run_resumes_with_its_parameter_groups(
     tmp_path, interrupted_training
 ):

@@ -6,9 +6,10 @@ within a few dozen updates (in our runs the clone went from almost no safety act
 most rollouts soon after the actor was released at Table II's rate). So the actor (the
 policy network and its output layer) gets its own Adam parameter group whose learning rate is
 0 for the first ``actor_frozen_steps`` timesteps — the value function learns the cloned
-policy's returns — and then rises linearly to ``actor_learning_rate`` over
-``actor_ramp_steps``. The value function keeps the configured learning rate throughout.
-With the defaults (no separate rate) this is SB3's PPO unchanged.
+policy's returns — and then rises linearly to ``actor_learning_rate`` (or, without one, the
+configured learning rate) over ``actor_ramp_steps``. The value function keeps the configured
+learning rate throughout. With the defaults (no separate rate, no frozen steps) this is SB3's
+PPO unchanged.
 
 The schedule is saved with the model (SB3 saves the attributes), so ``load`` and ``--resume``
 rebuild the same parameter groups.
@@ -62,12 +63,12 @@ class SwitchPPO(PPO):
         log_std = getattr(policy, "log_std", None)
         if isinstance(log_std, torch.nn.Parameter):
             log_std.requires_grad_(self.learn_log_std)
-        if self.actor_learning_rate is None and self.learn_log_std:
+        separate = self.actor_learning_rate is not None or self.actor_frozen_steps > 0
+        if not separate and self.learn_log_std:
             return
         actor = self.actor_parameters()
         mine = {id(p) for p in actor}
         rest = [p for p in policy.parameters() if p.requires_grad and id(p) not in mine]
-        separate = self.actor_learning_rate is not None
         groups = [{"params": rest}, {"params": actor}] if separate else [{"params": rest + actor}]
         optimizer_class: Any = policy.optimizer_class
         policy.optimizer = optimizer_class(
@@ -96,13 +97,17 @@ class SwitchPPO(PPO):
         return bool(super().collect_rollouts(*args, **kwargs))
 
     def actor_rate(self, timesteps: int) -> float:
-        """The actor's learning rate after ``timesteps`` (see the module docstring)."""
-        if self.actor_learning_rate is None:
-            return float(self.lr_schedule(self._current_progress_remaining))
+        """The actor's learning rate after ``timesteps`` (see the module docstring); without an
+        ``actor_learning_rate``, the configured learning rate is the one it ramps up to."""
+        rate = self.actor_learning_rate
+        if rate is None:
+            rate = float(self.lr_schedule(self._current_progress_remaining))
         since = timesteps - self.actor_frozen_steps
         if since < 0:
             return 0.0
-        return self.actor_learning_rate * min(1.0, since / max(self.actor_ramp_steps, 1))
+        if self.actor_ramp_steps == 0:
+            return rate
+        return rate * min(1.0, since / self.actor_ramp_steps)
 
     def _update_learning_rate(
         self, optimizers: list[torch.optim.Optimizer] | torch.optim.Optimizer
