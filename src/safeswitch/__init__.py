@@ -46,6 +46,7 @@ _EXPORTS = {
     "SafeSwitchVecEnv": "safeswitch.core.wrappers",
     "SwitchingLogic": "safeswitch.core.switching",
     "Decision": "safeswitch.core.switching",
+    "Guarded": "safeswitch.core.switching",
     "NeverSwitch": "safeswitch.core.switching",
     "SwitchingError": "safeswitch.core.switching",
     "supervise": "safeswitch.core.switching",
@@ -60,6 +61,7 @@ __all__ = [
     "SUMO_ENV_ID",
     "TRAFFIC_ENV_ID",
     "Decision",
+    "Guarded",
     "NeverSwitch",
     "SafeSwitch",
     "SafeSwitchVecEnv",
@@ -76,6 +78,7 @@ if TYPE_CHECKING:
     from safeswitch.core.registry import logic_names, make_logic, register_logic
     from safeswitch.core.switching import (
         Decision,
+        Guarded,
         NeverSwitch,
         SwitchingError,
         SwitchingLogic,

@@ -53,29 +53,51 @@ def scenarios_for(task, random_count=1000):
     return random, grid
 
 
+@pytest.fixture(scope="module")
+def guarded_task():
+    return LeftTurnTask(
+        resolve_config({"episode": {"learned_scope": "episode"}}, switching="guarded")
+    )
+
+
+@pytest.mark.parametrize("switching", ["certified", "guarded"])
 @pytest.mark.parametrize("adversary", ADVERSARIES)
-def test_no_adversary_makes_certified_collide(certified_task, shipped_act, adversary):
-    random, grid = scenarios_for(certified_task)
+def test_no_adversary_makes_certified_collide(request, shipped_act, adversary, switching):
+    """The filter alone, and the filter beneath the paper logic (``guarded``: it judges what
+    the paper logic lets through, so its guarantee covers the pair)."""
+    task = request.getfixturevalue(f"{switching}_task")
+    random, grid = scenarios_for(task)
     for scenarios in (random, grid):
         batch = scenarios.ego_speed.shape[0]
-        make = catalogue(certified_task, batch, seed=1, trained=shipped_act)[adversary]
-        result = rollout(certified_task, scenarios, make())
+        make = catalogue(task, batch, seed=1, trained=shipped_act)[adversary]
+        result = rollout(task, scenarios, make())
         assert result.collision.sum() == 0
         assert result.min_separation.min() > 0.0
 
 
 def test_the_paper_logic_has_a_blind_spot_that_certified_closes():
     """Changing pace after the gap looked safe (here: random bang-bang throttle) defeats the
-    paper's rule, not the filter."""
-    counts = {}
-    for switching in ("paper", "certified"):
+    paper's rule, not the filter, nor the filter beneath the paper's rule; there, both act (the
+    filter, which allows for the worst the north car can do, on most of the ticks)."""
+    counts, reasons = {}, {}
+    for switching in ("paper", "certified", "guarded"):
         task = LeftTurnTask(
             resolve_config({"episode": {"learned_scope": "episode"}}, switching=switching)
         )
         scenarios, _ = scenarios_for(task, 2000)
-        result = rollout(task, scenarios, catalogue(task, 2000, seed=1)["bang_bang"]())
+        ticks = np.zeros(len(task.reasons), dtype=np.int64)
+
+        def count(state, record, tick, ticks=ticks, task=task):
+            acted = record.reason[record.safety_active]
+            ticks[:] += np.bincount(acted, minlength=len(task.reasons))
+
+        result = rollout(task, scenarios, catalogue(task, 2000, seed=1)["bang_bang"](), count)
         counts[switching] = int(result.collision.sum())
-    assert counts["paper"] > 0 and counts["certified"] == 0
+        reasons[switching] = dict(zip(task.reasons, ticks.tolist(), strict=True))
+    assert counts["paper"] > 0 and counts["certified"] == 0 and counts["guarded"] == 0
+    paper_ticks = reasons["guarded"]["no_gap_at_braking_point"]
+    guard_ticks = sum(n for r, n in reasons["guarded"].items() if r.startswith("guard:"))
+    assert paper_ticks > 0 and guard_ticks > 0, reasons
 
 
 def test_a_safe_learned_action_is_never_replaced(certified_task):

@@ -100,6 +100,45 @@ def never_switch(context: object = None) -> NeverSwitch:
     return NeverSwitch()
 
 
+class Guarded:
+    """One logic guarded by another: ``primary`` decides, then ``guard`` judges the action
+    ``primary`` lets through (the learned one, or ``primary``'s safety action) exactly as it
+    would judge a learned proposal, and its safety action wins where it intervenes.
+
+    Whatever the guard guarantees for any proposed action sequence (the ``certified`` logic:
+    no collision) therefore holds for the pair, while ``primary`` still decides everywhere the
+    guard lets it. The pair's safety action is executed where either intervened.
+
+    Args:
+        primary: The logic in the loop (e.g. the paper's Algorithm 1).
+        guard: The logic beneath it (e.g. the certified safety filter).
+
+    Attributes:
+        reasons: ``primary``'s reasons, then the guard's, each of the latter prefixed
+            ``"guard:"``.
+    """
+
+    def __init__(self, primary: SwitchingLogic[Any], guard: SwitchingLogic[Any]) -> None:
+        first, second = check_logic(primary), check_logic(guard)
+        self.primary, self.guard = primary, guard
+        self._offset = len(first) - 1
+        self.reasons: tuple[str, ...] = (*first, *(f"guard:{r}" for r in second[1:]))
+        check_logic(self)
+
+    def decide(self, state: Any, learned: FloatArray, safe: FloatArray) -> Decision:
+        batch, dim = learned.shape
+        first = check_decision(self.primary, self.primary.decide(state, learned, safe), batch, dim)
+        use_first = first.use_safety[:, None]
+        passed = np.where(use_first, first.safe_action, learned)
+        second = check_decision(self.guard, self.guard.decide(state, passed, safe), batch, dim)
+        use = first.use_safety | second.use_safety
+        action = np.where(second.use_safety[:, None], second.safe_action, passed)
+        reason = np.where(
+            second.use_safety, second.reason.astype(np.int16) + self._offset, first.reason
+        ).astype(np.int8)
+        return Decision(use, reason, action)
+
+
 def check_logic(logic: object) -> tuple[str, ...]:
     """The logic's reasons, after checking that it follows :class:`SwitchingLogic`.
 

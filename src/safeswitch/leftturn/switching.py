@@ -33,7 +33,7 @@ import numpy as np
 
 from safeswitch.core.arrays import jit
 from safeswitch.core.registry import LogicContextError
-from safeswitch.core.switching import BoolArray, Decision, FloatArray
+from safeswitch.core.switching import BoolArray, Decision, FloatArray, Guarded
 from safeswitch.leftturn.config import PaperSwitchingConfig
 
 if TYPE_CHECKING:
@@ -194,3 +194,16 @@ def paper_logic(task: LeftTurnTask) -> PaperSwitching:
             paper, task.config.controllers.emergency_decel, task.config.episode.approach_distance_m
         )
     return PaperSwitching(paper, task.config.controllers.emergency_decel)
+
+
+def guarded_logic(task: LeftTurnTask) -> Guarded:
+    """Factory of the ``guarded`` logic (registered under that name; ours): the paper's
+    Algorithm 1 in the loop, the ``certified`` filter beneath it judging what it lets through
+    (:class:`~safeswitch.core.switching.Guarded`). The certificate's guarantee — no collision
+    for any proposed action sequence — covers the pair, so a policy can explore under the
+    paper's logic, and be charged ``R_ADAS`` for both, without the paper logic's known gap
+    (a car stopped inside the conflict zone) costing a collision. In traffic, both logics'
+    traffic versions."""
+    from safeswitch.leftturn.certified import certified_logic
+
+    return Guarded(paper_logic(task), certified_logic(task))
