@@ -46,6 +46,9 @@ def test_packaged_configs_by_name_and_the_default_is_the_papers_recipe(tmp_path,
     assert default.env.episode.learned_scope == "episode"  # not the env's comfort-breaking window
     assert default.ppo.learning_rate == 2.5e-4 and default.timesteps == 1_200_000  # Table II
     assert default != TrainConfig()
+    for name in packaged_config_names():  # every packaged recipe is valid, experiments too
+        assert load_config(name).timesteps > 0, name
+    assert load_config("experimental/scratch_shaped").ppo.progress_shaping == 5.0
 
 
 def test_bad_configs_are_refused_by_name(tmp_path, capsys):

@@ -229,6 +229,9 @@ class LeftTurnVecEnv(VecEnv):
             lambda tick, live: self._stats.update(tick, self.config, live),
         )
         self._actions = None
+        #: The ego's progress along its route after the step [m], taken before the episodes
+        #: that ended are reset (reward shaping reads it; training.shaping).
+        self.ego_progress_after_step = self._state.world.progress[:, 0].copy()
         done = record.terminated | record.truncated
         observation = record.observation
         ended = np.flatnonzero(done)

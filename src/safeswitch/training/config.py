@@ -59,6 +59,9 @@ class PPOConfig:
             is 0 on a throttle action asks for half throttle everywhere; starting at a gentle
             cruise (-0.3) keeps early training out of the timid and the careless basins
             (docs/learning_experiments.md).
+        progress_shaping: Potential-based shaping on the ego's route progress [reward per
+            metre] added to the reward PPO learns from (ours; 0: off). It leaves the optimal
+            policies unchanged; see :mod:`safeswitch.training.shaping`.
     """
 
     learning_rate: float = 2.5e-4
@@ -82,9 +85,13 @@ class PPOConfig:
     actor_frozen_steps: int = 0
     actor_ramp_steps: int = 0
     initial_action: float | None = None
+    progress_shaping: float = 0.0
 
     def __post_init__(self) -> None:
         o = "ppo"
+        shaping = self.progress_shaping
+        check(math.isfinite(shaping) and 0 <= shaping <= 100, o, "progress_shaping", shaping,
+              "must be in [0, 100] per metre")  # fmt: skip
         if self.initial_action is not None:
             check(-1 <= self.initial_action <= 1, o, "initial_action", self.initial_action,
                   "must be in [-1, 1] or null")  # fmt: skip
@@ -398,6 +405,9 @@ class EnvTrainConfig:
             )
         if self.penalty is not None:
             check(math.isfinite(self.penalty), o, "penalty", self.penalty, "must be finite")
+        check(self.ppo.progress_shaping == 0, "ppo", "progress_shaping",
+              self.ppo.progress_shaping, "shapes the left turn's reward only: must be 0 for "
+              f"env_id {self.env_id!r}")  # fmt: skip
         rollout = self.ppo.n_steps * self.n_envs
         check(
             rollout % self.ppo.n_minibatches == 0,

@@ -40,6 +40,7 @@ from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
+from safeswitch.training.shaping import ProgressShaping
 from safeswitch.training.validation import Validator, select_best
 from safeswitch.training.warm_start import warm_start
 
@@ -257,7 +258,10 @@ def train(
     )
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
-    env = normalized(vec, config, checkpoint)
+    shaping = config.ppo.progress_shaping
+    env = normalized(
+        ProgressShaping(vec, shaping, config.ppo.gamma) if shaping else vec, config, checkpoint
+    )
     if checkpoint is not None:
         model = SwitchPPO.load(
             checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")

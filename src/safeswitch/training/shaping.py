@@ -1,0 +1,66 @@
+"""Potential-based reward shaping on the ego's progress along its route (ours, opt-in).
+
+``ppo.progress_shaping: k`` adds ``F = γ·Φ(s') − Φ(s)`` with ``Φ(s) = k · (the ego's path
+distance along its route) [per metre]`` to the reward PPO learns from, with PPO's own ``γ``
+per environment step (one decision). Shaping of this form leaves the optimal policies of the
+discounted task unchanged (Ng, Harada & Russell, *Policy invariance under reward
+transformations*, ICML 1999): it changes how soon a speed-up is paid for, not which behaviour
+the paper's reward prefers. Its motive is measured in ``docs/learning_experiments.md``: PPO
+from scratch drives below the speed limit where nothing stops it, because "a little more
+throttle" pays off in ``R_v`` only through a transient that ``R_a_lon`` charges for.
+
+The environment's own reward, its episode returns, ``progress.csv`` and every evaluation stay
+the paper's: the shaping term is added here, between the environment and ``VecNormalize``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+
+from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+
+
+class ProgressShaping(VecEnvWrapper):
+    """``F = gamma·Φ(s') − Φ(s)``, ``Φ = per_metre · ego progress [m]``, added to each reward.
+
+    At the step that ends an episode ``s'`` is the episode's last state (not the next
+    episode's first), so the telescoping sum is that of the episode that ended.
+
+    Args:
+        venv: The batched left-turn environment.
+        per_metre: ``k`` [reward per metre of progress], > 0.
+        gamma: The discount PPO applies per step of ``venv``.
+    """
+
+    def __init__(self, venv: LeftTurnVecEnv, per_metre: float, gamma: float) -> None:
+        if not isinstance(venv, LeftTurnVecEnv):
+            raise TypeError(f"progress shaping needs a LeftTurnVecEnv, got {type(venv).__name__}")
+        if not (np.isfinite(per_metre) and per_metre > 0 and 0 < gamma <= 1):
+            raise ValueError(f"progress shaping: per_metre={per_metre!r}, gamma={gamma!r}")
+        super().__init__(venv)
+        self.base = venv
+        self.per_metre, self.gamma = float(per_metre), float(gamma)
+        self._before: np.ndarray | None = None
+
+    def reset(self) -> VecEnvObs:
+        observation = self.venv.reset()
+        self._before = self._progress()
+        return observation
+
+    def step_async(self, actions: np.ndarray) -> None:
+        if self._before is None:
+            self._before = self._progress()
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, reward, done, infos = self.venv.step_wait()
+        assert self._before is not None
+        after = self.base.ego_progress_after_step
+        shaped = self.per_metre * (self.gamma * after - self._before)
+        self._before = self._progress()  # where each episode is now (a fresh one if ended)
+        return observation, (reward + shaped).astype(np.float32), done, infos
+
+    def _progress(self) -> np.ndarray:
+        return self.base.state.world.progress[:, 0].copy()
