@@ -5,12 +5,14 @@ value (optionally under another ``--switching``) into a temporary run directory,
 thread, and collects each run's ``metrics.json``: training collisions and safety episodes, the
 step of the policy the run selected on its validation set (if it validates), and the
 deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic
-trained with): collisions, safety episodes, comfort, full stops, cuts, cleared, efficiency.
+trained with, and with ``--deploy`` under another too): collisions, safety episodes, comfort,
+full stops, cuts, cleared, efficiency.
 Every seed's row is reported (no seed is picked over another). 2 to 4 minutes per seed on a
 two-core machine, by recipe.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
-[--out FILE]``; writes ``benchmarks/results/train_seeds_<config>[_<switching>].json``.
+[--deploy LOGIC] [--out FILE]``; writes
+``benchmarks/results/train_seeds_<config>[_<switching>][_deployed_<logic>].json``.
 """
 
 from __future__ import annotations
@@ -25,9 +27,15 @@ from pathlib import Path
 
 import _common
 from safeswitch.training.config import load_config
-from safeswitch.training.run import train
+from safeswitch.training.policies import load_policy
+from safeswitch.training.run import evaluate_trained, train
 
 RESULTS = Path(__file__).parent / "results"
+#: What each evaluation reports (``safeswitch evaluate``'s fields).
+EVALUATED = (
+    "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
+    "cut_episodes", "cleared_episodes", "mean_efficiency",
+)  # fmt: skip
 
 
 def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
@@ -41,11 +49,8 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         "training_safety_episodes": t["safety_activation_episodes"],
         "training_episodes": t["episodes"],
         "selected_timesteps": (metrics.get("selected") or {}).get("best_timesteps"),
-        **{k: e[k] for k in (
-            "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
-            "cut_episodes", "cleared_episodes", "mean_efficiency",
-        )},
-    }  # fmt: skip
+        **{k: e[k] for k in EVALUATED},
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -54,6 +59,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--switching", help="train (and evaluate) under this logic instead")
     parser.add_argument("--out", type=Path, help="the JSON file (default under results/)")
+    parser.add_argument(
+        "--deploy",
+        help="also evaluate each run's policy under this logic (e.g. paper for a policy "
+        "trained under guarded), on the same scenarios",
+    )
     args = parser.parse_args(argv)
     config = load_config(args.config)
     if args.switching:
@@ -62,7 +72,12 @@ def main(argv: list[str] | None = None) -> int:
     for seed in args.seeds:
         with tempfile.TemporaryDirectory() as tmp:
             metrics = train(replace(config, seed=seed, torch_threads=1), tmp, progress_bar=False)
-        rows.append(row(seed, metrics))
+            rows.append(row(seed, metrics))
+            if args.deploy:
+                deployed = replace(config, env=replace(config.env, switching=args.deploy))
+                e = evaluate_trained(load_policy(tmp), deployed, config.eval_episodes,
+                                     config.eval_seed)  # fmt: skip
+                rows[-1]["deployed"] = {"switching": args.deploy, **{k: e[k] for k in EVALUATED}}
         print(json.dumps(rows[-1]), flush=True)
     result = {
         "benchmark": "train_seeds",
@@ -73,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     name = args.config.replace("/", "_").replace(".yaml", "")
     suffix = f"_{args.switching}" if args.switching else ""
+    suffix += f"_deployed_{args.deploy}" if args.deploy else ""
     out = args.out or RESULTS / f"train_seeds_{name}{suffix}.json"
     tmp_out = out.with_suffix(".tmp")
     tmp_out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
