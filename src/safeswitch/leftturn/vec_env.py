@@ -171,6 +171,9 @@ class LeftTurnVecEnv(VecEnv):
         self._stats = EpisodeStatistics(self.num_envs)
         self._start = time.perf_counter()
         self.last_record: StepRecord | None = None
+        #: The ego's progress along its route after the last step [m], taken before the
+        #: episodes that ended are reset (reward shaping reads it; training.shaping).
+        self.ego_progress_after_step = np.zeros(self.num_envs)
 
     @property
     def state(self) -> TaskState:
@@ -229,8 +232,6 @@ class LeftTurnVecEnv(VecEnv):
             lambda tick, live: self._stats.update(tick, self.config, live),
         )
         self._actions = None
-        #: The ego's progress along its route after the step [m], taken before the episodes
-        #: that ended are reset (reward shaping reads it; training.shaping).
         self.ego_progress_after_step = self._state.world.progress[:, 0].copy()
         done = record.terminated | record.truncated
         observation = record.observation
