@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml Makefile
 	touch $(STAMP)
 
 demo: venv
-	$(VENV)/bin/safeswitch reproduce --quick --out out/demo
+	$(VENV)/bin/safeswitch demo
 
 test: venv
 	$(PY) -m pytest -q

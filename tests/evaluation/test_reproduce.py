@@ -150,3 +150,19 @@ def test_reproduce_refuses_to_overwrite_a_report_without_overwrite(report, capsy
     args = ["reproduce", "--quick", "--out", str(report), "--episodes", "2"]
     assert main(args) == 2
     assert "is not empty" in capsys.readouterr().err
+
+
+def test_make_demo_runs_the_demo_command_which_replaces_its_own_report():
+    """`make demo` twice must work: the Makefile calls `safeswitch demo`, which is
+    `reproduce --quick` into out/demo with --overwrite on (a second run replaces the files the
+    first one wrote instead of refusing)."""
+    from pathlib import Path
+
+    from safeswitch.cli import build_parser
+
+    makefile = (Path(__file__).resolve().parents[2] / "Makefile").read_text(encoding="utf-8")
+    recipe = makefile.split("\ndemo:", 1)[1].split("\n\n", 1)[0]
+    assert "safeswitch demo" in recipe and "reproduce" not in recipe
+    args = build_parser().parse_args(["demo"])
+    assert (args.out, args.quick, args.overwrite, args.episodes) == ("out/demo", True, True, 1000)
+    assert args.func.__name__ == "_reproduce"
