@@ -79,3 +79,19 @@ def test_the_validation_set_is_neither_trained_nor_tested_on():
         from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "seed": 3}})
     with pytest.raises(ConfigError, match="every"):
         from_dict(TrainConfig, SMALL | {"validation": {"every": -1}})
+
+
+def test_a_policy_can_be_validated_under_the_logic_it_will_be_deployed_under(tmp_path):
+    from safeswitch.training.validation import Validator
+
+    trains_guarded = SMALL | {"env": {**SMALL["env"], "switching": "guarded"}}
+    config = from_dict(TrainConfig, trains_guarded)
+    assert Validator(config, tmp_path).task.config.switching == "guarded"  # default: its own
+    deployed = from_dict(
+        TrainConfig, trains_guarded | {"validation": {**SMALL["validation"], "switching": "paper"}}
+    )
+    validator = Validator(deployed, tmp_path)
+    assert validator.task.config.switching == "paper"
+    assert deployed.env.switching == "guarded"  # training itself keeps its logic
+    with pytest.raises(ConfigError, match=r"validation\.switching .*'papr'"):
+        from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "switching": "papr"}})

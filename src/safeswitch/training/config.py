@@ -200,15 +200,24 @@ class ValidationConfig:
         episodes: Scenarios of the validation set.
         seed: Their seed (differs from the training seed and from ``eval_seed``).
         start: Timesteps before the first validation (early policies are no candidates).
+        switching: The switching logic the policy is validated under (``null``: the one it
+            trains with). Ours: a policy trained under one logic and meant to be deployed
+            under another (trained under ``guarded``, deployed under ``paper``) is selected
+            where it will run.
     """
 
     every: int = 0
     episodes: int = 500
     seed: int = 2_000_003
     start: int = 0
+    switching: str | None = None
 
     def __post_init__(self) -> None:
         o = "validation"
+        if self.switching is not None:
+            known = ", ".join(logic_names())
+            check(self.switching in logic_names(), o, "switching", self.switching,
+                  f"must be null or a registered switching logic ({known})")  # fmt: skip
         check(self.every >= 0, o, "every", self.every, "must be >= 0 (0: no validation)")
         check(self.episodes >= 1, o, "episodes", self.episodes, "must be >= 1")
         check(self.start >= 0, o, "start", self.start, "must be >= 0")

@@ -2,8 +2,9 @@
 
 Every ``validation.every`` timesteps the deterministic policy (the Gaussian's mean, as it is
 evaluated and deployed) drives the validation scenarios — random scenarios drawn with their own
-seed, never trained on and never in the final evaluation — and its mean return there is its
-score (the paper's criterion for learned model validation). The best policy so far is saved
+seed, never trained on and never in the final evaluation, under the logic it trains with or
+``validation.switching`` — and its mean return there is its score (the paper's criterion for
+learned model validation). The best policy so far is saved
 whole into ``best/`` of the run directory (model and observation statistics, written into a
 temporary folder and renamed); each validation is a row of ``validation.csv`` with the
 evaluation's summary fields. At the end of the run the best policy becomes the run's
@@ -60,7 +61,8 @@ class Validator(BaseCallback):
         super().__init__()
         v = config.validation
         self.config, self.run = config, run
-        self.task = build_task(None, config.env, traffic=config.traffic_settings)
+        logic = {} if v.switching is None else {"switching": v.switching}
+        self.task = build_task(None, config.env, traffic=config.traffic_settings, **logic)
         ids = np.arange(v.episodes)
         self.scenarios = self.task.draw_scenarios(v.seed, ids, np.zeros(v.episodes, dtype=int))
         self._plan: OraclePlan | None = None
