@@ -6,7 +6,7 @@ import pytest
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.config import EnvTrainConfig, PPOConfig
-from safeswitch.training.shaping import ProgressShaping
+from safeswitch.training.shaping import ProgressShaping, ShapingSchedule
 
 GAMMA, K = 0.99, 2.0
 
@@ -67,3 +67,36 @@ def test_bad_shaping_settings_are_named():
         EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(progress_shaping=1.0))
     with pytest.raises(TypeError, match="LeftTurnVecEnv"):
         ProgressShaping(object(), 1.0, 0.99)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"progress_shaping_final .*needs progress_shaping"):
+        PPOConfig(progress_shaping_final=1.0)
+    with pytest.raises(ConfigError, match=r"progress_shaping_final .*-2\.0"):
+        PPOConfig(progress_shaping=5.0, progress_shaping_final=-2.0)
+
+
+def test_an_annealed_shaping_falls_linearly_over_the_run_and_shapes_with_its_current_k():
+    """``ppo.progress_shaping_final``: before each rollout ``k`` is set from the run's
+    progress; the next step's shaping uses it."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    base, env = make(2)
+    schedule = ShapingSchedule(env, start=K, final=0.5)
+    model = SimpleNamespace(
+        get_env=lambda: env, logger=configure(None, []), _current_progress_remaining=1.0
+    )
+    schedule.init_callback(model)  # type: ignore[arg-type]
+    seen = []
+    for remaining in (1.0, 0.75, 0.5, 0.0):
+        model._current_progress_remaining = remaining
+        schedule.on_rollout_start()
+        seen.append(env.per_metre)
+    np.testing.assert_allclose(seen, [K, K - 0.375, K - 0.75, 0.5])
+    env.reset()
+    env.step_async(np.array([[1.0], [1.0]]))
+    before = base.state.world.progress[:, 0].copy()
+    _, reward, _, _ = env.step_wait()
+    expected = 0.5 * (GAMMA * base.ego_progress_after_step - before)
+    np.testing.assert_allclose(reward - paper_reward(base), expected, atol=1e-4)
+    with pytest.raises(ValueError, match="final=-1"):
+        ShapingSchedule(env, start=K, final=-1.0)

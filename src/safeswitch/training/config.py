@@ -62,6 +62,9 @@ class PPOConfig:
         progress_shaping: Potential-based shaping on the ego's route progress [reward per
             metre] added to the reward PPO learns from (ours; 0: off). It leaves the optimal
             policies unchanged; see :mod:`safeswitch.training.shaping`.
+        progress_shaping_final: With ``progress_shaping`` on, ``k`` is annealed linearly
+            from it at the start to this at the end of the run, one value per rollout (ours;
+            ``null``: a constant ``k``).
     """
 
     learning_rate: float = 2.5e-4
@@ -86,12 +89,18 @@ class PPOConfig:
     actor_ramp_steps: int = 0
     initial_action: float | None = None
     progress_shaping: float = 0.0
+    progress_shaping_final: float | None = None
 
     def __post_init__(self) -> None:
         o = "ppo"
-        shaping = self.progress_shaping
+        shaping, final = self.progress_shaping, self.progress_shaping_final
         check(math.isfinite(shaping) and 0 <= shaping <= 100, o, "progress_shaping", shaping,
               "must be in [0, 100] per metre")  # fmt: skip
+        if final is not None:
+            check(math.isfinite(final) and 0 <= final <= 100, o, "progress_shaping_final",
+                  final, "must be in [0, 100] per metre or null")  # fmt: skip
+            check(shaping > 0, o, "progress_shaping_final", final,
+                  "anneals the shaping: needs progress_shaping > 0")  # fmt: skip
         if self.initial_action is not None:
             check(-1 <= self.initial_action <= 1, o, "initial_action", self.initial_action,
                   "must be in [-1, 1] or null")  # fmt: skip

@@ -40,7 +40,7 @@ from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
-from safeswitch.training.shaping import ProgressShaping
+from safeswitch.training.shaping import ProgressShaping, ShapingSchedule
 from safeswitch.training.validation import Validator, select_best
 from safeswitch.training.warm_start import warm_start
 
@@ -258,10 +258,9 @@ def train(
     )
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
-    shaping = config.ppo.progress_shaping
-    env = normalized(
-        ProgressShaping(vec, shaping, config.ppo.gamma) if shaping else vec, config, checkpoint
-    )
+    ppo = config.ppo
+    shaped = ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
+    env = normalized(shaped or vec, config, checkpoint)
     if checkpoint is not None:
         model = SwitchPPO.load(
             checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
@@ -279,10 +278,13 @@ def train(
         write_atomic(run / "warm_start.json", json.dumps(warm_start(model, env, config), indent=2))
         _save_checkpoint(run, model, env, vec, monitor)  # --resume starts after the warm start
     validator = Validator(config, run) if config.validation.every else None
+    extra: list[BaseCallback] = [validator] if validator is not None else []
+    if shaped is not None and ppo.progress_shaping_final is not None:
+        extra.append(ShapingSchedule(shaped, ppo.progress_shaping, ppo.progress_shaping_final))
     learn(
         model, run, config.timesteps, monitor,
         lambda: _save_checkpoint(run, model, env, vec, monitor), resume, progress_bar,
-        extra=[validator] if validator is not None else None,
+        extra=extra,
     )  # fmt: skip
     wall = monitor.wall_time_s
     save_final(run, model, env)

@@ -11,11 +11,17 @@ throttle" pays off in ``R_v`` only through a transient that ``R_a_lon`` charges 
 
 The environment's own reward, its episode returns, ``progress.csv`` and every evaluation stay
 the paper's: the shaping term is added here, between the environment and ``VecNormalize``.
+
+``ppo.progress_shaping_final`` anneals ``k`` linearly over the run to that value, one value per
+rollout (:class:`ShapingSchedule`): strong shaping while PPO explores, the paper's reward alone
+(or nearly) while it refines. Each step uses one ``k`` for ``Φ(s)`` and ``Φ(s')``; an episode
+that spans a change of ``k`` telescopes piecewise.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
@@ -64,3 +70,23 @@ class ProgressShaping(VecEnvWrapper):
 
     def _progress(self) -> np.ndarray:
         return self.base.state.world.progress[:, 0].copy()
+
+
+class ShapingSchedule(BaseCallback):
+    """Sets ``shaping.per_metre`` before each rollout: linear from ``start`` at the beginning of
+    the run to ``final`` at its end (a function of the run's progress, so a resumed run picks
+    up where it was)."""
+
+    def __init__(self, shaping: ProgressShaping, start: float, final: float) -> None:
+        if not all(np.isfinite(v) and v >= 0 for v in (start, final)):
+            raise ValueError(f"shaping schedule: start={start!r}, final={final!r}")
+        super().__init__()
+        self.shaping, self.start, self.final = shaping, float(start), float(final)
+
+    def _on_rollout_start(self) -> None:
+        done = 1.0 - float(self.model._current_progress_remaining)
+        self.shaping.per_metre = self.start + (self.final - self.start) * done
+        self.logger.record("train/progress_shaping", self.shaping.per_metre)
+
+    def _on_step(self) -> bool:
+        return True
