@@ -6,7 +6,7 @@ import pytest
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.config import EnvTrainConfig, PPOConfig
-from safeswitch.training.shaping import ProgressShaping, ShapingSchedule
+from safeswitch.training.shaping import ProgressShaping, ReasonPenalty, ShapingSchedule
 
 GAMMA, K = 0.99, 2.0
 
@@ -100,3 +100,47 @@ def test_an_annealed_shaping_falls_linearly_over_the_run_and_shapes_with_its_cur
     np.testing.assert_allclose(reward - paper_reward(base), expected, atol=1e-4)
     with pytest.raises(ValueError, match="final=-1"):
         ShapingSchedule(env, start=K, final=-1.0)
+
+
+def test_the_reasons_that_acted_are_counted_per_tick_and_charged_as_configured():
+    """``ppo.reason_penalties``: with a decision per tick, a step's counts are exactly the
+    reason its ``info`` reports when the safety action ran; the penalty PPO sees is those
+    counts times the configured values, and the environment's own reward is unchanged."""
+    config = {"episode": {"decision_interval": 1, "learned_scope": "episode"}}
+    base = LeftTurnVecEnv(32, config=config, seed=7, switching="guarded")
+    penalties = {"guard:backup_stop": -50.0, "no_gap_at_braking_point": -1.0}
+    env = ReasonPenalty(base, penalties)
+    assert base.count_reasons
+    env.reset()
+    rng = np.random.default_rng(1)
+    seen = dict.fromkeys(penalties, 0)
+    for step in range(700):
+        if step % 10 == 0:  # bang-bang throttle: both logics get work to do
+            action = rng.choice([-1.0, 1.0], (32, 1))
+        env.step_async(action)
+        _, reward, _, infos = env.step_wait()
+        counts = base.reason_ticks_in_step
+        for i, info in enumerate(infos):
+            expected = np.zeros(len(base.task.reasons), np.int32)
+            if info["safety_active"]:
+                expected[base.task.reasons.index(info["reason"])] = 1
+            np.testing.assert_array_equal(counts[i], expected)
+        charged = sum(v * counts[:, base.task.reasons.index(k)] for k, v in penalties.items())
+        np.testing.assert_allclose(reward - paper_reward(base), charged, atol=1e-3)
+        for name in penalties:
+            seen[name] += int(counts[:, base.task.reasons.index(name)].sum())
+    assert min(seen.values()) > 0, seen  # both reasons acted and were charged
+
+
+def test_bad_reason_penalties_are_named():
+    base = LeftTurnVecEnv(2, seed=1, switching="paper")
+    with pytest.raises(ValueError, match=r"\['guard:backup_clear'\] not reasons of .*'paper'"):
+        ReasonPenalty(base, {"guard:backup_clear": -50.0})
+    with pytest.raises(ValueError, match="finite and <= 0"):
+        ReasonPenalty(base, {"no_gap_at_braking_point": 5.0})
+    with pytest.raises(ConfigError, match=r"reason_penalties\['x'\] .*got 3"):
+        PPOConfig(reason_penalties={"x": 3})
+    with pytest.raises(ConfigError, match="reason_penalties"):
+        PPOConfig(reason_penalties={"x": "a lot"})
+    with pytest.raises(ConfigError, match="reason_penalties"):
+        EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(reason_penalties={"x": -1.0}))

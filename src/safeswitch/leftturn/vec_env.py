@@ -174,6 +174,11 @@ class LeftTurnVecEnv(VecEnv):
         #: The ego's progress along its route after the last step [m], taken before the
         #: episodes that ended are reset (reward shaping reads it; training.shaping).
         self.ego_progress_after_step = np.zeros(self.num_envs)
+        #: Set ``count_reasons`` to have :attr:`reason_ticks_in_step` filled: per environment
+        #: and reason of :attr:`LeftTurnTask.reasons`, the ticks of the last step on which
+        #: that reason's safety action ran (training.shaping.ReasonPenalty reads it).
+        self.count_reasons = False
+        self.reason_ticks_in_step = np.zeros((self.num_envs, len(self.task.reasons)), np.int32)
 
     @property
     def state(self) -> TaskState:
@@ -226,11 +231,16 @@ class LeftTurnVecEnv(VecEnv):
     def step_wait(self) -> VecEnvStepReturn:
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
-        self._state, record = self.task.hold(
-            self.state,
-            self._actions,
-            lambda tick, live: self._stats.update(tick, self.config, live),
-        )
+        counts = self.reason_ticks_in_step
+        counts[:] = 0
+
+        def on_tick(tick: StepRecord, live: NDArray[np.bool_]) -> None:
+            self._stats.update(tick, self.config, live)
+            if self.count_reasons:
+                acted = np.flatnonzero(tick.safety_active & live)
+                counts[acted, tick.reason[acted]] += 1
+
+        self._state, record = self.task.hold(self.state, self._actions, on_tick)
         self._actions = None
         self.ego_progress_after_step = self._state.world.progress[:, 0].copy()
         done = record.terminated | record.truncated

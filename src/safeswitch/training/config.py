@@ -65,6 +65,11 @@ class PPOConfig:
         progress_shaping_final: With ``progress_shaping`` on, ``k`` is annealed linearly
             from it at the start to this at the end of the run, one value per rollout (ours;
             ``null``: a constant ``k``).
+        reason_penalties: Reason of the switching logic → reward per tick on which that
+            reason's safety action ran, added to the reward PPO learns from only (ours; empty:
+            none). It changes what PPO optimises: ``{"guard:backup_clear": -50}`` under
+            ``guarded`` charges the certified filter's rescue like the collision it prevents;
+            see :class:`safeswitch.training.shaping.ReasonPenalty`.
     """
 
     learning_rate: float = 2.5e-4
@@ -90,9 +95,17 @@ class PPOConfig:
     initial_action: float | None = None
     progress_shaping: float = 0.0
     progress_shaping_final: float | None = None
+    reason_penalties: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         o = "ppo"
+        penalties = self.reason_penalties
+        check(isinstance(penalties, dict) and all(isinstance(k, str) for k in penalties), o,
+              "reason_penalties", penalties, "must map reason names to numbers")  # fmt: skip
+        for name, value in penalties.items():
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            ok = number and math.isfinite(value) and -1000 <= value <= 0
+            check(ok, o, f"reason_penalties[{name!r}]", value, "must be in [-1000, 0] per tick")
         shaping, final = self.progress_shaping, self.progress_shaping_final
         check(math.isfinite(shaping) and 0 <= shaping <= 100, o, "progress_shaping", shaping,
               "must be in [0, 100] per metre")  # fmt: skip
@@ -426,6 +439,9 @@ class EnvTrainConfig:
         check(self.ppo.progress_shaping == 0, "ppo", "progress_shaping",
               self.ppo.progress_shaping, "shapes the left turn's reward only: must be 0 for "
               f"env_id {self.env_id!r}")  # fmt: skip
+        check(not self.ppo.reason_penalties, "ppo", "reason_penalties",
+              self.ppo.reason_penalties, "are read from the left turn's records: must be empty "
+              f"for env_id {self.env_id!r}")  # fmt: skip
         rollout = self.ppo.n_steps * self.n_envs
         check(
             rollout % self.ppo.n_minibatches == 0,

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
-from stable_baselines3.common.vec_env import VecNormalize
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.io import write_atomic
@@ -40,7 +40,7 @@ from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
-from safeswitch.training.shaping import ProgressShaping, ShapingSchedule
+from safeswitch.training.shaping import ProgressShaping, ReasonPenalty, ShapingSchedule
 from safeswitch.training.validation import Validator, select_best
 from safeswitch.training.warm_start import warm_start
 
@@ -260,7 +260,10 @@ def train(
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
     ppo = config.ppo
     shaped = ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
-    env = normalized(shaped or vec, config, checkpoint)
+    learned: VecEnv = shaped or vec
+    if ppo.reason_penalties:
+        learned = ReasonPenalty(learned, ppo.reason_penalties)
+    env = normalized(learned, config, checkpoint)
     if checkpoint is not None:
         model = SwitchPPO.load(
             checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
@@ -90,3 +90,55 @@ class ShapingSchedule(BaseCallback):
 
     def _on_step(self) -> bool:
         return True
+
+
+class ReasonPenalty(VecEnvWrapper):
+    """A learning-only penalty per tick on which a named reason's safety action ran, added to
+    the reward PPO learns from (ours; ``ppo.reason_penalties``).
+
+    Unlike the progress shaping this changes what PPO optimises, on purpose: under the
+    ``guarded`` logic the certified filter's clear backup (``guard:backup_clear``) rescues the
+    ego from a state in which the paper logic alone would brake it to a stop inside the
+    conflict zone. Charged like the collision it prevents, the rescue teaches the policy to
+    stay out of those states although training never collides — the "punish the shield's
+    corrections" variant of shielded RL (Alshiekh et al., *Safe Reinforcement Learning via
+    Shielding*, AAAI 2018). The environment's own reward, returns, validation and evaluation
+    stay the paper's.
+
+    Args:
+        venv: The batched left-turn environment (or a wrapper of it).
+        penalties: Reason name (of ``venv``'s task's ``reasons``) → reward per tick, <= 0.
+
+    Raises:
+        ValueError: An unknown reason (the message lists the logic's reasons), or a penalty
+            that is positive or not finite.
+    """
+
+    def __init__(self, venv: VecEnv, penalties: dict[str, float]) -> None:
+        base = venv.unwrapped
+        if not isinstance(base, LeftTurnVecEnv):
+            raise TypeError(f"reason penalties need a LeftTurnVecEnv, got {type(base).__name__}")
+        reasons = base.task.reasons
+        unknown = sorted(set(penalties) - set(reasons))
+        if unknown:
+            raise ValueError(
+                f"reason penalties: {unknown} not reasons of the switching logic "
+                f"{base.config.switching!r} (its reasons: {', '.join(reasons)})"
+            )
+        bad = {k: v for k, v in penalties.items() if not (np.isfinite(v) and v <= 0)}
+        if bad:
+            raise ValueError(f"reason penalties must be finite and <= 0, got {bad}")
+        super().__init__(venv)
+        self.base = base
+        self.per_tick = np.zeros(len(reasons))
+        for name, value in penalties.items():
+            self.per_tick[reasons.index(name)] = value
+        base.count_reasons = True
+
+    def reset(self) -> VecEnvObs:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, reward, done, infos = self.venv.step_wait()
+        penalty = self.base.reason_ticks_in_step @ self.per_tick
+        return observation, (reward + penalty).astype(np.float32), done, infos
