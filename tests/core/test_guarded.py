@@ -33,7 +33,12 @@ class WhereFlagged:
 def test_the_guard_judges_what_the_primary_lets_through_and_wins_where_it_acts():
     guard = Threshold(0.5, -0.5, "too_fast")
     logic = Guarded(WhereFlagged(), guard)
-    assert logic.reasons == ("learned", "flagged", "guard:too_fast")
+    assert logic.reasons == (
+        "learned",
+        "flagged",
+        "guard:too_fast",
+        "guard:too_fast:overrules_primary",
+    )
     state = np.array([False, False, True, True])
     learned = np.array([[0.2], [0.9], [0.9], [0.2]])
     safe = np.array([[0.0], [0.0], [0.8], [0.0]])  # row 2: a Safety action the guard refuses
@@ -42,7 +47,8 @@ def test_the_guard_judges_what_the_primary_lets_through_and_wins_where_it_acts()
     np.testing.assert_array_equal(guard.seen[-1][:, 0], [0.2, 0.9, 0.8, 0.0])
     np.testing.assert_array_equal(sup.executed[:, 0], [0.2, -0.5, -0.5, 0.0])
     names = [logic.reasons[r] for r in sup.reason]
-    assert names == ["learned", "guard:too_fast", "guard:too_fast", "flagged"]
+    # row 1: the guard replaced a learned action; row 2: the primary's own safety action
+    assert names == ["learned", "guard:too_fast", "guard:too_fast:overrules_primary", "flagged"]
     np.testing.assert_array_equal(sup.safety_active, [False, True, True, True])
 
 

@@ -98,6 +98,9 @@ def test_the_paper_logic_has_a_blind_spot_that_certified_closes():
     paper_ticks = reasons["guarded"]["no_gap_at_braking_point"]
     guard_ticks = sum(n for r, n in reasons["guarded"].items() if r.startswith("guard:"))
     assert paper_ticks > 0 and guard_ticks > 0, reasons
+    # and where the paper logic's own braking was unsafe, the filter overruled it
+    overruled = sum(n for r, n in reasons["guarded"].items() if r.endswith(":overrules_primary"))
+    assert overruled > 0, reasons
 
 
 def test_a_safe_learned_action_is_never_replaced(certified_task):

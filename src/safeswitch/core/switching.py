@@ -114,15 +114,22 @@ class Guarded:
         guard: The logic beneath it (e.g. the certified safety filter).
 
     Attributes:
-        reasons: ``primary``'s reasons, then the guard's, each of the latter prefixed
-            ``"guard:"``.
+        reasons: ``primary``'s reasons; then the guard's, each prefixed ``"guard:"`` (the
+            guard replaced a learned action the primary let through); then the guard's again,
+            each also suffixed ``":overrules_primary"`` (the guard replaced the primary's own
+            safety action: the primary's safety net was itself unsafe there).
     """
 
     def __init__(self, primary: SwitchingLogic[Any], guard: SwitchingLogic[Any]) -> None:
         first, second = check_logic(primary), check_logic(guard)
         self.primary, self.guard = primary, guard
         self._offset = len(first) - 1
-        self.reasons: tuple[str, ...] = (*first, *(f"guard:{r}" for r in second[1:]))
+        self._overrules = len(second) - 1
+        self.reasons: tuple[str, ...] = (
+            *first,
+            *(f"guard:{r}" for r in second[1:]),
+            *(f"guard:{r}:overrules_primary" for r in second[1:]),
+        )
         check_logic(self)
 
     def decide(self, state: Any, learned: FloatArray, safe: FloatArray) -> Decision:
@@ -133,9 +140,9 @@ class Guarded:
         second = check_decision(self.guard, self.guard.decide(state, passed, safe), batch, dim)
         use = first.use_safety | second.use_safety
         action = np.where(second.use_safety[:, None], second.safe_action, passed)
-        reason = np.where(
-            second.use_safety, second.reason.astype(np.int16) + self._offset, first.reason
-        ).astype(np.int8)
+        guard_reason = second.reason.astype(np.int16) + self._offset
+        guard_reason += np.where(first.use_safety, self._overrules, 0).astype(np.int16)
+        reason = np.where(second.use_safety, guard_reason, first.reason).astype(np.int8)
         return Decision(use, reason, action)
 
 
