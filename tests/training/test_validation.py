@@ -95,3 +95,35 @@ def test_a_policy_can_be_validated_under_the_logic_it_will_be_deployed_under(tmp
     assert deployed.env.switching == "guarded"  # training itself keeps its logic
     with pytest.raises(ConfigError, match=r"validation\.switching .*'papr'"):
         from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "switching": "papr"}})
+
+
+@pytest.mark.parametrize(("criterion", "chosen"), [("return", 2), ("collisions_then_return", 3)])
+def test_the_selection_criterion_can_put_the_fewest_collisions_first(tmp_path, criterion, chosen):
+    """The paper's reward has no collision term, so the highest return can come with a
+    collision; ``collisions_then_return`` prefers the collision-free policies."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    from safeswitch.training.validation import Validator
+
+    config = from_dict(
+        TrainConfig, SMALL | {"validation": {**SMALL["validation"], "criterion": criterion}}
+    )
+    validator = Validator(config, tmp_path)
+    validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
+    scores = [(2, 100.0), (0, 90.0), (1, 120.0), (0, 95.0)]  # (collisions, mean return)
+    saved = []
+    validator._save_best = lambda: saved.append(validator.num_timesteps)  # type: ignore[method-assign]
+    for k, (collisions, mean_return) in enumerate(scores):
+        validator.validate = lambda c=collisions, r=mean_return: {  # type: ignore[method-assign]
+            "mean_return": r, "collisions": c, "safety_activation_episodes": 0,
+        }  # fmt: skip
+        validator.num_timesteps = 1024 * (k + 1)
+        validator._on_rollout_end()
+    assert validator.state["best_timesteps"] == 1024 * (chosen + 1)
+    assert saved[-1] == 1024 * (chosen + 1)
+    flagged = [int(r["timesteps"]) for r in rows(tmp_path) if r["best"] == "1"]
+    assert flagged[-1] == 1024 * (chosen + 1)
+    with pytest.raises(ConfigError, match="criterion"):
+        from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "criterion": "fastest"}})

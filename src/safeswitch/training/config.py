@@ -226,6 +226,11 @@ class ValidationConfig:
             trains with). Ours: a policy trained under one logic and meant to be deployed
             under another (trained under ``guarded``, deployed under ``paper``) is selected
             where it will run.
+        criterion: ``"return"``: the highest mean return (the paper's criterion);
+            ``"collisions_then_return"`` (ours): the fewest validation collisions, then the
+            highest mean return. The paper's reward has no collision term — a collision only
+            ends the episode early — so two policies can score the same return with and
+            without one.
     """
 
     every: int = 0
@@ -233,6 +238,7 @@ class ValidationConfig:
     seed: int = 2_000_003
     start: int = 0
     switching: str | None = None
+    criterion: Literal["return", "collisions_then_return"] = "return"
 
     def __post_init__(self) -> None:
         o = "validation"

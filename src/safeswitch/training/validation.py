@@ -4,11 +4,11 @@ Every ``validation.every`` timesteps the deterministic policy (the Gaussian's me
 evaluated and deployed) drives the validation scenarios — random scenarios drawn with their own
 seed, never trained on and never in the final evaluation, under the logic it trains with or
 ``validation.switching`` — and its mean return there is its score (the paper's criterion for
-learned model validation). The best policy so far is saved
-whole into ``best/`` of the run directory (model and observation statistics, written into a
-temporary folder and renamed); each validation is a row of ``validation.csv`` with the
-evaluation's summary fields. At the end of the run the best policy becomes the run's
-``model.zip`` and the last one is kept in ``last/``.
+learned model validation; ``validation.criterion`` can put the fewest collisions first). The
+best policy so far is saved whole into ``best/`` of the run directory (model and observation
+statistics, written into a temporary folder and renamed); each validation is a row of
+``validation.csv`` with the evaluation's summary fields. At the end of the run the best policy
+becomes the run's ``model.zip`` and the last one is kept in ``last/``.
 
 The oracle's plan of the validation scenarios is made once (the other vehicles never react to
 the ego's policy in the paper's scene; in traffic the oracle plans against the others' world
@@ -89,10 +89,16 @@ class Validator(BaseCallback):
         self._next = (self.num_timesteps // every + 1) * every
         summary = self.validate()
         score = float(summary["mean_return"])
-        best = self.state["best_return"]
-        better = best is None or score > best
+        collisions = int(summary["collisions"])
+        better = self.state["best_return"] is None or self._key(collisions, score) > self._key(
+            self.state.get("best_collisions", 0), self.state["best_return"]
+        )
         if better:
-            self.state = {"best_return": score, "best_timesteps": int(self.num_timesteps)}
+            self.state = {
+                "best_return": score,
+                "best_collisions": collisions,
+                "best_timesteps": int(self.num_timesteps),
+            }
             self._save_best()
         row = {"timesteps": self.num_timesteps, **summary, "best": int(better)}
         path = self.run / "validation.csv"
@@ -106,6 +112,12 @@ class Validator(BaseCallback):
         self.logger.record("validation/efficiency", summary.get("mean_efficiency", np.nan))
         self.logger.record("validation/safety_activation_episodes",
                            summary["safety_activation_episodes"])  # fmt: skip
+
+    def _key(self, collisions: int, mean_return: float) -> tuple[float, float]:
+        """What ``validation.criterion`` maximises."""
+        if self.config.validation.criterion == "collisions_then_return":
+            return (-collisions, mean_return)
+        return (0.0, mean_return)
 
     def validate(self) -> dict[str, Any]:
         """The current deterministic policy's summary on the validation scenarios."""
