@@ -43,6 +43,32 @@ def test_the_shaping_telescopes_over_each_episode_and_the_paper_reward_is_untouc
     assert checked >= 12
 
 
+def test_a_collision_is_an_absorbing_state_whose_potential_is_zero():
+    """Where an episode terminates in a collision (nothing is bootstrapped after it) the
+    shaping sums to ``−Φ(first)``: a collision earns nothing for the metres the ego came;
+    episodes that go on keep their potential."""
+    config = {"episode": {"decision_interval": 5, "learned_scope": "episode"}}
+    base = LeftTurnVecEnv(32, config=config, seed=4, switching="none")  # nothing stops it
+    env = ProgressShaping(base, K, GAMMA)
+    env.reset()
+    start = K * base.state.world.progress[:, 0].copy()
+    discounted, power = np.zeros(32), np.ones(32)
+    collided = 0
+    for _ in range(130):
+        env.step_async(np.ones((32, 1)))  # full throttle into whatever comes
+        _, reward, done, _ = env.step_wait()
+        discounted += power * (reward - paper_reward(base))
+        power *= GAMMA
+        for i in np.flatnonzero(done):
+            terminal = base.last_record.terminated[i]
+            last = 0.0 if terminal else K * base.ego_progress_after_step[i]
+            assert discounted[i] == pytest.approx(power[i] * last - start[i], abs=1e-3)
+            collided += int(terminal)
+            start[i] = K * base.state.world.progress[i, 0]
+            discounted[i], power[i] = 0.0, 1.0
+    assert collided >= 5
+
+
 def paper_reward(base):
     """The paper's reward of the last step, as the environment itself returns it."""
     return base.last_record.reward.astype(np.float32)

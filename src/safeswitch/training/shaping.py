@@ -32,7 +32,12 @@ class ProgressShaping(VecEnvWrapper):
     """``F = gamma·Φ(s') − Φ(s)``, ``Φ = per_metre · ego progress [m]``, added to each reward.
 
     At the step that ends an episode ``s'`` is the episode's last state (not the next
-    episode's first), so the telescoping sum is that of the episode that ended.
+    episode's first), so the telescoping sum is that of the episode that ended. Where the
+    episode *terminated* (a collision: an absorbing state, nothing is bootstrapped after it)
+    ``Φ(s') = 0``, as Ng et al. require for the optimal policies to stay unchanged; otherwise a
+    collision would pay ``k`` per metre the ego had come, against the episodes that go on. At a
+    time limit or the end of the route (truncation: PPO bootstraps the value of ``s'``) it is
+    the last state's potential.
 
     Args:
         venv: The batched left-turn environment.
@@ -63,7 +68,9 @@ class ProgressShaping(VecEnvWrapper):
     def step_wait(self) -> VecEnvStepReturn:
         observation, reward, done, infos = self.venv.step_wait()
         assert self._before is not None
-        after = self.base.ego_progress_after_step
+        record = self.base.last_record
+        assert record is not None
+        after = np.where(record.terminated, 0.0, self.base.ego_progress_after_step)
         shaped = self.per_metre * (self.gamma * after - self._before)
         self._before = self._progress()  # where each episode is now (a fresh one if ended)
         return observation, (reward + shaped).astype(np.float32), done, infos
