@@ -8,16 +8,22 @@ under ``paper`` alone, recording which episodes collided. Each reason's row says
 episodes it acted and how many of those collided under ``paper``; the last line says how many
 of the collisions under ``paper`` fall in an episode with an overrule.
 
-Run: ``python benchmarks/overrule_trace.py --model RUN [RUN ...] [--json]`` (about 40 s per
-policy); a run is ``safeswitch train --config experimental/scratch_shaped_guarded --seed N
---out RUN`` or any other run trained under ``guarded``.
+Run: ``python benchmarks/overrule_trace.py --model RUN [RUN ...] [--json] [--out FILE]``
+(about 40 s per policy); a run is ``safeswitch train --config
+experimental/scratch_shaped_guarded --seed N --out RUN`` or any other run trained under
+``guarded``. ``benchmarks/results/overrule_trace.json`` holds that recipe's seeds 2 and 3 (its
+runs that collide under ``paper``; seed 1 does not), as ``runs/scratch_shaped_guarded_s2`` and
+``_s3``.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
+import os
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -76,9 +82,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", nargs="+", required=True, help="run directories")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--out", type=Path, help="also write the JSON to this file")
     args = parser.parse_args(argv)
     rows = [trace(run) for run in args.model]
     result = {"benchmark": "overrule_trace", **_common.machine(), "seed": SEED, "runs": rows}
+    if args.out:
+        tmp = args.out.with_suffix(".tmp")
+        tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+        os.replace(tmp, args.out)
     if args.json:
         _common.emit(result, True)
         return 0
