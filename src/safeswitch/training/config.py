@@ -67,9 +67,10 @@ class PPOConfig:
             ``null``: a constant ``k``).
         reason_penalties: Reason of the switching logic → reward per tick on which that
             reason's safety action ran, added to the reward PPO learns from only (ours; empty:
-            none). It changes what PPO optimises: ``{"guard:backup_clear": -50}`` under
-            ``guarded`` charges the certified filter's rescue like the collision it prevents;
-            see :class:`safeswitch.training.shaping.ReasonPenalty`.
+            none). It changes what PPO optimises: ``{"guard:backup_clear:overrules_primary":
+            -50}`` under ``guarded`` charges the filter overruling the paper logic's braking
+            about what the collision it prevents would forfeit; see
+            :class:`safeswitch.training.shaping.ReasonPenalty`.
     """
 
     learning_rate: float = 2.5e-4

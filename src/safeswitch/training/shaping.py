@@ -104,13 +104,14 @@ class ReasonPenalty(VecEnvWrapper):
     the reward PPO learns from (ours; ``ppo.reason_penalties``).
 
     Unlike the progress shaping this changes what PPO optimises, on purpose: under the
-    ``guarded`` logic the certified filter's clear backup (``guard:backup_clear``) rescues the
-    ego from a state in which the paper logic alone would brake it to a stop inside the
-    conflict zone. Charged like the collision it prevents, the rescue teaches the policy to
-    stay out of those states although training never collides — the "punish the shield's
-    corrections" variant of shielded RL (Alshiekh et al., *Safe Reinforcement Learning via
-    Shielding*, AAAI 2018). The environment's own reward, returns, validation and evaluation
-    stay the paper's.
+    ``guarded`` logic the certified filter overrules the paper logic's own braking
+    (``guard:…:overrules_primary``) where that braking was itself unsafe — in every episode
+    in which a guarded-trained policy we traced collided under the paper logic alone
+    (``benchmarks/overrule_trace.py``). Charged about what the collision there would forfeit,
+    the overrule teaches the policy to stay out of those states although training never
+    collides — the "punish the shield's corrections" variant of shielded RL (Alshiekh et al.,
+    *Safe Reinforcement Learning via Shielding*, AAAI 2018). The environment's own reward,
+    returns, validation and evaluation stay the paper's.
 
     Args:
         venv: The batched left-turn environment (or a wrapper of it).
