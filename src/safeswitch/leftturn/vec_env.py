@@ -231,12 +231,13 @@ class LeftTurnVecEnv(VecEnv):
     def step_wait(self) -> VecEnvStepReturn:
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
-        counts = self.reason_ticks_in_step
-        counts[:] = 0
+        counting, counts = self.count_reasons, self.reason_ticks_in_step
+        if counting:
+            counts[:] = 0
 
         def on_tick(tick: StepRecord, live: NDArray[np.bool_]) -> None:
             self._stats.update(tick, self.config, live)
-            if self.count_reasons:
+            if counting:
                 acted = np.flatnonzero(tick.safety_active & live)
                 counts[acted, tick.reason[acted]] += 1
 
