@@ -38,32 +38,30 @@ SEED, EPISODES = 1_000_003, 1000
 OVERRULES = ":overrules_primary"
 
 
+def drive(run: str, switching: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """The run's policy under ``switching``: its reasons, which of them acted in each episode
+    (``[episodes, reasons]``), and which episodes collided."""
+    env = load_config(f"{run}/config.yaml").env
+    task = build_task(None, dataclasses.replace(env, switching=switching))
+    scenarios = task.draw_scenarios(SEED, np.arange(EPISODES), np.zeros(EPISODES, dtype=int))
+    hit = np.zeros((EPISODES, len(task.reasons)), dtype=bool)
+
+    def record(state: Any, rec: StepRecord, tick: int) -> None:
+        on = np.flatnonzero(rec.safety_active)
+        hit[on, rec.reason[on]] = True
+
+    result = rollout(task, scenarios, load_policy(run).as_policy(), record)
+    return task.reasons, hit, np.asarray(result.collision, dtype=bool)
+
+
 def trace(run: str) -> dict[str, Any]:
     """The reasons that acted per episode under ``guarded``, and the collisions under ``paper``."""
-    policy = load_policy(run)
-    env = load_config(f"{run}/config.yaml").env
-    acted: dict[str, np.ndarray] = {}
-    collided: dict[str, np.ndarray] = {}
-    reasons: tuple[str, ...] = ()
-    for switching in ("guarded", "paper"):
-        task = build_task(None, dataclasses.replace(env, switching=switching))
-        scenarios = task.draw_scenarios(SEED, np.arange(EPISODES), np.zeros(EPISODES, dtype=int))
-        hit = np.zeros((EPISODES, len(task.reasons)), dtype=bool)
-
-        def record(state: Any, rec: StepRecord, tick: int, hit: np.ndarray = hit) -> None:
-            on = np.flatnonzero(rec.safety_active)
-            hit[on, rec.reason[on]] = True
-
-        result = rollout(task, scenarios, policy.as_policy(), record)
-        collided[switching] = np.asarray(result.collision, dtype=bool)
-        acted[switching] = hit
-        if switching == "guarded":
-            reasons = task.reasons
-    hit, collisions = acted["guarded"], collided["paper"]
+    reasons, hit, guarded_collisions = drive(run, "guarded")
+    _, _, collisions = drive(run, "paper")
     overruled = hit[:, [i for i, r in enumerate(reasons) if r.endswith(OVERRULES)]].any(axis=1)
     return {
         "model": run,
-        "collisions_under_guarded": int(collided["guarded"].sum()),
+        "collisions_under_guarded": int(guarded_collisions.sum()),
         "collisions_under_paper": int(collisions.sum()),
         "reasons": {
             r: {

@@ -260,7 +260,7 @@ def train(
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
     ppo = config.ppo
     shaped = ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
-    learned: VecEnv = shaped or vec
+    learned: VecEnv = vec if shaped is None else shaped
     if ppo.reason_penalties:
         learned = ReasonPenalty(learned, ppo.reason_penalties)
     env = normalized(learned, config, checkpoint)
