@@ -6,7 +6,12 @@ import pytest
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.config import EnvTrainConfig, PPOConfig
-from safeswitch.training.shaping import ProgressShaping, ReasonPenalty, ShapingSchedule
+from safeswitch.training.shaping import (
+    PenaltySchedule,
+    ProgressShaping,
+    ReasonPenalty,
+    ShapingSchedule,
+)
 
 GAMMA, K = 0.99, 2.0
 
@@ -158,6 +163,46 @@ def test_the_reasons_that_acted_are_counted_per_tick_and_charged_as_configured()
     assert min(seen.values()) > 0, seen  # both reasons acted and were charged
 
 
+def test_ramped_reason_penalties_charge_their_share_of_the_configured_values():
+    """``ppo.reason_penalties_initial_scale``: before each rollout the charge is scaled
+    linearly from the initial share to the full value; each step charges counts × values ×
+    the current scale."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    config = {"episode": {"decision_interval": 1, "learned_scope": "episode"}}
+    base = LeftTurnVecEnv(32, config=config, seed=7, switching="guarded")
+    penalties = {"guard:backup_stop": -50.0, "no_gap_at_braking_point": -1.0}
+    env = ReasonPenalty(base, penalties)
+    schedule = PenaltySchedule(env, start=0.2)
+    model = SimpleNamespace(
+        get_env=lambda: env, logger=configure(None, []), _current_progress_remaining=1.0
+    )
+    schedule.init_callback(model)  # type: ignore[arg-type]
+    env.reset()
+    rng = np.random.default_rng(1)
+    charged_ticks = 0
+    for remaining, expected_scale in ((1.0, 0.2), (0.5, 0.6), (0.0, 1.0)):
+        model._current_progress_remaining = remaining
+        schedule.on_rollout_start()
+        assert env.scale == pytest.approx(expected_scale)
+        for step in range(250):
+            if step % 10 == 0:
+                action = rng.choice([-1.0, 1.0], (32, 1))
+            env.step_async(action)
+            _, reward, _, _ = env.step_wait()
+            counts = base.reason_ticks_in_step
+            full = sum(v * counts[:, base.task.reasons.index(k)] for k, v in penalties.items())
+            np.testing.assert_allclose(
+                reward - paper_reward(base), expected_scale * full, atol=1e-3
+            )
+            charged_ticks += int((full != 0).sum())
+    assert charged_ticks > 0
+    with pytest.raises(ValueError, match=r"start=-0\.5"):
+        PenaltySchedule(env, start=-0.5)
+
+
 def test_bad_reason_penalties_are_named():
     base = LeftTurnVecEnv(2, seed=1, switching="paper")
     with pytest.raises(ValueError, match=r"\['guard:backup_clear'\] not reasons of .*'paper'"):
@@ -168,5 +213,9 @@ def test_bad_reason_penalties_are_named():
         PPOConfig(reason_penalties={"x": 3})
     with pytest.raises(ConfigError, match="reason_penalties"):
         PPOConfig(reason_penalties={"x": "a lot"})
+    with pytest.raises(ConfigError, match=r"reason_penalties_initial_scale .*1\.5"):
+        PPOConfig(reason_penalties={"x": -1.0}, reason_penalties_initial_scale=1.5)
+    with pytest.raises(ConfigError, match=r"reason_penalties_initial_scale .*needs reason_pen"):
+        PPOConfig(reason_penalties_initial_scale=0.0)
     with pytest.raises(ConfigError, match="reason_penalties"):
         EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(reason_penalties={"x": -1.0}))

@@ -71,6 +71,11 @@ class PPOConfig:
             -50}`` under ``guarded`` charges the filter overruling the paper logic's braking
             about what the collision it prevents would forfeit; see
             :class:`safeswitch.training.shaping.ReasonPenalty`.
+        reason_penalties_initial_scale: The reason penalties are ramped linearly from this
+            share of their values at the start to all of them at the end of the run, one
+            value per rollout (ours; 1: no ramp). A charge for the filter's rescues is paid
+            mostly for exploration noise early on; ramped in as the noise is annealed out
+            it charges the policy's own behaviour (docs/learning_experiments.md).
     """
 
     learning_rate: float = 2.5e-4
@@ -97,6 +102,7 @@ class PPOConfig:
     progress_shaping: float = 0.0
     progress_shaping_final: float | None = None
     reason_penalties: dict[str, float] = field(default_factory=dict)
+    reason_penalties_initial_scale: float = 1.0
 
     def __post_init__(self) -> None:
         o = "ppo"
@@ -107,6 +113,11 @@ class PPOConfig:
             number = isinstance(value, int | float) and not isinstance(value, bool)
             ok = number and math.isfinite(value) and -1000 <= value <= 0
             check(ok, o, f"reason_penalties[{name!r}]", value, "must be in [-1000, 0] per tick")
+        scale = self.reason_penalties_initial_scale
+        check(math.isfinite(scale) and 0 <= scale <= 1, o, "reason_penalties_initial_scale",
+              scale, "must be in [0, 1]")  # fmt: skip
+        check(scale == 1 or bool(penalties), o, "reason_penalties_initial_scale", scale,
+              "ramps the reason penalties: needs reason_penalties")  # fmt: skip
         shaping, final = self.progress_shaping, self.progress_shaping_final
         check(math.isfinite(shaping) and 0 <= shaping <= 100, o, "progress_shaping", shaping,
               "must be in [0, 100] per metre")  # fmt: skip

@@ -40,7 +40,12 @@ from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
-from safeswitch.training.shaping import ProgressShaping, ReasonPenalty, ShapingSchedule
+from safeswitch.training.shaping import (
+    PenaltySchedule,
+    ProgressShaping,
+    ReasonPenalty,
+    ShapingSchedule,
+)
 from safeswitch.training.validation import Validator, select_best
 from safeswitch.training.warm_start import warm_start
 
@@ -261,8 +266,8 @@ def train(
     ppo = config.ppo
     shaped = ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
     learned: VecEnv = vec if shaped is None else shaped
-    if ppo.reason_penalties:
-        learned = ReasonPenalty(learned, ppo.reason_penalties)
+    charged = ReasonPenalty(learned, ppo.reason_penalties) if ppo.reason_penalties else None
+    learned = learned if charged is None else charged
     env = normalized(learned, config, checkpoint)
     if checkpoint is not None:
         model = SwitchPPO.load(
@@ -284,6 +289,8 @@ def train(
     extra: list[BaseCallback] = [validator] if validator is not None else []
     if shaped is not None and ppo.progress_shaping_final is not None:
         extra.append(ShapingSchedule(shaped, ppo.progress_shaping, ppo.progress_shaping_final))
+    if charged is not None and ppo.reason_penalties_initial_scale != 1.0:
+        extra.append(PenaltySchedule(charged, ppo.reason_penalties_initial_scale))
     learn(
         model, run, config.timesteps, monitor,
         lambda: _save_checkpoint(run, model, env, vec, monitor), resume, progress_bar,

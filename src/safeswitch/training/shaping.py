@@ -79,21 +79,25 @@ class ProgressShaping(VecEnvWrapper):
         return self.base.state.world.progress[:, 0].copy()
 
 
-class ShapingSchedule(BaseCallback):
-    """Sets ``shaping.per_metre`` before each rollout: linear from ``start`` at the beginning of
-    the run to ``final`` at its end (a function of the run's progress, so a resumed run picks
-    up where it was)."""
+class LinearSchedule(BaseCallback):
+    """Sets ``target.<attribute>`` before each rollout: linear from ``start`` at the beginning
+    of the run to ``final`` at its end (a function of the run's progress, so a resumed run
+    picks up where it was), logged as ``tag``."""
 
-    def __init__(self, shaping: ProgressShaping, start: float, final: float) -> None:
+    def __init__(
+        self, target: object, attribute: str, start: float, final: float, tag: str
+    ) -> None:
         if not all(np.isfinite(v) and v >= 0 for v in (start, final)):
-            raise ValueError(f"shaping schedule: start={start!r}, final={final!r}")
+            raise ValueError(f"{tag} schedule: start={start!r}, final={final!r}")
         super().__init__()
-        self.shaping, self.start, self.final = shaping, float(start), float(final)
+        self.target, self.attribute, self.tag = target, attribute, tag
+        self.start, self.final = float(start), float(final)
 
     def _on_rollout_start(self) -> None:
         done = 1.0 - float(self.model._current_progress_remaining)
-        self.shaping.per_metre = self.start + (self.final - self.start) * done
-        self.logger.record("train/progress_shaping", self.shaping.per_metre)
+        value = self.start + (self.final - self.start) * done
+        setattr(self.target, self.attribute, value)
+        self.logger.record(self.tag, value)
 
     def _on_step(self) -> bool:
         return True
@@ -139,6 +143,8 @@ class ReasonPenalty(VecEnvWrapper):
         super().__init__(venv)
         self.base = base
         self.per_tick = np.zeros(len(reasons))
+        #: Multiplies every penalty (:func:`PenaltySchedule` ramps it; 1: as configured).
+        self.scale = 1.0
         for name, value in penalties.items():
             self.per_tick[reasons.index(name)] = value
         base.count_reasons = True
@@ -148,5 +154,20 @@ class ReasonPenalty(VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         observation, reward, done, infos = self.venv.step_wait()
-        penalty = self.base.reason_ticks_in_step @ self.per_tick
+        penalty = self.scale * (self.base.reason_ticks_in_step @ self.per_tick)
         return observation, (reward + penalty).astype(np.float32), done, infos
+
+
+class ShapingSchedule(LinearSchedule):
+    """``ppo.progress_shaping_final``: the shaping's ``k`` from ``start`` to ``final``."""
+
+    def __init__(self, shaping: ProgressShaping, start: float, final: float) -> None:
+        super().__init__(shaping, "per_metre", start, final, "train/progress_shaping")
+
+
+class PenaltySchedule(LinearSchedule):
+    """``ppo.reason_penalties_initial_scale``: the reason penalties scaled from ``start`` of
+    their configured values at the beginning of the run to all of them at its end."""
+
+    def __init__(self, penalty: ReasonPenalty, start: float) -> None:
+        super().__init__(penalty, "scale", start, 1.0, "train/reason_penalty_scale")
