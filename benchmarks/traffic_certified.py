@@ -39,7 +39,9 @@ FIELDS = (
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=1000)
-    parser.add_argument("--model", nargs="*", default=[], help="trained runs to add")
+    parser.add_argument(
+        "--model", nargs="*", default=[], help="trained runs to add (rows named by directory)"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
     shipped = ("learned:traffic-certified", "learned", "traffic-certified", None)
@@ -49,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         ("rule", "rule", None, "paper"),
         shipped,
         ("learned:traffic-paper", "learned", "traffic-paper", None),
-        *((f"learned:{m}", "learned", m, None) for m in args.model),
+        *((f"learned:{Path(m).name}", "learned", m, None) for m in args.model),
     ]
     # every family for every controller; the shipped certified policy at every density too
     cells = [(family, run) for family in FAMILIES for run in runs]
