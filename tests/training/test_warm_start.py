@@ -256,6 +256,27 @@ def test_annealed_exploration_noise_follows_its_schedule_and_is_the_rollouts(tmp
     assert float(model.policy.log_std.detach().mean()) == pytest.approx(-1.0)
 
 
+def test_an_annealed_learning_rate_falls_linearly_over_the_run_and_is_saved(tmp_path, monkeypatch):
+    """``learning_rate_final``: each update's Adam step size is on the line from
+    ``learning_rate`` to it, and a loaded (or resumed) model keeps the schedule."""
+    annealed = config(ppo={"learning_rate": 1e-3, "learning_rate_final": 2e-4})
+    seen = []
+    original = SwitchPPO.train
+
+    def record(self):
+        original(self)
+        seen.append([group["lr"] for group in self.policy.optimizer.param_groups])
+
+    monkeypatch.setattr(SwitchPPO, "train", record)
+    train(annealed, tmp_path / "run", progress_bar=False)
+    # 2,048 steps in rollouts of 1,024: updated half-way through the run, then at its end
+    assert seen == [pytest.approx([6e-4]), pytest.approx([2e-4])]
+    model = load_policy(tmp_path / "run").model
+    assert model.lr_schedule(0.25) == pytest.approx(4e-4)
+    with pytest.raises(ConfigError, match=r"learning_rate_final .*-0\.1"):
+        config(ppo={"learning_rate_final": -0.1})
+
+
 def test_an_annealed_noise_that_would_also_be_learned_is_refused():
     with pytest.raises(ConfigError, match="log_std_final"):
         config(ppo={"learn_log_std": True, "log_std_final": -2.0})

@@ -29,6 +29,8 @@ class PPOConfig:
 
     Attributes:
         learning_rate: Adam step size.
+        learning_rate_final: The step size is annealed linearly from ``learning_rate`` at the
+            start to this at the end of the run (ours; ``null``: constant, Table II).
         n_steps: Horizon: ticks collected per environment per update.
         n_minibatches: Minibatches per epoch (SB3's ``batch_size = n_steps · n_envs / this``).
         n_epochs: Passes over each rollout.
@@ -79,6 +81,7 @@ class PPOConfig:
     """
 
     learning_rate: float = 2.5e-4
+    learning_rate_final: float | None = None
     n_steps: int = 128
     n_minibatches: int = 4
     n_epochs: int = 4
@@ -150,6 +153,9 @@ class PPOConfig:
         check(
             0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
         )
+        if self.learning_rate_final is not None:
+            check(0 <= self.learning_rate_final < 1, o, "learning_rate_final",
+                  self.learning_rate_final, "must be in [0, 1) or null")  # fmt: skip
         check(self.n_steps >= 2, o, "n_steps", self.n_steps, "must be >= 2")
         check(self.n_minibatches >= 1, o, "n_minibatches", self.n_minibatches, "must be >= 1")
         check(self.n_epochs >= 1, o, "n_epochs", self.n_epochs, "must be >= 1")

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
@@ -67,7 +68,11 @@ def build_model(
     model = SwitchPPO(
         "MlpPolicy",
         env,
-        learning_rate=ppo.learning_rate,
+        learning_rate=(
+            ppo.learning_rate
+            if ppo.learning_rate_final is None
+            else LinearSchedule(ppo.learning_rate, ppo.learning_rate_final, 1.0)
+        ),
         n_steps=ppo.n_steps,
         batch_size=config.batch_size,
         n_epochs=ppo.n_epochs,
