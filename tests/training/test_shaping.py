@@ -7,6 +7,7 @@ from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.config import EnvTrainConfig, PPOConfig
 from safeswitch.training.shaping import (
+    ClearTimePenalty,
     PenaltySchedule,
     ProgressShaping,
     ReasonPenalty,
@@ -201,6 +202,45 @@ def test_ramped_reason_penalties_charge_their_share_of_the_configured_values():
     assert charged_ticks > 0
     with pytest.raises(ValueError, match=r"start=-0\.5"):
         PenaltySchedule(env, start=-0.5)
+
+
+def test_the_clear_time_penalty_charges_each_step_until_the_ego_clears_or_the_horizon():
+    """``ppo.clear_time_penalty``: per episode, the cost is ``c`` per second for every step
+    begun with the ego short of its zone's exit — as many steps as the environment's own
+    time to clear spans — and a collision before the exit pays the whole horizon."""
+    per_second, interval, horizon = 10.0, 5, 6.0
+    config = {"episode": {"decision_interval": interval, "learned_scope": "episode",
+                          "horizon_s": horizon}}  # fmt: skip
+    base = LeftTurnVecEnv(48, config=config, seed=3, switching="none")
+    env = ClearTimePenalty(base, per_second)
+    env.reset()
+    rng = np.random.default_rng(2)
+    step_s = interval * base.config.episode.dt
+    action = rng.uniform(-1, 1, (48, 1))  # one throttle per episode: some crawl, some collide
+    total = np.zeros(48)
+    kinds = {"cleared": 0, "collided": 0, "never": 0}
+    for _ in range(400):
+        env.step_async(action)
+        _, reward, done, infos = env.step_wait()
+        total += paper_reward(base) - reward
+        for i in np.flatnonzero(done):
+            summary = infos[i]["episode"]
+            if summary["collision"] and np.isnan(summary["time_to_clear"]):
+                expected, kind = per_second * horizon, "collided"
+            elif np.isnan(summary["time_to_clear"]):
+                expected, kind = per_second * horizon, "never"
+            else:
+                ticks = round(summary["time_to_clear"] / base.config.episode.dt)
+                expected, kind = per_second * step_s * -(-ticks // interval), "cleared"
+            assert total[i] == pytest.approx(expected, abs=1e-2), (kind, summary)
+            kinds[kind] += 1
+            total[i] = 0.0
+            action[i] = rng.uniform(-1, 1)
+    assert min(kinds.values()) > 0, kinds  # every case was met
+    with pytest.raises(ValueError, match="per_second=-1"):
+        ClearTimePenalty(base, -1.0)
+    with pytest.raises(ConfigError, match=r"clear_time_penalty .*-5"):
+        PPOConfig(clear_time_penalty=-5.0)
 
 
 def test_bad_reason_penalties_are_named():

@@ -78,6 +78,10 @@ class PPOConfig:
             value per rollout (ours; 1: no ramp). A charge for the filter's rescues is paid
             mostly for exploration noise early on; ramped in as the noise is annealed out
             it charges the policy's own behaviour (docs/learning_experiments.md).
+        clear_time_penalty: A cost per second until the ego has left its conflict zone,
+            added to the reward PPO learns from only (ours; 0: off): the paper's reward is
+            all but indifferent to when the crossing is cleared; see
+            :class:`safeswitch.training.shaping.ClearTimePenalty`.
     """
 
     learning_rate: float = 2.5e-4
@@ -106,6 +110,7 @@ class PPOConfig:
     progress_shaping_final: float | None = None
     reason_penalties: dict[str, float] = field(default_factory=dict)
     reason_penalties_initial_scale: float = 1.0
+    clear_time_penalty: float = 0.0
 
     def __post_init__(self) -> None:
         o = "ppo"
@@ -121,6 +126,9 @@ class PPOConfig:
               scale, "must be in [0, 1]")  # fmt: skip
         check(scale == 1 or bool(penalties), o, "reason_penalties_initial_scale", scale,
               "ramps the reason penalties: needs reason_penalties")  # fmt: skip
+        check(math.isfinite(self.clear_time_penalty) and 0 <= self.clear_time_penalty <= 1000,
+              o, "clear_time_penalty", self.clear_time_penalty,
+              "must be in [0, 1000] per second")  # fmt: skip
         shaping, final = self.progress_shaping, self.progress_shaping_final
         check(math.isfinite(shaping) and 0 <= shaping <= 100, o, "progress_shaping", shaping,
               "must be in [0, 100] per metre")  # fmt: skip
@@ -465,6 +473,9 @@ class EnvTrainConfig:
               f"env_id {self.env_id!r}")  # fmt: skip
         check(not self.ppo.reason_penalties, "ppo", "reason_penalties",
               self.ppo.reason_penalties, "are read from the left turn's records: must be empty "
+              f"for env_id {self.env_id!r}")  # fmt: skip
+        check(self.ppo.clear_time_penalty == 0, "ppo", "clear_time_penalty",
+              self.ppo.clear_time_penalty, "is read from the left turn's records: must be 0 "
               f"for env_id {self.env_id!r}")  # fmt: skip
         rollout = self.ppo.n_steps * self.n_envs
         check(

@@ -42,6 +42,7 @@ from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config,
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.shaping import (
+    ClearTimePenalty,
     PenaltySchedule,
     ProgressShaping,
     ReasonPenalty,
@@ -273,6 +274,8 @@ def train(
     learned: VecEnv = vec if shaped is None else shaped
     charged = ReasonPenalty(learned, ppo.reason_penalties) if ppo.reason_penalties else None
     learned = learned if charged is None else charged
+    if ppo.clear_time_penalty:
+        learned = ClearTimePenalty(learned, ppo.clear_time_penalty)
     env = normalized(learned, config, checkpoint)
     if checkpoint is not None:
         model = SwitchPPO.load(

@@ -171,3 +171,56 @@ class PenaltySchedule(LinearSchedule):
 
     def __init__(self, penalty: ReasonPenalty, start: float) -> None:
         super().__init__(penalty, "scale", start, 1.0, "train/reason_penalty_scale")
+
+
+class ClearTimePenalty(VecEnvWrapper):
+    """A learning-only cost per second until the ego has left its conflict zone, added to the
+    reward PPO learns from (ours; ``ppo.clear_time_penalty``).
+
+    The paper's reward is all but indifferent to *when* the ego clears the crossing: a yield
+    that crawls up to the zone and one that arrives just behind the north car at speed score
+    about the same (``benchmarks/reward_landscape.py``), so PPO has no reason to prefer the
+    second, and efficiency (oracle time over time to clear) does. This term charges
+    ``per_second`` for every step begun with the ego not yet clear: a minimum-time cost on top
+    of the paper's reward. A collision (an episode that terminates) is charged the rest of the
+    horizon, so ending an episode never saves the cost. The environment's own reward,
+    returns, validation and evaluation stay the paper's.
+
+    Args:
+        venv: The batched left-turn environment (or a wrapper of it).
+        per_second: The cost [reward per second], > 0.
+    """
+
+    def __init__(self, venv: VecEnv, per_second: float) -> None:
+        base = venv.unwrapped
+        if not isinstance(base, LeftTurnVecEnv):
+            raise TypeError(
+                f"a clear-time penalty needs a LeftTurnVecEnv, got {type(base).__name__}"
+            )
+        if not (np.isfinite(per_second) and per_second > 0):
+            raise ValueError(f"clear-time penalty: per_second={per_second!r}")
+        super().__init__(venv)
+        self.base, self.per_second = base, float(per_second)
+        episode = base.config.episode
+        self.step_s = episode.decision_interval * episode.dt
+        self.horizon_s = episode.horizon_s
+        self.elapsed = np.zeros(self.num_envs)
+        self.cleared = np.zeros(self.num_envs, dtype=bool)
+
+    def reset(self) -> VecEnvObs:
+        self.elapsed[:] = 0.0
+        self.cleared[:] = False
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, reward, done, infos = self.venv.step_wait()
+        record = self.base.last_record
+        assert record is not None
+        charge = np.where(self.cleared, 0.0, self.per_second * self.step_s)
+        self.elapsed += self.step_s
+        self.cleared |= record.ego_cleared
+        rest = np.maximum(self.horizon_s - self.elapsed, 0.0)
+        charge += np.where(record.terminated & ~self.cleared, self.per_second * rest, 0.0)
+        self.elapsed[done] = 0.0
+        self.cleared[done] = False
+        return observation, (reward - charge).astype(np.float32), done, infos
