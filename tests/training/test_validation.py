@@ -97,14 +97,10 @@ def test_a_policy_can_be_validated_under_the_logic_it_will_be_deployed_under(tmp
         from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "switching": "papr"}})
 
 
-@pytest.mark.parametrize(
-    ("criterion", "chosen"),
-    [("return", 2), ("collisions_then_return", 3), ("collisions_then_cleared", 1)],
-)
+@pytest.mark.parametrize(("criterion", "chosen"), [("return", 2), ("collisions_then_return", 3)])
 def test_the_selection_criterion_can_put_the_fewest_collisions_first(tmp_path, criterion, chosen):
     """The paper's reward has no collision term, so the highest return can come with a
-    collision; ``collisions_then_return`` prefers the collision-free policies, and
-    ``collisions_then_cleared`` among those the one that clears the crossing most often."""
+    collision; ``collisions_then_return`` prefers the collision-free policies."""
     from types import SimpleNamespace
 
     from stable_baselines3.common.logger import configure
@@ -116,14 +112,12 @@ def test_the_selection_criterion_can_put_the_fewest_collisions_first(tmp_path, c
     )
     validator = Validator(config, tmp_path)
     validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
-    # (collisions, cleared episodes, mean return)
-    scores = [(2, 500, 100.0), (0, 480, 90.0), (1, 500, 120.0), (0, 470, 95.0)]
+    scores = [(2, 100.0), (0, 90.0), (1, 120.0), (0, 95.0)]  # (collisions, mean return)
     saved = []
     validator._save_best = lambda: saved.append(validator.num_timesteps)  # type: ignore[method-assign]
-    for k, (collisions, cleared, mean_return) in enumerate(scores):
-        validator.validate = lambda c=collisions, n=cleared, r=mean_return: {  # type: ignore[method-assign]
-            "mean_return": r, "collisions": c, "cleared_episodes": n,
-            "safety_activation_episodes": 0,
+    for k, (collisions, mean_return) in enumerate(scores):
+        validator.validate = lambda c=collisions, r=mean_return: {  # type: ignore[method-assign]
+            "mean_return": r, "collisions": c, "safety_activation_episodes": 0,
         }  # fmt: skip
         validator.num_timesteps = 1024 * (k + 1)
         validator._on_rollout_end()

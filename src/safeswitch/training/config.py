@@ -256,10 +256,7 @@ class ValidationConfig:
             ``"collisions_then_return"`` (ours): the fewest validation collisions, then the
             highest mean return. The paper's reward has no collision term — a collision only
             ends the episode early — so two policies can score the same return with and
-            without one. ``"collisions_then_cleared"`` (ours): the fewest collisions, then the
-            most episodes in which the ego cleared the crossing, then the highest return — the
-            task's success rate, to which the paper's return is all but indifferent (a yield
-            that does not finish within the horizon scores about as well as one that does).
+            without one.
     """
 
     every: int = 0
@@ -267,7 +264,7 @@ class ValidationConfig:
     seed: int = 2_000_003
     start: int = 0
     switching: str | None = None
-    criterion: Literal["return", "collisions_then_return", "collisions_then_cleared"] = "return"
+    criterion: Literal["return", "collisions_then_return"] = "return"
 
     def __post_init__(self) -> None:
         o = "validation"

@@ -90,16 +90,13 @@ class Validator(BaseCallback):
         summary = self.validate()
         score = float(summary["mean_return"])
         collisions = int(summary["collisions"])
-        cleared = int(summary.get("cleared_episodes", 0))
-        best = self.state
-        better = best["best_return"] is None or self._key(collisions, cleared, score) > self._key(
-            best.get("best_collisions", 0), best.get("best_cleared", 0), best["best_return"]
+        better = self.state["best_return"] is None or self._key(collisions, score) > self._key(
+            self.state.get("best_collisions", 0), self.state["best_return"]
         )
         if better:
             self.state = {
                 "best_return": score,
                 "best_collisions": collisions,
-                "best_cleared": cleared,
                 "best_timesteps": int(self.num_timesteps),
             }
             self._save_best()
@@ -116,14 +113,11 @@ class Validator(BaseCallback):
         self.logger.record("validation/safety_activation_episodes",
                            summary["safety_activation_episodes"])  # fmt: skip
 
-    def _key(self, collisions: int, cleared: int, mean_return: float) -> tuple[float, ...]:
+    def _key(self, collisions: int, mean_return: float) -> tuple[float, float]:
         """What ``validation.criterion`` maximises."""
-        criterion = self.config.validation.criterion
-        if criterion == "collisions_then_return":
-            return (-collisions, 0.0, mean_return)
-        if criterion == "collisions_then_cleared":
-            return (-collisions, cleared, mean_return)
-        return (0.0, 0.0, mean_return)
+        if self.config.validation.criterion == "collisions_then_return":
+            return (-collisions, mean_return)
+        return (0.0, mean_return)
 
     def validate(self) -> dict[str, Any]:
         """The current deterministic policy's summary on the validation scenarios."""
