@@ -79,7 +79,7 @@ class ProgressShaping(VecEnvWrapper):
         return self.base.state.world.progress[:, 0].copy()
 
 
-class LinearSchedule(BaseCallback):
+class RolloutSchedule(BaseCallback):
     """Sets ``target.<attribute>`` before each rollout: linear from ``start`` at the beginning
     of the run to ``final`` at its end (a function of the run's progress, so a resumed run
     picks up where it was), logged as ``tag``."""
@@ -143,7 +143,7 @@ class ReasonPenalty(VecEnvWrapper):
         super().__init__(venv)
         self.base = base
         self.per_tick = np.zeros(len(reasons))
-        #: Multiplies every penalty (:func:`PenaltySchedule` ramps it; 1: as configured).
+        #: Multiplies every penalty (:class:`PenaltySchedule` ramps it; 1: as configured).
         self.scale = 1.0
         for name, value in penalties.items():
             self.per_tick[reasons.index(name)] = value
@@ -158,14 +158,14 @@ class ReasonPenalty(VecEnvWrapper):
         return observation, (reward + penalty).astype(np.float32), done, infos
 
 
-class ShapingSchedule(LinearSchedule):
+class ShapingSchedule(RolloutSchedule):
     """``ppo.progress_shaping_final``: the shaping's ``k`` from ``start`` to ``final``."""
 
     def __init__(self, shaping: ProgressShaping, start: float, final: float) -> None:
         super().__init__(shaping, "per_metre", start, final, "train/progress_shaping")
 
 
-class PenaltySchedule(LinearSchedule):
+class PenaltySchedule(RolloutSchedule):
     """``ppo.reason_penalties_initial_scale``: the reason penalties scaled from ``start`` of
     their configured values at the beginning of the run to all of them at its end."""
 
