@@ -272,8 +272,9 @@ def train(
     ppo = config.ppo
     shaped = ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
     learned: VecEnv = vec if shaped is None else shaped
-    charged = ReasonPenalty(learned, ppo.reason_penalties) if ppo.reason_penalties else None
-    learned = learned if charged is None else charged
+    charged = None
+    if ppo.reason_penalties:
+        learned = charged = ReasonPenalty(learned, ppo.reason_penalties)
     if ppo.clear_time_penalty:
         learned = ClearTimePenalty(learned, ppo.clear_time_penalty)
     env = normalized(learned, config, checkpoint)

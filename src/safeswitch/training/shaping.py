@@ -28,6 +28,14 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 
 
+def left_turn_beneath(venv: VecEnv, what: str) -> LeftTurnVecEnv:
+    """The batched left-turn environment ``venv`` wraps (or is); ``what`` needs it."""
+    base = getattr(venv, "unwrapped", venv)
+    if not isinstance(base, LeftTurnVecEnv):
+        raise TypeError(f"{what} needs a LeftTurnVecEnv, got {type(base).__name__}")
+    return base
+
+
 class ProgressShaping(VecEnvWrapper):
     """``F = gamma·Φ(s') − Φ(s)``, ``Φ = per_metre · ego progress [m]``, added to each reward.
 
@@ -45,13 +53,12 @@ class ProgressShaping(VecEnvWrapper):
         gamma: The discount PPO applies per step of ``venv``.
     """
 
-    def __init__(self, venv: LeftTurnVecEnv, per_metre: float, gamma: float) -> None:
-        if not isinstance(venv, LeftTurnVecEnv):
-            raise TypeError(f"progress shaping needs a LeftTurnVecEnv, got {type(venv).__name__}")
+    def __init__(self, venv: VecEnv, per_metre: float, gamma: float) -> None:
+        base = left_turn_beneath(venv, "progress shaping")
         if not (np.isfinite(per_metre) and per_metre > 0 and 0 < gamma <= 1):
             raise ValueError(f"progress shaping: per_metre={per_metre!r}, gamma={gamma!r}")
         super().__init__(venv)
-        self.base = venv
+        self.base = base
         self.per_metre, self.gamma = float(per_metre), float(gamma)
         self._before: np.ndarray | None = None
 
@@ -127,9 +134,7 @@ class ReasonPenalty(VecEnvWrapper):
     """
 
     def __init__(self, venv: VecEnv, penalties: dict[str, float]) -> None:
-        base = venv.unwrapped
-        if not isinstance(base, LeftTurnVecEnv):
-            raise TypeError(f"reason penalties need a LeftTurnVecEnv, got {type(base).__name__}")
+        base = left_turn_beneath(venv, "reason penalties")
         reasons = base.task.reasons
         unknown = sorted(set(penalties) - set(reasons))
         if unknown:
@@ -192,11 +197,7 @@ class ClearTimePenalty(VecEnvWrapper):
     """
 
     def __init__(self, venv: VecEnv, per_second: float) -> None:
-        base = venv.unwrapped
-        if not isinstance(base, LeftTurnVecEnv):
-            raise TypeError(
-                f"a clear-time penalty needs a LeftTurnVecEnv, got {type(base).__name__}"
-            )
+        base = left_turn_beneath(venv, "a clear-time penalty")
         if not (np.isfinite(per_second) and per_second > 0):
             raise ValueError(f"clear-time penalty: per_second={per_second!r}")
         super().__init__(venv)
