@@ -3,9 +3,11 @@ fits of the actor (issue #18 asks for the profile of the shipped `paper` recipe'
 1,077 s of its 1,289).
 
 Runs the warm start of a training configuration (default the shipped ``paper`` one) with
-``--episodes`` scenarios per round instead of the configured number — every phase is linear in
-the episodes, so the configured size is extrapolated by the ratio — and times each phase by
-wrapping it: the planner's calls (labelling), the rest of the rollouts (the simulator, the
+``--episodes`` scenarios per round instead of the configured number, and extrapolates to the
+configured size by the ratio: the fits and the rollouts are linear in the samples; the teacher's
+calls are batched over the scenarios, so their extrapolated time is an upper bound. It times
+each phase by wrapping it: the teacher's calls (the planner, or the gap planner in traffic:
+labelling), the rest of the rollouts (the simulator, the
 switching logic and, in the DAgger rounds, the clone's forward passes), and the fits (the
 actor's epochs of Adam over all labels so far). One torch thread.
 
@@ -26,6 +28,7 @@ import torch
 
 import _common
 from safeswitch.evaluation.planner import Planner
+from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.io import write_json
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training import warm_start as module
@@ -66,20 +69,22 @@ def main(argv: list[str] | None = None) -> int:
     env = normalized(vec, config, None)
     model = build_model(config, env, None)
 
-    clock = {"planner": 0.0, "rollouts": 0.0, "fits": 0.0}
-    saved = module.rollout, module.fit_actor, Planner.__call__
+    clock = {"teacher": 0.0, "rollouts": 0.0, "fits": 0.0}
+    saved = module.rollout, module.fit_actor, Planner.__call__, GapPlanner.__call__
     module.rollout = timed(clock, "rollouts", module.rollout)  # type: ignore[assignment]
     module.fit_actor = timed(clock, "fits", module.fit_actor)  # type: ignore[assignment]
-    Planner.__call__ = timed(clock, "planner", Planner.__call__)  # type: ignore[method-assign]
+    for teacher in (Planner, GapPlanner):
+        teacher.__call__ = timed(clock, "teacher", teacher.__call__)  # type: ignore[method-assign]
     try:
         report = module.warm_start(model, env, config)
     finally:
-        module.rollout, module.fit_actor, Planner.__call__ = saved  # type: ignore[method-assign]
+        module.rollout, module.fit_actor = saved[:2]  # type: ignore[assignment]
+        Planner.__call__, GapPlanner.__call__ = saved[2:]  # type: ignore[method-assign]
     total = report["wall_time_s"]
     phases = {
-        "labels (planner calls)": clock["planner"],
-        "rollouts without the planner (simulator, logic, clone)": clock["rollouts"]
-        - clock["planner"],
+        "labels (teacher calls)": clock["teacher"],
+        "rollouts without the teacher (simulator, logic, clone)": clock["rollouts"]
+        - clock["teacher"],
         "fits (actor epochs)": clock["fits"],
     }
     phases["other"] = total - sum(phases.values())
