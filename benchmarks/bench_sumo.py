@@ -19,9 +19,11 @@ drivers broke the certified assumptions; the rule and the shipped ``paper`` poli
 logics in medium traffic, embedded vs SUMO. It writes the ``traffic`` entry of the results
 file and keeps the rest.
 
-Run: ``python benchmarks/bench_sumo.py [--json] [--episodes N] [--compare N] [--traffic]``;
-writes ``benchmarks/results/sumo.json``. Needs ``pip install 'safeswitch[sumo]'``. The
-single-car run takes about 25 minutes, ``--traffic`` about 20 (two cores).
+Run: ``python benchmarks/bench_sumo.py [--json] [--episodes N] [--compare N] [--traffic]
+[--cross-only]``; writes ``benchmarks/results/sumo.json`` (``--cross-only`` re-measures 3.
+alone, e.g. after a shipped policy was retrained, and keeps the rest). Needs ``pip install
+'safeswitch[sumo]'``. The single-car run takes about 25 minutes, ``--traffic`` about 20 (two
+cores).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -192,9 +195,18 @@ def main() -> None:
         help="episodes per simulator (default 200; in traffic 100)",
     )
     parser.add_argument("--traffic", action="store_true", help="traffic from every leg")
+    parser.add_argument(
+        "--cross-only",
+        action="store_true",
+        help="re-measure only the single-car cross-simulator comparison (3.), keep the rest",
+    )
     args = parser.parse_args()  # fmt: skip
     previous = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-    if args.traffic:
+    if args.cross_only:
+        if args.traffic or "safety" not in previous:
+            parser.error("--cross-only needs a single-car results file and no --traffic")
+        result = {**previous, "cross_simulator": cross(args.compare or 200)}
+    elif args.traffic:
         episodes, compare = args.episodes or 12, args.compare or 100
         rows = traffic_safety(episodes)
         part: dict[str, object] = {
@@ -221,7 +233,9 @@ def main() -> None:
         if "traffic" in previous:
             result["traffic"] = previous["traffic"]
     RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    tmp = RESULTS.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=2) + "\n")
+    os.replace(tmp, RESULTS)
     _common.emit(result, args.json)
 
 
