@@ -4,14 +4,15 @@ Trains ``--config`` (default ``experimental/scratch_annealed_noise``) once per `
 value (optionally under another ``--switching``) into a temporary run directory, one torch
 thread, and collects each run's ``metrics.json``: training collisions and safety episodes, the
 step of the policy the run selected on its validation set (if it validates), and the
-deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic
-trained with, and with ``--deploy`` under another too): collisions, safety episodes, comfort,
+deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic the
+recipe deploys its policy under — ``deploy_switching``, by default the one it trains with —
+and with ``--deploy`` under another too): collisions, safety episodes, comfort,
 full stops, cuts, cleared, efficiency.
 Every seed's row is reported (no seed is picked over another). 2 to 4 minutes per seed on a
 two-core machine, by recipe.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
-[--deploy LOGIC] [--out FILE]``; writes
+[--deploy LOGIC] [--parallel N] [--out FILE]``; writes
 ``benchmarks/results/train_seeds_<config>[_<switching>][_deployed_<logic>].json``.
 """
 
@@ -22,11 +23,12 @@ import json
 import os
 import sys
 import tempfile
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
 import _common
-from safeswitch.training.config import load_config
+from safeswitch.training.config import TrainConfig, load_config
 from safeswitch.training.policies import load_policy
 from safeswitch.training.run import evaluate_trained, train
 
@@ -47,10 +49,25 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         "wall_time_s": metrics["wall_time_s"],
         "training_collision_episodes": t["collision_episodes"],
         "training_safety_episodes": t["safety_activation_episodes"],
+        "constraints": metrics.get("constraints"),
         "training_episodes": t["episodes"],
         "selected_timesteps": (metrics.get("selected") or {}).get("best_timesteps"),
         **{k: e[k] for k in EVALUATED},
     }
+
+
+def one_seed(config: TrainConfig, seed: int, deploy: str | None) -> dict[str, object]:
+    """Train ``config`` with ``seed`` (one torch thread) in a temporary run directory and
+    return its row (with ``deploy``: also evaluated under that logic)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        metrics = train(replace(config, seed=seed, torch_threads=1), tmp, progress_bar=False)
+        result = row(seed, metrics)
+        if deploy:
+            deployed = replace(config, deploy_switching=deploy)
+            e = evaluate_trained(load_policy(tmp), deployed, config.eval_episodes,
+                                 config.eval_seed)  # fmt: skip
+            result["deployed"] = {"switching": deploy, **{k: e[k] for k in EVALUATED}}
+    return result
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,26 +81,29 @@ def main(argv: list[str] | None = None) -> int:
         help="also evaluate each run's policy under this logic (e.g. paper for a policy "
         "trained under guarded), on the same scenarios",
     )
+    parser.add_argument(
+        "--parallel", type=int, default=1,
+        help="seeds trained at once, one process and one torch thread each (default 1: the "
+        "wall times are then of a run alone on the machine)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     config = load_config(args.config)
     if args.switching:
-        config = replace(config, env=replace(config.env, switching=args.switching))
-    rows = []
-    for seed in args.seeds:
-        with tempfile.TemporaryDirectory() as tmp:
-            metrics = train(replace(config, seed=seed, torch_threads=1), tmp, progress_bar=False)
-            rows.append(row(seed, metrics))
-            if args.deploy:
-                deployed = replace(config, env=replace(config.env, switching=args.deploy))
-                e = evaluate_trained(load_policy(tmp), deployed, config.eval_episodes,
-                                     config.eval_seed)  # fmt: skip
-                rows[-1]["deployed"] = {"switching": args.deploy, **{k: e[k] for k in EVALUATED}}
-        print(json.dumps(rows[-1]), flush=True)
+        config = replace(config, env=replace(config.env, switching=args.switching),
+                         deploy_switching=None)  # fmt: skip
+    with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
+        futures = [pool.submit(one_seed, config, seed, args.deploy) for seed in args.seeds]
+        rows = []
+        for future in futures:
+            rows.append(future.result())
+            print(json.dumps(rows[-1]), flush=True)
     result = {
         "benchmark": "train_seeds",
         **_common.machine(),
+        "parallel": args.parallel,
         "config": args.config,
         "switching": config.env.switching,
+        "evaluated_under": config.deployed_env.switching,
         "runs": rows,
     }
     name = args.config.replace("/", "_").replace(".yaml", "")

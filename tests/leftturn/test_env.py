@@ -183,9 +183,12 @@ def test_vec_env_auto_resets_like_sb3_expects():
             assert "terminal_observation" not in infos[0]
     assert dones.all()
     for i, env in enumerate(refs):
-        last_obs, _, terminated, truncated, _ = ref[i]
+        last_obs, _, terminated, truncated, last_info = ref[i]
         assert truncated and not terminated
         np.testing.assert_array_equal(infos[i]["terminal_observation"], last_obs)
+        # the last tick's own values, not those of the episode the reset put in its place
+        for key in ("accel_lon", "accel_lat", "lateral_deviation", "ego_speed", "north_speed"):
+            assert infos[i][key] == last_info[key], key
         assert infos[i]["TimeLimit.truncated"] is True
         assert infos[i]["episode"]["l"] == 50
         next_first, _ = env.reset()  # the second episode of environment i

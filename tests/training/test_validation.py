@@ -116,9 +116,9 @@ def test_the_selection_criterion_can_put_the_fewest_collisions_first(tmp_path, c
     saved = []
     validator._save_best = lambda: saved.append(validator.num_timesteps)  # type: ignore[method-assign]
     for k, (collisions, mean_return) in enumerate(scores):
-        validator.validate = lambda c=collisions, r=mean_return: {  # type: ignore[method-assign]
-            "mean_return": r, "collisions": c, "safety_activation_episodes": 0,
-        }  # fmt: skip
+        validator.validate = lambda c=collisions, r=mean_return: canned(  # type: ignore[method-assign]
+            mean_return=r, collisions=c
+        )
         validator.num_timesteps = 1024 * (k + 1)
         validator._on_rollout_end()
     assert validator.state["best_timesteps"] == 1024 * (chosen + 1)
@@ -127,3 +127,57 @@ def test_the_selection_criterion_can_put_the_fewest_collisions_first(tmp_path, c
     assert flagged[-1] == 1024 * (chosen + 1)
     with pytest.raises(ConfigError, match="criterion"):
         from_dict(TrainConfig, SMALL | {"validation": {"every": 1024, "criterion": "fastest"}})
+
+
+def canned(**given):
+    """A validation summary with every field the validator reads (600-tick episodes)."""
+    return {
+        "episodes": 100, "ticks": 60_000, "mean_return": 0.0, "collisions": 0,
+        "safety_activation_episodes": 0, "safety_activation_steps": 0,
+        "comfort_violation_steps": 0, "cleared_episodes": 100, "mean_time_to_clear_s": 8.0,
+    } | given  # fmt: skip
+
+
+def test_constraints_then_return_puts_the_limits_first_then_the_time_then_the_return(tmp_path):
+    """``constraints_then_return``: a policy within its comfort and safety budgets beats one
+    outside them whatever its return; among those, one within (or nearer) the clear-time
+    budget; then the higher return. The time to clear counts a never-cleared episode at the
+    horizon (12 s)."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    from safeswitch.core.config import to_dict
+    from safeswitch.training.validation import Validator, constraint_key
+
+    config = from_dict(TrainConfig, SMALL | {
+        "env": {"episode": {"learned_scope": "episode"}},
+        "validation": {**SMALL["validation"], "criterion": "constraints_then_return"},
+        "constraints": {"comfort": {"budget": 0.01}, "safety": {"budget": 0.015},
+                        "clear_time": {"budget": 7.5}},
+    })  # fmt: skip
+    validator = Validator(config, tmp_path)
+    validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
+    validator._save_best = lambda: None  # type: ignore[method-assign]
+    candidates = [
+        canned(mean_return=2000.0, safety_activation_episodes=2),  # 2 % of episodes: over
+        canned(mean_return=1900.0, comfort_violation_steps=300),  # 0.5 %: within
+        canned(mean_return=1800.0, cleared_episodes=95, mean_time_to_clear_s=7.0),  # 7.25 s
+        canned(mean_return=1850.0, cleared_episodes=95, mean_time_to_clear_s=7.1),  # 7.345 s
+        canned(mean_return=1700.0, collisions=1, mean_time_to_clear_s=6.0),  # a collision
+    ]
+    chosen = []
+    for k, summary in enumerate(candidates):
+        validator.validate = lambda s=summary: s  # type: ignore[method-assign]
+        validator.num_timesteps = 1024 * (k + 1)
+        validator._on_rollout_end()
+        chosen.append(validator.state["best_timesteps"] // 1024 - 1)
+    assert chosen == [0, 1, 2, 3, 3]
+    # held to its own validation budget (here looser than training's), the first is within it
+    looser = from_dict(TrainConfig, {**to_dict(config), "constraints": {
+        "comfort": {"budget": 0.01}, "safety": {"budget": 0.015, "validation_budget": 0.02},
+        "clear_time": {"budget": 7.5}}})  # fmt: skip
+    assert constraint_key(looser, candidates[0], 12.0) > constraint_key(looser, candidates[1], 12.0)
+    assert constraint_key(config, candidates[0], 12.0) < constraint_key(config, candidates[1], 12.0)
+    times = [float(r["clear_time_s"]) for r in rows(tmp_path)]
+    assert times[2] == pytest.approx(0.95 * 7.0 + 0.05 * 12.0)

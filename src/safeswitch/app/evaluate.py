@@ -59,7 +59,7 @@ def controller_setup(
                 f"the policy in {trained.path} was trained on {trained.config.env_id}; "
                 f"evaluate it with --env {trained.config.env_id}"
             )
-        env_config = trained.config.env
+        env_config = trained.config.deployed_env
         if switching is not None:
             env_config = replace(env_config, switching=switching)
         return replace(env_config, scenario=None), trained.as_policy()

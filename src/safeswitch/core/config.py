@@ -65,6 +65,9 @@ def _convert(hint: Any, value: Any, where: str) -> Any:
         args = typing.get_args(hint)
         if value is None and type(None) in args:
             return None
+        given = [arg for arg in args if arg is not type(None)]
+        if len(given) == 1:  # ``X | None``: X's own message names what is wrong
+            return _convert(given[0], value, where)
         for arg in args:
             if arg is type(None):
                 continue

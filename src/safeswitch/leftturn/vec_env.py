@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import fields, replace
 from typing import Any
 
 import gymnasium as gym
@@ -50,6 +51,44 @@ EPISODE_KEYS: tuple[str, ...] = (
 )
 
 
+def comfort_exceeded(record: StepRecord, config: LeftTurnConfig) -> NDArray[np.bool_]:
+    """Per environment ``[B]``: the tick exceeded a comfort limit (|a_lon| or |a_lat| above
+    the configuration's comfort limits; the evaluation's ``comfort_violation_steps``)."""
+    return (np.abs(record.accel_lon) > config.rewards.comfort_accel_lon) | (
+        np.abs(record.accel_lat) > config.rewards.comfort_accel_lat
+    )
+
+
+class TickCosts:
+    """Per environment, what the ticks of one step held (arrays ``[B]``, counts of ticks):
+    what the learning-only costs of :mod:`safeswitch.training.constraints` read.
+
+    Attributes:
+        ticks: Ticks the episode was live for in the step (fewer than the decision interval
+            at the step that ends it).
+        comfort: Of those, ticks that exceeded a comfort limit.
+        safety: Ticks on which the safety action was executed (any reason).
+        uncleared: Ticks that ended with the ego not yet clear of its conflict zone.
+    """
+
+    def __init__(self, batch: int) -> None:
+        self.ticks = np.zeros(batch, dtype=np.int64)
+        self.comfort = np.zeros(batch, dtype=np.int64)
+        self.safety = np.zeros(batch, dtype=np.int64)
+        self.uncleared = np.zeros(batch, dtype=np.int64)
+
+    def clear(self) -> None:
+        for counts in (self.ticks, self.comfort, self.safety, self.uncleared):
+            counts[:] = 0
+
+    def add(self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_]) -> None:
+        """Add one tick of the episodes ``live`` selects."""
+        self.ticks += live
+        self.comfort += live & comfort_exceeded(record, config)
+        self.safety += live & record.safety_active
+        self.uncleared += live & ~record.ego_cleared
+
+
 class EpisodeStatistics:
     """Running per-episode statistics of a batch of environments (arrays ``[B]``)."""
 
@@ -76,10 +115,7 @@ class EpisodeStatistics:
         self.collision |= r.collision & on
         self.safety_steps += r.safety_active & on
         self.min_speed = np.where(on, np.minimum(self.min_speed, r.ego_speed), self.min_speed)
-        self.comfort_violation_steps += on & (
-            (np.abs(r.accel_lon) > config.rewards.comfort_accel_lon)
-            | (np.abs(r.accel_lat) > config.rewards.comfort_accel_lat)
-        )
+        self.comfort_violation_steps += on & comfort_exceeded(r, config)
         just_cleared = on & r.ego_cleared & np.isnan(self.time_to_clear)
         self.time_to_clear[just_cleared] = self.length[just_cleared] * config.episode.dt
         self.max_lateral = np.where(
@@ -140,6 +176,15 @@ class LeftTurnVecEnv(VecEnv):
         learned_scope: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv`.
         traffic: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv` (``None``: the paper's
             scene, bit for bit).
+        stagger: Truncate each environment's first episode after a random number of ticks
+            (uniform over the horizon, drawn from ``seed``), as a time limit (SB3 bootstraps
+            it). Every episode of the left turn lasts the whole horizon, so without this all
+            environments start, and end, their episodes together for the whole run: each
+            rollout of fewer ticks than an episode then holds only the approach, or only what
+            follows the turn, of every episode, and the next update sees only the other part
+            (Rudin et al., *Learning to Walk in Minutes Using Massively Parallel Deep RL*,
+            CoRL 2021, randomise the first episode's length for the same reason). Off by
+            default (the paper's setting, and every run before it).
     """
 
     def __init__(
@@ -153,6 +198,7 @@ class LeftTurnVecEnv(VecEnv):
         render_mode: str | None = None,
         learned_scope: str = FROM_CONFIG,
         traffic: Any = None,
+        stagger: bool = False,
     ) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -170,6 +216,9 @@ class LeftTurnVecEnv(VecEnv):
         self._actions: NDArray[np.float64] | None = None
         self._stats = EpisodeStatistics(self.num_envs)
         self._start = time.perf_counter()
+        self.stagger = bool(stagger)
+        #: Per environment, the tick its first episode is cut at (0: no cut; see ``stagger``).
+        self._first_cut = np.zeros(self.num_envs, dtype=np.int64)
         self.last_record: StepRecord | None = None
         #: The ego's progress along its route after the last step [m], taken before the
         #: episodes that ended are reset (reward shaping reads it; training.shaping).
@@ -179,6 +228,10 @@ class LeftTurnVecEnv(VecEnv):
         #: that reason's safety action ran (training.shaping.ReasonPenalty reads it).
         self.count_reasons = False
         self.reason_ticks_in_step = np.zeros((self.num_envs, len(self.task.reasons)), np.int32)
+        #: Set ``count_costs`` to have :attr:`costs_in_step` filled (a :class:`TickCosts` of
+        #: the last step; training.constraints reads it).
+        self.count_costs = False
+        self.costs_in_step = TickCosts(self.num_envs)
 
     @property
     def state(self) -> TaskState:
@@ -211,6 +264,7 @@ class LeftTurnVecEnv(VecEnv):
         self._episodes += 1
         self._state = self.task.initial(scenarios)
         self._stats = EpisodeStatistics(self.num_envs)
+        self._first_cut = self._stagger_cuts() if self.stagger else np.zeros_like(self._first_cut)
         self.reset_infos = [{"scenario": scenario_info(scenarios, i)} for i in range(self.num_envs)]
         self._reset_options()
         return self.task.observe(self._state)
@@ -232,17 +286,24 @@ class LeftTurnVecEnv(VecEnv):
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
         counting, counts = self.count_reasons, self.reason_ticks_in_step
+        costs = self.costs_in_step if self.count_costs else None
         if counting:
             counts[:] = 0
+        if costs is not None:
+            costs.clear()
 
         def on_tick(tick: StepRecord, live: NDArray[np.bool_]) -> None:
             self._stats.update(tick, self.config, live)
             if counting:
                 acted = np.flatnonzero(tick.safety_active & live)
                 counts[acted, tick.reason[acted]] += 1
+            if costs is not None:
+                costs.add(tick, self.config, live)
 
         self._state, record = self.task.hold(self.state, self._actions, on_tick)
         self._actions = None
+        if self._first_cut.any():
+            record = self._cut_first_episodes(record)
         self.ego_progress_after_step = self._state.world.progress[:, 0].copy()
         done = record.terminated | record.truncated
         observation = record.observation
@@ -250,6 +311,9 @@ class LeftTurnVecEnv(VecEnv):
         terminal = observation[ended].copy()
         episode: dict[str, NDArray[Any]] = {}
         if ended.size:
+            # Some of the record's arrays are the state's own (the ego's acceleration, its
+            # lateral deviation, ...): copied before the reset writes the fresh episodes in.
+            record = _detached(record)
             episode = self._stats.summary(ended, record, time.perf_counter() - self._start)
             self._stats.reset_at(ended)
             fresh = self.task.initial(
@@ -264,6 +328,23 @@ class LeftTurnVecEnv(VecEnv):
         self.last_record = record
         infos = BatchInfos(record, self.task.reasons, done, terminal, episode)
         return observation, record.reward.astype(np.float32), done, infos  # type: ignore[return-value]
+
+    def _stagger_cuts(self) -> NDArray[np.int64]:
+        """The tick each environment's first episode is cut at: uniform over the horizon,
+        from the base seed (so a run is reproducible)."""
+        episode = self.config.episode
+        horizon = round(episode.horizon_s / episode.dt)
+        rng = np.random.default_rng([self._seed, 0x5A66])
+        return rng.integers(episode.decision_interval, horizon + 1, self.num_envs)
+
+    def _cut_first_episodes(self, record: StepRecord) -> StepRecord:
+        """Truncate the first episodes that reached their cut (``stagger``)."""
+        ended = record.terminated | record.truncated
+        cut = (self._first_cut > 0) & (self._stats.length >= self._first_cut) & ~ended
+        self._first_cut[ended | cut] = 0
+        if not cut.any():
+            return record
+        return replace(record, truncated=record.truncated | cut)
 
     def close(self) -> None:
         self._state = None
@@ -347,6 +428,16 @@ class EnvironmentView:
         from safeswitch.leftturn.render import render_scene
 
         return render_scene(self._vec.task, self._vec.state, self.env_index, self._vec.last_record)
+
+
+def _detached(record: StepRecord) -> StepRecord:
+    """``record`` with every array copied (none shared with the task state any more)."""
+    arrays: dict[str, Any] = {
+        f.name: value.copy()
+        for f in fields(record)
+        if isinstance(value := getattr(record, f.name), np.ndarray)
+    }
+    return replace(record, **arrays)
 
 
 def _fresh_seed() -> int:

@@ -8,6 +8,7 @@ configuration is saved with every run.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,6 +44,10 @@ class PPOConfig:
         net_arch: Hidden units per layer, for the policy and (separately) the value network.
         activation: Hidden-layer non-linearity (Table II: Tanh; the text's "ReLU" is the
             alternative).
+        fast_tanh: With ``activation: tanh``, compute it with numpy's kernel in the forward
+            pass (the same function to float32 rounding; a PPO update about a fifth faster on
+            this CPU build of torch; ours, off by default so that earlier runs reproduce; see
+            :mod:`safeswitch.training.activations`).
         normalize_observations: Running observation normalisation (``VecNormalize``).
         normalize_rewards: Running return-based reward scaling (``VecNormalize``).
         log_std_init: Initial log standard deviation of the Gaussian policy (not in Table II;
@@ -97,6 +102,7 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     net_arch: tuple[int, ...] = (128, 128, 128)
     activation: Literal["tanh", "relu"] = "tanh"
+    fast_tanh: bool = False
     normalize_observations: bool = True
     normalize_rewards: bool = True
     log_std_init: float = 0.0
@@ -249,14 +255,17 @@ class ValidationConfig:
         seed: Their seed (differs from the training seed and from ``eval_seed``).
         start: Timesteps before the first validation (early policies are no candidates).
         switching: The switching logic the policy is validated under (``null``: the one it
-            trains with). Ours: a policy trained under one logic and meant to be deployed
-            under another (trained under ``guarded``, deployed under ``paper``) is selected
-            where it will run.
+            is deployed under, ``deploy_switching``, by default the one it trains with). Ours:
+            a policy trained under one logic and meant to be deployed under another (trained
+            under ``guarded``, deployed under ``paper``) is selected where it will run.
         criterion: ``"return"``: the highest mean return (the paper's criterion);
             ``"collisions_then_return"`` (ours): the fewest validation collisions, then the
             highest mean return. The paper's reward has no collision term — a collision only
             ends the episode early — so two policies can score the same return with and
-            without one.
+            without one. ``"constraints_then_return"`` (ours, with ``constraints``): the
+            fewest collisions, then the smallest excess over the comfort and safety budgets,
+            then over the clear-time budget, then the highest return — the constrained
+            problem's priorities (:func:`safeswitch.training.validation.constraint_key`).
     """
 
     every: int = 0
@@ -264,7 +273,7 @@ class ValidationConfig:
     seed: int = 2_000_003
     start: int = 0
     switching: str | None = None
-    criterion: Literal["return", "collisions_then_return"] = "return"
+    criterion: Literal["return", "collisions_then_return", "constraints_then_return"] = "return"
 
     def __post_init__(self) -> None:
         o = "validation"
@@ -275,6 +284,103 @@ class ValidationConfig:
         check(self.every >= 0, o, "every", self.every, "must be >= 0 (0: no validation)")
         check(self.episodes >= 1, o, "episodes", self.episodes, "must be >= 1")
         check(self.start >= 0, o, "start", self.start, "must be >= 0")
+
+
+@dataclass(frozen=True)
+class ConstraintConfig:
+    """One constraint of constrained PPO (see :mod:`safeswitch.training.constraints`).
+
+    Attributes:
+        budget: What the constraint allows: a share of ticks (``comfort``, ``overrule``), a
+            share of episodes (``safety``, ``uncleared``) or a mean time to clear [s]
+            (``clear_time``), > 0.
+        integral_gain: Added to the multiplier's integral term per rollout per unit of
+            relative excess (``measured / budget − 1``) [reward per unit of the cost].
+        proportional_gain: Multiplier per unit of the rollout's relative excess.
+        max_multiplier: Upper bound of the multiplier [reward per unit of the cost].
+        initial_multiplier: The multiplier at the start of the run.
+        start: Timesteps before the multiplier starts to move.
+        validation_budget: What ``validation.criterion: constraints_then_return`` holds the
+            deterministic policy to on the validation scenarios, in the same unit (``null``:
+            ``budget``). The training budget is met by the exploring policy the multipliers
+            see; this one is the target the deployed policy is meant to meet.
+        reasons: ``safety`` only: the switching logic's reasons whose safety actions count
+            (empty: every safety action). Under ``guarded``, the paper logic's own
+            (``no_gap_at_braking_point`` and the ``…:overrules_primary`` reasons) are what the
+            policy meets deployed under ``paper``.
+    """
+
+    budget: float
+    integral_gain: float = 1.0
+    proportional_gain: float = 0.0
+    max_multiplier: float = 100.0
+    initial_multiplier: float = 0.0
+    start: int = 0
+    validation_budget: float | None = None
+    reasons: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        o = "constraints.<cost>"
+        check(math.isfinite(self.budget) and self.budget > 0, o, "budget", self.budget,
+              "must be > 0")  # fmt: skip
+        for name in ("integral_gain", "proportional_gain", "max_multiplier"):
+            value = getattr(self, name)
+            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
+        most = self.max_multiplier
+        check(0 <= self.initial_multiplier <= most, o, "initial_multiplier",
+              self.initial_multiplier, f"must be in [0, max_multiplier={most}]")  # fmt: skip
+        check(self.start >= 0, o, "start", self.start, "must be >= 0")
+        if self.validation_budget is not None:
+            check(math.isfinite(self.validation_budget) and self.validation_budget > 0, o,
+                  "validation_budget", self.validation_budget, "must be > 0 or null")  # fmt: skip
+
+    @property
+    def selection_budget(self) -> float:
+        """The budget validation holds the deterministic policy to."""
+        return self.budget if self.validation_budget is None else self.validation_budget
+
+
+@dataclass(frozen=True)
+class ConstraintsConfig:
+    """Constrained PPO: learning-only costs whose Lagrange multipliers the run moves to meet
+    their budgets (ours; see :mod:`safeswitch.training.constraints`). Each cost is off unless
+    given.
+
+    Attributes:
+        comfort: Ticks over a comfort limit, as a share of ticks.
+        safety: Episodes with a safety action (of ``reasons``), as a share of episodes.
+        overrule: Under ``guarded``: ticks on which the certified filter overruled the paper
+            logic's own safety action (its braking was unsafe there: deployed under ``paper``
+            alone, these are the episodes that collide), as a share of ticks; ``reasons``
+            default to every ``…:overrules_primary`` reason of the logic.
+        clear_time: The mean time until the ego clears its conflict zone [s].
+        uncleared: Episodes that end with the ego not clear of its conflict zone, as a share
+            of episodes.
+    """
+
+    comfort: ConstraintConfig | None = None
+    safety: ConstraintConfig | None = None
+    overrule: ConstraintConfig | None = None
+    clear_time: ConstraintConfig | None = None
+    uncleared: ConstraintConfig | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("comfort", "clear_time", "uncleared"):
+            given = getattr(self, name)
+            if given is not None:
+                check(not given.reasons, f"constraints.{name}", "reasons", given.reasons,
+                      "are for the safety constraint only")  # fmt: skip
+        for name in ("comfort", "safety", "overrule", "uncleared"):
+            given = getattr(self, name)
+            if given is not None:
+                check(given.budget < 1, f"constraints.{name}", "budget", given.budget,
+                      "is a share: must be < 1")  # fmt: skip
+
+    def active(self) -> dict[str, ConstraintConfig]:
+        """The constraints that are on, by cost name."""
+        named = {"comfort": self.comfort, "safety": self.safety, "overrule": self.overrule,
+                 "clear_time": self.clear_time, "uncleared": self.uncleared}  # fmt: skip
+        return {name: c for name, c in named.items() if c is not None}
 
 
 @dataclass(frozen=True)
@@ -289,9 +395,19 @@ class TrainConfig:
         checkpoint_every: Save a resumable checkpoint every this many timesteps.
         eval_episodes: Random scenarios of the final evaluation.
         eval_seed: Seed of the final evaluation's scenarios (never used in training).
+        deploy_switching: The switching logic the trained policy runs under: its final
+            evaluation, its validation (unless ``validation.switching`` names another) and
+            ``safeswitch evaluate --model`` without ``--switching`` (ours; ``null``: the logic it
+            trains with). A policy trained under ``guarded`` (the paper's logic with the
+            certified filter beneath it while it learns) is deployed under ``paper``.
+        stagger_starts: Truncate each training environment's first episode after a random
+            share of the horizon, so that the environments' episodes do not all start and
+            end together (ours; off: the paper's setting). See
+            :class:`~safeswitch.leftturn.vec_env.LeftTurnVecEnv`'s ``stagger``.
         ppo: PPO hyper-parameters.
         warm_start: Behaviour cloning of the planner before PPO (off by default).
         validation: Selection of the run's policy on a validation set (off by default).
+        constraints: Constrained PPO: costs with self-adjusting multipliers (off by default).
         env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
         traffic: Traffic from every leg (``null``: the paper's scene): a preset's name or a
             mapping of :class:`~safeswitch.leftturn.config.TrafficConfig` settings (``preset``
@@ -305,9 +421,12 @@ class TrainConfig:
     checkpoint_every: int = 200_000
     eval_episodes: int = 1000
     eval_seed: int = 1_000_003
+    deploy_switching: str | None = None
+    stagger_starts: bool = False
     ppo: PPOConfig = field(default_factory=PPOConfig)
     warm_start: WarmStartConfig = field(default_factory=WarmStartConfig)
     validation: ValidationConfig = field(default_factory=ValidationConfig)
+    constraints: ConstraintsConfig = field(default_factory=ConstraintsConfig)
     env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
     traffic: str | dict[str, Any] | None = None
 
@@ -339,7 +458,21 @@ class TrainConfig:
         if self.warm_start.episodes and self.warm_start.teacher == "gap_planner":
             check(self.traffic is not None, "warm_start", "teacher", self.warm_start.teacher,
                   "needs traffic (the single-car scene has teacher: planner)")  # fmt: skip
+        if self.deploy_switching is not None:
+            known = ", ".join(logic_names())
+            check(self.deploy_switching in logic_names(), o, "deploy_switching",
+                  self.deploy_switching,
+                  f"must be null or a registered switching logic ({known})")  # fmt: skip
+        clear = self.constraints.clear_time
+        if clear is not None:
+            horizon = self.env.episode.horizon_s
+            check(clear.budget < horizon, "constraints.clear_time", "budget", clear.budget,
+                  f"is a mean time to clear [s]: must be below the horizon ({horizon} s)",
+                  )  # fmt: skip
         v = self.validation
+        constrained = bool(self.constraints.active())
+        check(v.criterion != "constraints_then_return" or constrained, "validation",
+              "criterion", v.criterion, "needs constraints (none are set)")  # fmt: skip
         if v.every:
             check(v.seed not in (self.seed, self.eval_seed), "validation", "seed", v.seed,
                   "must differ from the training seed and eval_seed")  # fmt: skip
@@ -348,6 +481,13 @@ class TrainConfig:
     def batch_size(self) -> int:
         """SB3's minibatch size."""
         return self.ppo.n_steps * self.n_envs // self.ppo.n_minibatches
+
+    @property
+    def deployed_env(self) -> LeftTurnConfig:
+        """:attr:`env` with the logic the trained policy runs under (``deploy_switching``)."""
+        if self.deploy_switching is None:
+            return self.env
+        return dataclasses.replace(self.env, switching=self.deploy_switching)
 
     @property
     def traffic_settings(self) -> TrafficConfig | None:

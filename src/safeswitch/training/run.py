@@ -37,8 +37,17 @@ from safeswitch.evaluation.evaluate import run_controller, summary_against_oracl
 from safeswitch.io import write_atomic
 from safeswitch.leftturn.task import build_task
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training.activations import NumpyTanh
 from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
-from safeswitch.training.config import EnvTrainConfig, TrainConfig, dump_config, load_config
+from safeswitch.training.config import (
+    ConstraintsConfig,
+    EnvTrainConfig,
+    PPOConfig,
+    TrainConfig,
+    dump_config,
+    load_config,
+)
+from safeswitch.training.constraints import ConstraintCosts, ConstraintUpdate
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.shaping import (
@@ -56,8 +65,64 @@ class RunDirectoryError(RuntimeError):
     """The run directory cannot be used as asked (exists, incomplete, or has no checkpoint)."""
 
 
-def _activation(name: str) -> type[torch.nn.Module]:
-    return torch.nn.Tanh if name == "tanh" else torch.nn.ReLU
+def _activation(name: str, fast_tanh: bool = False) -> type[torch.nn.Module]:
+    if name != "tanh":
+        return torch.nn.ReLU
+    return NumpyTanh if fast_tanh else torch.nn.Tanh
+
+
+class LearningEnv:
+    """The learning-only wrappers a configuration asks for, around the batched environment:
+    progress shaping, the reason penalties, the minimum-time cost, the constraints' costs
+    (each only if configured, in that order), and the callbacks that move them over the run.
+    What the learner sees (``env``); what the task pays is what ``vec`` records.
+
+    Args:
+        vec: The batched left-turn environment.
+        ppo: The configuration's ``ppo`` section (its learning-only settings and ``gamma``).
+        constraints: The configuration's ``constraints`` section (default: none).
+    """
+
+    def __init__(
+        self, vec: LeftTurnVecEnv, ppo: PPOConfig, constraints: ConstraintsConfig | None = None
+    ) -> None:
+        self.ppo = ppo
+        self.shaped = (
+            ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
+        )
+        env: VecEnv = vec if self.shaped is None else self.shaped
+        self.charged = None
+        if ppo.reason_penalties:
+            env = self.charged = ReasonPenalty(env, ppo.reason_penalties)
+        if ppo.clear_time_penalty:
+            env = ClearTimePenalty(env, ppo.clear_time_penalty)
+        self.constrained = None
+        if constraints is not None and constraints.active():
+            env = self.constrained = ConstraintCosts(env, constraints)
+        self.env = env
+
+    def schedules(self) -> list[BaseCallback]:
+        """Callbacks that move the shaping and the charge over the run, as configured."""
+        ppo = self.ppo
+        out: list[BaseCallback] = []
+        if self.shaped is not None and ppo.progress_shaping_final is not None:
+            out.append(
+                ShapingSchedule(self.shaped, ppo.progress_shaping, ppo.progress_shaping_final)
+            )
+        if self.charged is not None and ppo.reason_penalties_initial_scale != 1.0:
+            out.append(PenaltySchedule(self.charged, ppo.reason_penalties_initial_scale))
+        if self.constrained is not None:
+            out.append(ConstraintUpdate(self.constrained))
+        return out
+
+    def state(self) -> dict[str, Any]:
+        """What a checkpoint must keep of the learning-only terms (the multipliers)."""
+        return {} if self.constrained is None else {"constraints": self.constrained.state()}
+
+    def restore(self, checkpoint: dict[str, Any]) -> None:
+        """The learning-only terms as a checkpoint's state left them."""
+        if self.constrained is not None and "constraints" in checkpoint:
+            self.constrained.restore(checkpoint["constraints"])
 
 
 def build_model(
@@ -87,7 +152,7 @@ def build_model(
         device="cpu",
         policy_kwargs={
             "net_arch": {"pi": arch, "vf": arch},
-            "activation_fn": _activation(ppo.activation),
+            "activation_fn": _activation(ppo.activation, ppo.fast_tanh),
             "log_std_init": ppo.log_std_init,
         },
         tensorboard_log=str(tensorboard_log) if tensorboard_log else None,
@@ -139,9 +204,18 @@ def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[
 
 
 def _save_checkpoint(
-    run: Path, model: SwitchPPO, env: VecNormalize, vec: LeftTurnVecEnv, monitor: TrainingMonitor
+    run: Path,
+    model: SwitchPPO,
+    env: VecNormalize,
+    vec: LeftTurnVecEnv,
+    monitor: TrainingMonitor,
+    learning: LearningEnv,
 ) -> Path:
-    state = {"totals": monitor.totals, "episode_counters": vec.episode_counters.tolist()}
+    state = {
+        "totals": monitor.totals,
+        "episode_counters": vec.episode_counters.tolist(),
+        **learning.state(),
+    }
     return save_checkpoint(run, model, env, state)
 
 
@@ -241,9 +315,10 @@ def learn(
 def evaluate_trained(
     policy: TrainedPolicy, config: TrainConfig, episodes: int, seed: int
 ) -> dict[str, Any]:
-    """Deterministic evaluation on ``episodes`` random scenarios drawn with ``seed``, with the
-    oracle's efficiency (``safeswitch evaluate``'s fields)."""
-    task = build_task(None, config.env, traffic=config.traffic_settings)
+    """Deterministic evaluation on ``episodes`` random scenarios drawn with ``seed`` under the
+    logic the policy is deployed under, with the oracle's efficiency (``safeswitch
+    evaluate``'s fields)."""
+    task = build_task(None, config.deployed_env, traffic=config.traffic_settings)
     scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
     result, plan = run_controller(task, policy.as_policy(), scenarios, trace=False)
     return summary_against_oracle(result, plan, task.config.episode.horizon_s)
@@ -265,19 +340,15 @@ def train(
     if checkpoint is not None:
         config = load_config(run / "config.yaml")
     vec = LeftTurnVecEnv(
-        config.n_envs, config=config.env, seed=config.seed, traffic=config.traffic_settings
-    )
+        config.n_envs, config=config.env, seed=config.seed, traffic=config.traffic_settings,
+        stagger=config.stagger_starts,
+    )  # fmt: skip
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
-    ppo = config.ppo
-    shaped = ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
-    learned: VecEnv = vec if shaped is None else shaped
-    charged = None
-    if ppo.reason_penalties:
-        learned = charged = ReasonPenalty(learned, ppo.reason_penalties)
-    if ppo.clear_time_penalty:
-        learned = ClearTimePenalty(learned, ppo.clear_time_penalty)
-    env = normalized(learned, config, checkpoint)
+    learning = LearningEnv(vec, config.ppo, config.constraints)
+    if checkpoint is not None:
+        learning.restore(checkpoint)
+    env = normalized(learning.env, config, checkpoint)
     if checkpoint is not None:
         model = SwitchPPO.load(
             checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
@@ -288,21 +359,20 @@ def train(
     monitor = TrainingMonitor(
         run / "progress.csv",
         config.checkpoint_every,
-        lambda m: _save_checkpoint(run, model, env, vec, m),
+        lambda m: _save_checkpoint(run, model, env, vec, m, learning),
         checkpoint["totals"] if checkpoint else None,
     )
     if checkpoint is None and config.warm_start.episodes > 0:
         write_atomic(run / "warm_start.json", json.dumps(warm_start(model, env, config), indent=2))
-        _save_checkpoint(run, model, env, vec, monitor)  # --resume starts after the warm start
+        _save_checkpoint(
+            run, model, env, vec, monitor, learning
+        )  # --resume starts after the warm start
     validator = Validator(config, run) if config.validation.every else None
     extra: list[BaseCallback] = [validator] if validator is not None else []
-    if shaped is not None and ppo.progress_shaping_final is not None:
-        extra.append(ShapingSchedule(shaped, ppo.progress_shaping, ppo.progress_shaping_final))
-    if charged is not None and ppo.reason_penalties_initial_scale != 1.0:
-        extra.append(PenaltySchedule(charged, ppo.reason_penalties_initial_scale))
+    extra += learning.schedules()
     learn(
         model, run, config.timesteps, monitor,
-        lambda: _save_checkpoint(run, model, env, vec, monitor), resume, progress_bar,
+        lambda: _save_checkpoint(run, model, env, vec, monitor, learning), resume, progress_bar,
         extra=extra,
     )  # fmt: skip
     wall = monitor.wall_time_s
@@ -326,6 +396,7 @@ def train(
         "n_envs": config.n_envs,
         "torch_threads": config.torch_threads,
         "switching": config.env.switching,
+        "deployed_switching": config.deployed_env.switching,
         "adas_penalty": config.env.adas_penalty,
         "seed": config.seed,
         "warm_start": (
@@ -334,6 +405,7 @@ def train(
             else None
         ),
         "selected": selected,
+        **learning.state(),
         "training": {
             "collisions": int(t["collisions"]),
             "collision_episodes": int(t["collision_episodes"]),

@@ -2,9 +2,10 @@
 
 Every ``validation.every`` timesteps the deterministic policy (the Gaussian's mean, as it is
 evaluated and deployed) drives the validation scenarios — random scenarios drawn with their own
-seed, never trained on and never in the final evaluation, under the logic it trains with or
-``validation.switching`` — and its mean return there is its score (the paper's criterion for
-learned model validation; ``validation.criterion`` can put the fewest collisions first). The
+seed, never trained on and never in the final evaluation, under the logic it is deployed under
+(``deploy_switching``, by default the one it trains with) or ``validation.switching`` — and
+its mean return there is its score (the paper's criterion for learned model validation;
+``validation.criterion`` can put the fewest collisions, or the constraints, first). The
 best policy so far is saved whole into ``best/`` of the run directory (model and observation
 statistics, written into a temporary folder and renamed); each validation is a row of
 ``validation.csv`` with the evaluation's summary fields. At the end of the run the best policy
@@ -18,6 +19,7 @@ without the ego), so a validation costs one batched rollout.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import shutil
@@ -44,6 +46,8 @@ VALIDATION_FIELDS = (
     "cut_episodes",
     "cleared_episodes",
     "mean_efficiency",
+    "safety_activation_steps",
+    "clear_time_s",
     "best",
 )
 
@@ -61,8 +65,10 @@ class Validator(BaseCallback):
         super().__init__()
         v = config.validation
         self.config, self.run = config, run
-        logic = {} if v.switching is None else {"switching": v.switching}
-        self.task = build_task(None, config.env, traffic=config.traffic_settings, **logic)
+        env = config.deployed_env
+        if v.switching is not None:
+            env = dataclasses.replace(env, switching=v.switching)
+        self.task = build_task(None, env, traffic=config.traffic_settings)
         ids = np.arange(v.episodes)
         self.scenarios = self.task.draw_scenarios(v.seed, ids, np.zeros(v.episodes, dtype=int))
         self._plan: OraclePlan | None = None
@@ -89,18 +95,23 @@ class Validator(BaseCallback):
         self._next = (self.num_timesteps // every + 1) * every
         summary = self.validate()
         score = float(summary["mean_return"])
-        collisions = int(summary["collisions"])
-        better = self.state["best_return"] is None or self._key(collisions, score) > self._key(
-            self.state.get("best_collisions", 0), self.state["best_return"]
-        )
+        key = self.key(summary)
+        best = self.state.get("best_key")
+        if best is None and self.state["best_return"] is not None:  # a run from before keys
+            best = [-float(self.state.get("best_collisions", 0)), self.state["best_return"]]
+        better = best is None or tuple(key) > tuple(best)
         if better:
             self.state = {
                 "best_return": score,
-                "best_collisions": collisions,
+                "best_collisions": int(summary["collisions"]),
                 "best_timesteps": int(self.num_timesteps),
+                "best_key": list(key),
             }
             self._save_best()
-        row = {"timesteps": self.num_timesteps, **summary, "best": int(better)}
+        horizon = self.task.config.episode.horizon_s
+        clear_time = constraint_measures(summary, horizon)["clear_time"]
+        row = {"timesteps": self.num_timesteps, **summary, "clear_time_s": clear_time,
+               "best": int(better)}  # fmt: skip
         path = self.run / "validation.csv"
         new_file = not path.exists()
         with open(path, "a", newline="", encoding="utf-8") as handle:
@@ -113,11 +124,16 @@ class Validator(BaseCallback):
         self.logger.record("validation/safety_activation_episodes",
                            summary["safety_activation_episodes"])  # fmt: skip
 
-    def _key(self, collisions: int, mean_return: float) -> tuple[float, float]:
-        """What ``validation.criterion`` maximises."""
-        if self.config.validation.criterion == "collisions_then_return":
-            return (-collisions, mean_return)
-        return (0.0, mean_return)
+    def key(self, summary: dict[str, Any]) -> tuple[float, ...]:
+        """What ``validation.criterion`` maximises, from a validation's summary."""
+        criterion = self.config.validation.criterion
+        mean_return = float(summary["mean_return"])
+        if criterion == "collisions_then_return":
+            return (-float(summary["collisions"]), mean_return)
+        if criterion == "constraints_then_return":
+            horizon = self.task.config.episode.horizon_s
+            return (-float(summary["collisions"]), *constraint_key(self.config, summary, horizon))
+        return (mean_return,)
 
     def validate(self) -> dict[str, Any]:
         """The current deterministic policy's summary on the validation scenarios."""
@@ -138,6 +154,44 @@ class Validator(BaseCallback):
         (tmp / "state.json").write_text(json.dumps(self.state), encoding="utf-8")
         shutil.rmtree(final, ignore_errors=True)
         os.replace(tmp, final)
+
+
+def constraint_measures(summary: dict[str, Any], horizon_s: float) -> dict[str, float]:
+    """What each constraint of :mod:`safeswitch.training.constraints` measures, from an
+    evaluation's summary (the deterministic policy's): the share of ticks over a comfort limit,
+    the share of episodes with a safety action (any reason: validation runs under one logic),
+    the mean time to clear [s] with an episode that never clears counted at the horizon, and
+    the share of episodes that never clear."""
+    ticks = max(float(summary["ticks"]), 1.0)
+    episodes = max(float(summary["episodes"]), 1.0)
+    cleared = float(summary["cleared_episodes"])
+    cleared_time = float(summary["mean_time_to_clear_s"]) if cleared else 0.0
+    return {
+        "comfort": float(summary["comfort_violation_steps"]) / ticks,
+        "safety": float(summary["safety_activation_episodes"]) / episodes,
+        "clear_time": (cleared * cleared_time + (episodes - cleared) * horizon_s) / episodes,
+        "uncleared": (episodes - cleared) / episodes,
+    }
+
+
+def constraint_key(
+    config: TrainConfig, summary: dict[str, Any], horizon_s: float
+) -> tuple[float, float, float]:
+    """``constraints_then_return``'s order, to maximise: the safety constraints first (minus
+    the summed excess ``max(0, measured / budget − 1)`` of ``comfort`` and ``safety``, each
+    against its ``validation_budget``, by default its training budget), then the task's (the
+    summed excess of ``clear_time`` and ``uncleared``), then the mean return — the constrained
+    problem's priorities: a policy that keeps its limits before a faster one, a faster one
+    (until it is fast enough) before a better-rewarded one."""
+    measured = constraint_measures(summary, horizon_s)
+    excess = {  # ``overrule`` has no measure outside ``guarded``: collisions come first anyway
+        name: max(0.0, measured[name] / c.selection_budget - 1.0)
+        for name, c in config.constraints.active().items()
+        if name in measured
+    }
+    safe = excess.get("comfort", 0.0) + excess.get("safety", 0.0)
+    task = excess.get("clear_time", 0.0) + excess.get("uncleared", 0.0)
+    return (-safe, -task, float(summary["mean_return"]))
 
 
 def select_best(run: Path) -> None:

@@ -1,0 +1,303 @@
+"""Constrained PPO: Lagrange multipliers that move the learning-only costs to their budgets
+(ours; the ``constraints`` section of a training configuration).
+
+The targets a left-turn policy is held to are constraints, not one objective: no more than a
+share of ticks over the comfort limits, no more than a share with the safety action, clear the
+crossing within so many seconds on average — and, within those, the paper's reward. Fixed
+penalty weights trade them against each other differently on every seed: in
+``docs/learning_experiments.md`` each fixed charge that cured one seed's miss opened another
+on the next. So each constraint ``c`` gets a multiplier ``λ_c`` (reward per unit of its cost)
+that the run adjusts itself, after every rollout, from what the rollout measured against the
+budget — the Lagrangian relaxation of constrained RL (Altman, *Constrained Markov Decision
+Processes*, 1999; PPO-Lagrangian of Ray, Achiam & Amodei, *Benchmarking Safe Exploration in
+Deep Reinforcement Learning*, 2019), with the proportional-integral multiplier update of Stooke,
+Achiam & Abbeel (*Responsive Safety in Reinforcement Learning by PID Lagrangian Methods*,
+ICML 2020), which damps the oscillation of the plain integral (gradient-ascent) update.
+
+PPO learns from ``r − Σ_c λ_c · cost_c`` (added between the environment and
+``VecNormalize``, like the other learning-only terms of :mod:`safeswitch.training.shaping`);
+the environment's own reward, its returns, validation and evaluation stay the paper's.
+
+The costs, counted per tick of each step (the learned controller holds its action for
+``episode.decision_interval`` ticks), and what each constraint measures over the episodes that
+ended since the last update (pooled until there are enough of them; see
+:class:`ConstraintCosts`):
+
+* ``comfort`` — the tick exceeded a comfort limit (the evaluation's comfort violation);
+  measured as a share of the episodes' ticks.
+* ``safety`` — the episode's first tick on which the safety action was executed (with
+  ``reasons``: one of those reasons' safety actions; under ``guarded`` the paper logic's own,
+  which is what fires when the policy is deployed under ``paper``); measured as the share of
+  episodes with a safety action, the unit of the target it stands for (``R_ADAS`` already
+  charges every tick of one).
+* ``overrule`` — under ``guarded``, the certified filter overruled the paper logic's own
+  safety action on the tick (that braking was itself unsafe; deployed under ``paper`` alone,
+  such episodes are the ones that collide: ``benchmarks/overrule_trace.py``); a share of ticks.
+* ``clear_time`` — the tick ended with the ego not yet clear of its conflict zone; a collision
+  (an episode that terminates) costs the rest of the horizon, so ending an episode never saves
+  it. Measured as the mean over episodes [s]: the time to clear less one tick, or the whole
+  horizon for an episode that never clears (as the evaluation's efficiency counts it).
+* ``uncleared`` — the episode ended with the ego not clear of its conflict zone (charged on
+  its last step); measured as the share of episodes.
+
+After each rollout, for each constraint whose ``start`` has passed, with
+``e = clip(measured / budget − 1, −1, 4)`` (the relative excess; episodes at more than five
+times the budget count as five times, so one unlucky batch cannot throw the multiplier to its
+maximum)::
+
+    integral ← clip(integral + integral_gain · e, 0, max_multiplier)
+    λ        ← clip(proportional_gain · e + integral, 0, max_multiplier)
+
+A ``start`` later than 0 keeps a multiplier at its initial value while the exploration noise of
+the first rollouts breaks the limits regardless of the policy's mean. The multipliers are part
+of a run's checkpoints (``--resume`` continues with them) and of its ``metrics.json``; TensorBoard
+logs ``constraints/<cost>`` (what was measured) and ``constraints/<cost>_multiplier``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+
+from safeswitch.training.config import ConstraintConfig, ConstraintsConfig
+from safeswitch.training.shaping import left_turn_beneath
+
+#: The relative excess of one rollout is clipped to ``[-1, MAX_EXCESS]``.
+MAX_EXCESS = 4.0
+
+
+@dataclass
+class Multiplier:
+    """One constraint's Lagrange multiplier with its proportional-integral update.
+
+    Attributes:
+        budget: What the constraint allows (in its measurement's unit), > 0.
+        integral_gain: Added to the integral per rollout per unit of relative excess.
+        proportional_gain: Multiplier per unit of the current rollout's relative excess.
+        maximum: The multiplier's (and the integral's) upper bound.
+        value: The multiplier ``λ`` now [reward per unit of the cost: a tick, or an episode
+            for ``safety`` and ``uncleared``].
+        integral: The integral term now.
+    """
+
+    budget: float
+    integral_gain: float
+    proportional_gain: float
+    maximum: float
+    value: float = 0.0
+    integral: float = 0.0
+
+    @classmethod
+    def from_config(cls, config: ConstraintConfig) -> Multiplier:
+        return cls(
+            budget=config.budget,
+            integral_gain=config.integral_gain,
+            proportional_gain=config.proportional_gain,
+            maximum=config.max_multiplier,
+            value=config.initial_multiplier,
+            integral=config.initial_multiplier,
+        )
+
+    def excess(self, measured: float) -> float:
+        """The relative excess over the budget, clipped to ``[-1, MAX_EXCESS]``."""
+        return float(np.clip(measured / self.budget - 1.0, -1.0, MAX_EXCESS))
+
+    def update(self, measured: float) -> float:
+        """Move the multiplier after a rollout that measured ``measured``; returns it."""
+        e = self.excess(measured)
+        self.integral = float(np.clip(self.integral + self.integral_gain * e, 0, self.maximum))
+        self.value = float(np.clip(self.proportional_gain * e + self.integral, 0, self.maximum))
+        return self.value
+
+
+class ConstraintCosts(VecEnvWrapper):
+    """Charges each configured constraint's cost at its multiplier in the reward PPO learns
+    from, and measures each over the episodes that end (see the module docstring).
+
+    Each constraint is measured over whole episodes — the left turn's episodes all last the
+    horizon, and a rollout shorter than an episode holds only part of each, so a per-rollout
+    share of ticks would swing with the part it holds. The episodes that ended since the last
+    update are pooled until there are at least ``min_episodes`` of them. An environment's first
+    episode is left out when the environment staggers its starts (that episode is cut short
+    on purpose).
+
+    Args:
+        venv: The batched left-turn environment (or a wrapper of it).
+        config: The configuration's ``constraints`` section.
+        min_episodes: Ended episodes needed before the multipliers move (default: half the
+            environments, at least 1).
+
+    Raises:
+        ValueError: ``safety.reasons`` names a reason the switching logic does not have (the
+            message lists its reasons).
+    """
+
+    def __init__(
+        self, venv: VecEnv, config: ConstraintsConfig, min_episodes: int | None = None
+    ) -> None:
+        base = left_turn_beneath(venv, "constraints")
+        super().__init__(venv)
+        self.base, self.config = base, config
+        self.multipliers = {name: Multiplier.from_config(c) for name, c in config.active().items()}
+        self.starts = {name: c.start for name, c in config.active().items()}
+        self.min_episodes = max(1, self.num_envs // 2) if min_episodes is None else min_episodes
+        known = base.task.reasons
+        #: Per reason-counted cost, the reason codes it counts (``safety`` without reasons
+        #: counts every safety action instead).
+        self._reasons: dict[str, NDArray[np.intp]] = {}
+        for name in ("safety", "overrule"):
+            given = getattr(config, name)
+            if given is None:
+                continue
+            reasons = given.reasons
+            if name == "overrule" and not reasons:
+                reasons = tuple(r for r in known if r.endswith(":overrules_primary"))
+                if not reasons:
+                    raise ValueError(
+                        f"constraints.overrule: the switching logic {base.config.switching!r} "
+                        "has no ':overrules_primary' reasons (use switching: guarded)"
+                    )
+            unknown = sorted(set(reasons) - set(known))
+            if unknown:
+                raise ValueError(
+                    f"constraints.{name}.reasons: {unknown} not reasons of the switching logic "
+                    f"{base.config.switching!r} (its reasons: {', '.join(known)})"
+                )
+            if reasons:
+                self._reasons[name] = np.array([known.index(r) for r in reasons])
+                base.count_reasons = True
+        base.count_costs = True
+        episode = base.config.episode
+        self.dt = episode.dt
+        self.horizon_ticks = round(episode.horizon_s / episode.dt)
+        n = self.num_envs
+        #: Per environment, the running episode's cost sums [ticks] and its length [ticks].
+        self._episode = {name: np.zeros(n) for name in self.multipliers}
+        self._length = np.zeros(n, dtype=np.int64)
+        self._cleared = np.zeros(n, dtype=bool)
+        self._safety_seen = np.zeros(n, dtype=bool)
+        self._counted = np.ones(n, dtype=bool)
+        self._pooled = dict.fromkeys(self.multipliers, 0.0)
+        self._pooled_ticks = 0
+        self._pooled_episodes = 0
+
+    def reset(self) -> VecEnvObs:
+        observation = self.venv.reset()
+        for sums in self._episode.values():
+            sums[:] = 0.0
+        self._length[:] = 0
+        self._cleared[:] = False
+        self._safety_seen[:] = False
+        self._counted[:] = not self.base.stagger
+        return observation
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, reward, done, infos = self.venv.step_wait()
+        costs = self.costs_of_step(done)
+        penalty = np.zeros(self.num_envs)
+        for name, cost in costs.items():
+            penalty += self.multipliers[name].value * cost
+            self._episode[name] += cost
+        self._length += self.base.costs_in_step.ticks
+        ended = np.flatnonzero(done)
+        pooled = ended[self._counted[ended]]
+        for name, sums in self._episode.items():
+            self._pooled[name] += float(sums[pooled].sum())
+            sums[ended] = 0.0
+        self._pooled_ticks += int(self._length[pooled].sum())
+        self._pooled_episodes += len(pooled)
+        self._length[ended] = 0
+        self._cleared[ended] = False
+        self._safety_seen[ended] = False
+        self._counted[ended] = True
+        return observation, (reward - penalty).astype(np.float32), done, infos
+
+    def costs_of_step(self, done: NDArray[np.bool_]) -> dict[str, NDArray[np.float64]]:
+        """Per constraint, its cost in the last step per environment ``[B]`` (ticks; for
+        ``safety`` and ``uncleared`` episodes); ``done``: the episodes that step ended."""
+        counts = self.base.costs_in_step
+        record = self.base.last_record
+        assert record is not None
+        out: dict[str, NDArray[np.float64]] = {}
+        if "uncleared" in self.multipliers:
+            out["uncleared"] = (done & ~record.ego_cleared).astype(np.float64)
+        if "comfort" in self.multipliers:
+            out["comfort"] = counts.comfort.astype(np.float64)
+        if "safety" in self.multipliers and "safety" not in self._reasons:
+            out["safety"] = counts.safety.astype(np.float64)
+        for name, codes in self._reasons.items():
+            out[name] = self.base.reason_ticks_in_step[:, codes].sum(axis=1).astype(np.float64)
+        if "safety" in out:  # an episode's first safety action is its cost: it counts episodes
+            acted = out["safety"] > 0
+            out["safety"] = (acted & ~self._safety_seen).astype(np.float64)
+            self._safety_seen |= acted
+        if "clear_time" in self.multipliers:
+            self._cleared |= record.ego_cleared
+            rest = np.maximum(self.horizon_ticks - self._length - counts.ticks, 0)
+            charged = counts.uncleared + np.where(record.terminated & ~self._cleared, rest, 0)
+            out["clear_time"] = charged.astype(np.float64)
+        return out
+
+    def measured(self) -> dict[str, float] | None:
+        """What the pooled episodes measured per constraint, in its budget's unit (a share of
+        ticks; for ``safety`` a share of episodes; for ``clear_time`` the mean time to clear
+        [s]; for ``uncleared`` a share of episodes); ``None`` while fewer than ``min_episodes``
+        have ended."""
+        episodes = self._pooled_episodes
+        if episodes < self.min_episodes:
+            return None
+        ticks = max(self._pooled_ticks, 1)
+        out = {name: total / ticks for name, total in self._pooled.items()}
+        for name in ("safety", "uncleared"):
+            if name in out:
+                out[name] = self._pooled[name] / episodes
+        if "clear_time" in out:
+            out["clear_time"] = self._pooled["clear_time"] * self.dt / episodes
+        return out
+
+    def end_rollout(self, timesteps: int) -> dict[str, float] | None:
+        """The pooled episodes' measurements, if there are enough of them (then a new pool
+        starts); the multipliers whose ``start`` is past at ``timesteps`` move."""
+        measured = self.measured()
+        if measured is None:
+            return None
+        for name, value in measured.items():
+            if timesteps >= self.starts[name]:
+                self.multipliers[name].update(value)
+        self._pooled = dict.fromkeys(self.multipliers, 0.0)
+        self._pooled_ticks = self._pooled_episodes = 0
+        return measured
+
+    def state(self) -> dict[str, dict[str, float]]:
+        """The multipliers' state, for a checkpoint."""
+        return {n: {"value": m.value, "integral": m.integral} for n, m in self.multipliers.items()}
+
+    def restore(self, state: dict[str, dict[str, float]]) -> None:
+        """The multipliers as a checkpoint left them."""
+        for name, saved in state.items():
+            self.multipliers[name].value = float(saved["value"])
+            self.multipliers[name].integral = float(saved["integral"])
+
+
+class ConstraintUpdate(BaseCallback):
+    """Moves the multipliers after every rollout (each from its ``start`` on) and logs
+    ``constraints/<name>`` (what the rollout measured) and ``constraints/<name>_multiplier``."""
+
+    def __init__(self, costs: ConstraintCosts) -> None:
+        super().__init__()
+        self.costs = costs
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_rollout_end(self) -> None:
+        measured = self.costs.end_rollout(self.num_timesteps)
+        for name, value in (measured or {}).items():
+            self.logger.record(f"constraints/{name}", value)
+            self.logger.record(f"constraints/{name}_multiplier",
+                               self.costs.multipliers[name].value)  # fmt: skip
