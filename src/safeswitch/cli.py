@@ -519,7 +519,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument(
         "--quick",
         action="store_true",
-        help="use the shipped policies (about a minute) instead of training all five first",
+        help="use the shipped policies (about a minute) instead of training all six first",
     )
     rep.add_argument("--out", default="out/report", help="report folder (default: out/report)")
     rep.add_argument("--episodes", type=int, default=1000, help="random evaluation scenarios")

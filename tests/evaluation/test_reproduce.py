@@ -64,9 +64,13 @@ def test_the_report_embeds_every_figure_and_animation_it_lists(report):
     assert len(listed) == 3 * (len(ENTRIES) - 1)  # 3 scenarios per controller but the oracle
     pngs = re.findall(r'src="data:image/png;base64,', page)
     gifs = re.findall(r'src="data:image/gif;base64,', page)
-    assert len(pngs) == len(listed) + 2  # and the comparison and clearing against traffic
+    assert len(pngs) == len(listed) + 3  # the comparison, clearing in traffic, training curves
     assert len(gifs) == len(SCENARIO_NAMES) + 1  # and one in traffic
     assert "Traffic from every leg" in page and "SUMO as a second simulator" in page
+    assert (
+        "Training (the paper's Fig. 5)" in page
+        and "figures/training_curves.png" in (report / "report.md").read_text()
+    )
     assert not re.search(r"(src|href)=\"(?!data:)", page)  # self-contained, offline
     markdown = (report / "report.md").read_text()
     for stem, _ in listed:
@@ -85,9 +89,13 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     assert "3 m/s²" in page and "5 m/s²" in page  # the comfort limits, with their values
     policies = tables(page)[0]
     made = {row[0]: row[1] for row, _ in policies[1:]}
-    assert made["ppo-paper"].startswith("warm start (behaviour cloning of the planner")
+    assert made["ppo-paper"].startswith("PPO from a random initialisation")
+    assert "trained under guarded, deployed under paper" in made["ppo-paper"]
+    assert made["ppo-paper-warm"].startswith("warm start (behaviour cloning of the planner")
     assert made["ppo-paper-scratch"].startswith("PPO from a random initialisation, 1,200,")
-    comparison_header = tables(page)[1][0][0]
+    story = tables(page)[1]  # the training curves beside what the paper says of its own
+    assert story[0][0] == ["the paper (Section V-B)", "this run"] and len(story) == 6
+    comparison_header = tables(page)[2][0][0]
     for _, header, _ in COMPARISON:
         assert header in comparison_header
     assert page.count("reproduced:") == 4
@@ -101,7 +109,7 @@ def test_a_collision_is_shown_in_every_table_and_figure_caption(report):
     crashed = [name for name, row in raw.items() if row["collision"] == "1"]
     assert crashed  # the premise: this policy collides in some paper scenario
     page = (report / "report.html").read_text()
-    comparison, scenarios = tables(page)[1], tables(page)[2]
+    comparison, scenarios = tables(page)[2], tables(page)[3]
     header = comparison[0][0]
     summary = json.loads((report / "summary.json").read_text())
     for row, css in comparison[1:]:

@@ -10,6 +10,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+#: The paper's six panels (a)–(f), then two of ours: when the policy starts to cut in front,
+#: and how often the Safety controller still acts.
 PANELS = (
     ("return", "(a) cumulative reward (per episode)"),
     ("adas", "(b) ADAS"),
@@ -17,18 +19,21 @@ PANELS = (
     ("speed", "(d) velocity"),
     ("accel_lon", "(e) longitudinal acceleration"),
     ("accel_lat", "(f) lateral acceleration"),
+    ("cut_rate", "(g) episodes the ego crosses first (ours)"),
+    ("activation_episode_rate", "(h) episodes with a safety action (ours)"),
 )
 
 
 def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = "") -> None:
-    """Six panels: the episode return and each reward term's per-episode sum against
-    timesteps (not normalised)."""
+    """Eight panels against timesteps: the episode return and each reward term's per-episode
+    sum (not normalised; the paper's Fig. 5), then the share of episodes that cut in front and
+    the share with a safety action, each averaged over a rollout's finished episodes."""
     with open(progress_csv, encoding="utf-8") as handle:
         rows = [r for r in csv.DictReader(handle) if r["return"] != ""]
     if not rows:
         raise ValueError(f"{progress_csv} has no finished episodes yet")
     steps = [int(r["timesteps"]) for r in rows]
-    fig, axes = plt.subplots(3, 2, figsize=(10, 8), sharex=True)
+    fig, axes = plt.subplots(4, 2, figsize=(10, 10.5), sharex=True)
     for ax, (key, label) in zip(axes.ravel(), PANELS, strict=True):
         ax.plot(steps, [float(r[key]) for r in rows], lw=1.2)
         ax.set_title(label, fontsize=10)
@@ -42,3 +47,86 @@ def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = 
     fig.savefig(tmp, dpi=110)
     plt.close(fig)
     tmp.replace(out_png)
+
+
+def _rows(progress_csv: str | Path) -> list[dict[str, float]]:
+    """The rollouts of ``progress.csv`` that finished episodes, as numbers."""
+    with open(progress_csv, encoding="utf-8") as handle:
+        rows = [r for r in csv.DictReader(handle) if r["return"] != ""]
+    if not rows:
+        raise ValueError(f"{progress_csv} has no finished episodes yet")
+    return [{k: float(v) if v != "" else float("nan") for k, v in r.items()} for r in rows]
+
+
+def _mean(rows: list[dict[str, float]], key: str) -> float:
+    return sum(r[key] for r in rows) / len(rows)
+
+
+def training_story(progress_csv: str | Path) -> list[tuple[str, str]]:
+    """What the paper says of its training curves (Section V-B, Fig. 5), each beside what a
+    run's ``progress.csv`` shows of the same: ``(the paper, this run)`` pairs. "First" and
+    "last" are the means over the first and the last tenth of the rollouts that finished
+    episodes."""
+    rows = _rows(progress_csv)
+    tenth = max(1, len(rows) // 10)
+    first, last = rows[:tenth], rows[-tenth:]
+    step = [int(r["timesteps"]) for r in rows]
+
+    def change(key: str) -> str:
+        return f"{_mean(first, key):,.0f} → {_mean(last, key):,.0f}"
+
+    drops = [k for k in range(1, len(rows)) if rows[k]["return"] < 0.9 * rows[k - 1]["return"]]
+    with_safety = [
+        k for k in drops
+        if rows[k]["activation_episode_rate"] > rows[k - 1]["activation_episode_rate"]
+    ]  # fmt: skip
+    early = rows[: max(1, len(rows) // 5)]
+    peak = max(range(len(early)), key=lambda k: early[k]["speed"])
+    lowest = min(range(len(early)), key=lambda k: early[k]["accel_lat"])
+    window = min(10, len(rows))
+    rolling = [_mean(rows[max(0, k - window + 1) : k + 1], "cut_rate") for k in range(len(rows))]
+    below = [k for k, share in enumerate(rolling) if share < 0.2]
+    dip = min(range(len(rows)), key=lambda k: rolling[k])
+    if not below:
+        starts_to_cut = "a rolling mean over 10 rollouts cuts in front in 20 % or more throughout"
+    elif below[-1] == len(rows) - 1:
+        starts_to_cut = "it does not keep cutting in front in 20 % of the episodes"
+    else:
+        starts_to_cut = (
+            f"the share of episodes that cut in front (a rolling mean over 10 rollouts) is "
+            f"lowest at step {step[dip]:,} ({rolling[dip]:.0%}; the first rollouts' cuts are "
+            f"the random policy's) and stays at 20 % or more from step {step[below[-1] + 1]:,} on"
+        )
+    starts_to_cut += f"; {_mean(last, 'cut_rate'):.0%} in the last tenth"
+    return [
+        (
+            "(a) The non-normalised cumulative reward is the main criterion for model "
+            "validation; it drops noticeably when the policy explores actions that lead to "
+            "Safety controller activation.",
+            f"Return per episode {change('return')} (first → last tenth). It fell by more than "
+            f"10 % from one rollout to the next {len(drops)} times, {len(with_safety)} of them "
+            "with more episodes with a safety action than the rollout before.",
+        ),
+        (
+            "(b) The ADAS term is a penalty for activating the Safety controller, so the "
+            "algorithm learns not to involve it.",
+            f"ADAS term per episode {change('adas')}; episodes with a safety action "
+            f"{_mean(first, 'activation_episode_rate'):.0%} → "
+            f"{_mean(last, 'activation_episode_rate'):.0%}.",
+        ),
+        (
+            "(d), (f) In the first 220,000 steps it explores maximising the speed, and the "
+            "lateral-acceleration reward drops dramatically.",
+            f"In the first fifth of the run the velocity term peaks at step {step[peak]:,} "
+            f"({early[peak]['speed']:,.0f}) and the lateral-acceleration term is lowest at step "
+            f"{step[lowest]:,} ({early[lowest]['accel_lat']:,.0f}).",
+        ),
+        (
+            "(c), (d), (e), (f) By the end it minimises lane-keeping mistakes, reduces both "
+            "accelerations and finds the highest velocity it can.",
+            f"Lane keeping {change('lka')}, longitudinal acceleration {change('accel_lon')}, "
+            f"lateral acceleration {change('accel_lat')}, velocity {change('speed')} (each "
+            "term's sum per episode; higher is better).",
+        ),
+        ("(not in the paper) Where the policy starts to cut in front.", starts_to_cut + "."),
+    ]

@@ -1,0 +1,56 @@
+"""The training curves (the paper's Fig. 5) and what the report says of them."""
+
+import csv
+
+import pytest
+from PIL import Image
+
+from safeswitch.report.training import training_curves, training_story
+from safeswitch.training.callbacks import PROGRESS_FIELDS
+
+
+def write_progress(path, rows):
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: row.get(k, "") for k in PROGRESS_FIELDS})
+
+
+def rollout(step, ret, cut=0.0, safety=0.0, speed=400.0, accel_lat=500.0):
+    return {"timesteps": step, "return": ret, "adas": -25.0 * 20 * safety, "lka": 550.0,
+            "speed": speed, "accel_lon": 480.0, "accel_lat": accel_lat, "cut_rate": cut,
+            "activation_episode_rate": safety}  # fmt: skip
+
+
+def test_the_story_reads_its_numbers_off_the_progress_log(tmp_path):
+    """Each statement beside the paper's is computed from the log: first and last tenths,
+    the drops in return (and those with more safety episodes), the early speed peak and
+    lateral low, and the first rollout in which a fifth of the episodes cut in front."""
+    rows = [rollout(1000 * (k + 1), 1500.0 + 10 * k) for k in range(40)]
+    rows[1] |= {"speed": 900.0}  # the early speed peak (first fifth: rollouts 0-7)
+    rows[3] |= {"accel_lat": 100.0}  # the early lateral low
+    rows[20] |= {"return": 1000.0, "activation_episode_rate": 0.3}  # a drop with safety
+    rows[30] |= {"return": 1200.0}  # a drop without
+    for k in range(25, 40):
+        rows[k]["cut_rate"] = 0.35  # rolling mean of 10: below 20 % up to rollout 29, not after
+    rows.insert(5, {"timesteps": 5500, "return": ""})  # a rollout that finished no episode
+    path = tmp_path / "progress.csv"
+    write_progress(path, rows)
+    story = dict(training_story(path))
+    texts = list(story.values())
+    assert "1,515 → 1,875" in texts[0]  # means of rollouts 0-3 and 36-39
+    assert "more than 10 % from one rollout to the next 2 times, 1 of them" in texts[0]
+    assert "peaks at step 2,000 (900)" in texts[2] and "lowest at step 4,000 (100)" in texts[2]
+    assert "stays at 20 % or more from step 31,000 on; 35% in the last tenth" in texts[4]
+    assert "lowest at step 1,000 (0%" in texts[4]
+    training_curves(path, tmp_path / "curves.png", title="test")
+    with Image.open(tmp_path / "curves.png") as image:
+        assert image.size[0] > 800 and image.size[1] > 800  # eight panels
+
+
+def test_a_log_without_finished_episodes_is_refused_by_name(tmp_path):
+    path = tmp_path / "progress.csv"
+    write_progress(path, [{"timesteps": 100, "return": ""}])
+    with pytest.raises(ValueError, match=r"progress\.csv has no finished episodes"):
+        training_story(path)
