@@ -1,7 +1,7 @@
 """Reproduce the shipped policies: train each from its configuration and copy the run's
 artefacts into ``src/safeswitch/policies/<name>/`` with a README of how it was made.
 
-Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all seven).
+Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all eight).
 Training is the same as ``safeswitch train --config <name> --out runs/<name>``;
 ``--from-runs`` only copies already finished runs from ``runs/``.
 """
@@ -18,13 +18,21 @@ from safeswitch.training.run import train
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = (
-    "paper", "paper_scratch", "no_adas", "certified", "none", "traffic_paper", "traffic_certified"
+    "paper", "paper_warm", "paper_scratch", "no_adas", "certified", "none", "traffic_paper",
+    "traffic_certified",
 )  # fmt: skip
 ARTEFACTS = ("model.zip", "vecnormalize.pkl", "config.yaml", "metrics.json", "training_curves.png")
+#: Shipped too when the run wrote them: the training log (the report's Fig. 5) and the
+#: validation records.
+OPTIONAL_ARTEFACTS = ("progress.csv", "validation.csv")
 
 
 def policy_readme(
-    name: str, metrics: dict, traffic: str | None = None, teacher: str = "planner"
+    name: str,
+    metrics: dict,
+    traffic: str | None = None,
+    teacher: str = "planner",
+    logs: tuple[str, ...] = (),
 ) -> str:
     t, e, warm = metrics["training"], metrics["evaluation"], metrics.get("warm_start")
     warm_note = ""
@@ -34,6 +42,18 @@ def policy_readme(
             f"the\n{teacher.replace('_', ' ')} or its clone ({warm['collisions']} collisions; "
             f"{warm['wall_time_s']:.0f} s of the wall time above)."
         )
+    trained = metrics["switching"]
+    deployed = metrics.get("deployed_switching", trained)
+    logic = f"the `{trained}` switching logic"
+    if deployed != trained:
+        logic += f" (deployed, and evaluated below, under `{deployed}`)"
+    selected = metrics.get("selected") or {}
+    if selected.get("best_timesteps"):
+        warm_note += (
+            f"\n\nThe run's policy is the one it selected on its validation scenarios (seed "
+            f"{selected['validation_seed']}), at {selected['best_timesteps']:,} steps."
+        )
+    logs_text = "".join(f", `{name}`" for name in logs)
     scene, horizon = "random scenarios", "12 s"
     if traffic:
         scene, horizon = f"random scenes of the `{traffic}` traffic family", "30 s"
@@ -53,18 +73,19 @@ Made with
 two-core machine). Re-running the command reproduces it up to the non-determinism of CPU
 floating point across machines.{warm_note}
 
-During training: {t["collisions"]} collisions, a safety action in {t["safety_activation_episodes"]}
-of {t["episodes"]} episodes.
+Trained under {logic}. During training: {t["collisions"]} collisions, a safety
+action in {t["safety_activation_episodes"]} of {t["episodes"]} episodes.
 
 Evaluation on {e["episodes"]} unseen {scene} (seed {e["seed"]}): {e["collisions"]}
 collisions, safety action in {e["safety_activation_episodes"]} episodes, comfort limits exceeded
 on {100 * e["comfort_violation_fraction"]:.2f} % of ticks, {e["stops"]} episodes with a full
 stop, mean time to clear the conflict zone {e["mean_time_to_clear_s"]:.2f} s (NaN: it never
 cleared it within the {horizon} episode), crossed first in {e["cut_episodes"]} episodes and after
-the north car in {e["yield_episodes"]}.
+the north car in {e["yield_episodes"]}; {e["mean_efficiency"]:.3f} of the oracle (mean over
+scenarios of its time to clear over this policy's).
 
 Files: `model.zip` (SB3 PPO), `vecnormalize.pkl` (observation statistics), `config.yaml`
-(the resolved configuration), `metrics.json`, `training_curves.png` (the paper's Fig. 5).
+(the resolved configuration), `metrics.json`, `training_curves.png` (the paper's Fig. 5){logs_text}.
 """
 
 
@@ -74,11 +95,15 @@ def ship(name: str) -> None:
     target.mkdir(parents=True, exist_ok=True)
     for artefact in ARTEFACTS:
         shutil.copy2(run / artefact, target / artefact)
+    for artefact in OPTIONAL_ARTEFACTS:
+        if (run / artefact).is_file():
+            shutil.copy2(run / artefact, target / artefact)
     metrics = json.loads((run / "metrics.json").read_text())
     config = load_config(run / "config.yaml")
     traffic = config.traffic
     preset = traffic.get("preset", "custom") if isinstance(traffic, dict) else traffic
-    readme = policy_readme(name, metrics, preset, config.warm_start.teacher)
+    logs = tuple(a for a in OPTIONAL_ARTEFACTS if (run / a).is_file())
+    readme = policy_readme(name, metrics, preset, config.warm_start.teacher, logs)
     (target / "README.md").write_text(readme)
 
 

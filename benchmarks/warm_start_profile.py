@@ -1,8 +1,8 @@
 """Where the warm start's time goes: the teacher's labels, the rollouts around them, and the
-fits of the actor (issue #18 asks for the profile of the shipped `paper` recipe's warm start,
+fits of the actor (issue #18 asks for the profile of the warm start of the `paper_warm` recipe,
 1,077 s of its 1,289).
 
-Runs the warm start of a training configuration (default the shipped ``paper`` one) with
+Runs the warm start of a training configuration (default ``paper_warm``) with
 ``--episodes`` scenarios per round instead of the configured number, and extrapolates to the
 configured size by the ratio: the fits and the rollouts are linear in the samples; the teacher's
 calls are batched over the scenarios, so their extrapolated time is an upper bound. It times
@@ -11,7 +11,7 @@ labelling), the rest of the rollouts (the simulator, the
 switching logic and, in the DAgger rounds, the clone's forward passes), and the fits (the
 actor's epochs of Adam over all labels so far). One torch thread.
 
-Run: ``python benchmarks/warm_start_profile.py [--config paper] [--episodes 100] [--json]``;
+Run: ``python benchmarks/warm_start_profile.py [--config paper_warm] [--episodes 100] [--json]``;
 writes ``benchmarks/results/warm_start_profile.json``.
 """
 
@@ -53,7 +53,7 @@ def timed(clock: dict[str, float], key: str, function: Any) -> Any:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="paper")
+    parser.add_argument("--config", default="paper_warm")
     parser.add_argument("--episodes", type=int, default=100, help="scenarios per round")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)

@@ -11,8 +11,10 @@ import yaml
 
 from safeswitch import __version__
 from safeswitch.cli import DEFAULT_CONFIG, main
+from safeswitch.core.config import from_dict
 from safeswitch.training.config import TrainConfig, load_config, packaged_config_names
 from safeswitch.training.policies import SHIPPED_DIR
+from safeswitch.training.run import train
 
 EVAL = ["evaluate", "--controller", "learned", "--scenarios", "random", "--episodes", "6"]
 
@@ -40,8 +42,9 @@ def test_packaged_configs_by_name_and_the_default_is_the_papers_recipe(tmp_path,
     assert {"paper", "paper_scratch", "certified", "none", "no_adas"} <= set(
         packaged_config_names()
     )
-    paper = load_config("paper")
-    assert paper.env.switching == "paper" and paper.env.adas_penalty
+    paper = load_config("paper")  # trained under guarded, deployed under the paper's logic
+    assert paper.deployed_env.switching == "paper" and paper.env.adas_penalty
+    assert paper.warm_start.episodes == 0  # from a random initialisation, no demonstrations
     default = load_config(DEFAULT_CONFIG)
     assert default.env.episode.learned_scope == "episode"  # not the env's comfort-breaking window
     assert default.ppo.learning_rate == 2.5e-4 and default.timesteps == 1_200_000  # Table II
@@ -117,8 +120,15 @@ def test_a_policy_without_its_observation_statistics_is_refused(tmp_path, capsys
     assert line.count("error:") == 1
 
 
-def test_json_is_strict_and_a_policy_that_never_clears_says_so(capsys):
-    assert main([*EVAL, "--model", "certified", "--json"]) == 0
+def test_json_is_strict_and_a_policy_that_never_clears_says_so(tmp_path, capsys):
+    # a policy trained (and so evaluated) on 2 s episodes: too short for the ego to clear
+    config = from_dict(TrainConfig, {
+        "timesteps": 1024, "n_envs": 8, "eval_episodes": 0, "torch_threads": 1, "seed": 2,
+        "env": {"episode": {"learned_scope": "episode", "horizon_s": 2.0}},
+    })  # fmt: skip
+    train(config, tmp_path / "run", progress_bar=False)
+    capsys.readouterr()
+    assert main([*EVAL, "--model", str(tmp_path / "run"), "--json"]) == 0
     out = capsys.readouterr().out
     assert out.endswith("}\n")
     summary = json.loads(out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
@@ -132,7 +142,8 @@ def test_human_readable_output_is_rounded_without_python_reprs(capsys):
     for line in out.splitlines():
         value = line.split(":", 1)[1].strip()
         if value.replace(".", "").replace(",", "").isdigit() and "." in value:
-            assert len(value.split(".")[1]) <= 4, line
+            significant = value.replace(",", "").replace(".", "").lstrip("0")
+            assert len(significant) <= 4, line  # four significant digits, not a float's repr
 
 
 def test_a_checkpoint_and_an_interrupted_run_can_be_evaluated(

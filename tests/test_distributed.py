@@ -138,9 +138,10 @@ def test_falsification_finds_the_paper_logics_failures_far_more_often_than_rando
 
 
 def test_falsification_finds_a_policys_rare_safety_actions_more_often_than_random(tmp_path):
-    """The shipped policy needs the Safety controller in about 5 of 1,000 random scenarios, on
-    a thin band of arrival offsets. Ranked by separation alone the search settled elsewhere and
-    found fewer than random sampling (0.2-0.3x); seeded with the episodes the logic judged
+    """The shipped policy needs the Safety controller in about 1 % of random scenarios, on a
+    thin band of arrival offsets at the boundary between crossing first and giving way. Ranked
+    by separation alone the search settled elsewhere and found fewer than random sampling
+    (0.2-0.3x, against the policy shipped then); seeded with the episodes the logic judged
     critical it finds the band."""
     args = ["falsify", "--controller", "learned", "--model", "shipped", "--failure", "safety",
             "--budget", "6000", "--generation", "2000", "--workers", "0", "--out",
@@ -151,7 +152,9 @@ def test_falsification_finds_a_policys_rare_safety_actions_more_often_than_rando
     assert random["failures"] > 0
     assert search["failures"] >= 2 * random["failures"]
     offsets = [s["arrival_offset_s"] for s in search["most_dangerous"] if s["safety_ticks"] > 0]
-    assert offsets and all(2.0 < o < 3.5 for o in offsets)
+    # a band (under a second wide) between the oracle's yields (offset < 1 s) and its easy cuts
+    assert offsets and all(1.0 < o < 3.5 for o in offsets)
+    assert max(offsets) - min(offsets) < 1.0
 
 
 def test_a_sweep_trains_seeds_in_parallel_into_normal_run_directories(tmp_path, capsys):

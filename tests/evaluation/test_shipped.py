@@ -14,7 +14,7 @@ from safeswitch.training.config import load_config
 from safeswitch.training.policies import SHIPPED_DIR, load_policy, resolve_model_dir
 
 EVAL = {"scenarios": "random", "episodes": 1000, "seed": 424242, "out": None}
-NAMES = ("paper", "paper_scratch", "no_adas", "certified", "none")
+NAMES = ("paper", "paper_warm", "paper_scratch", "no_adas", "certified", "none")
 
 
 def metrics(name):
@@ -36,7 +36,9 @@ def test_every_shipped_policy_loads_with_its_config_and_acts_in_bounds():
     for name in NAMES:
         policy = load_policy(SHIPPED_DIR / name)
         config = load_config(SHIPPED_DIR / name / "config.yaml")
-        assert config.timesteps == 1_200_000
+        # trained for as long as its config says (PPO rounds up to whole rollouts)
+        rollout = config.ppo.n_steps * config.n_envs
+        assert config.timesteps <= metrics(name)["timesteps"] < config.timesteps + rollout
         action = policy.act(obs)
         assert action.shape == (1,) and -1.0 <= action[0] <= 1.0
     assert resolve_model_dir("shipped") == SHIPPED_DIR / "paper"
@@ -46,14 +48,24 @@ def test_every_shipped_policy_loads_with_its_config_and_acts_in_bounds():
 
 
 def test_training_with_a_safety_net_was_collision_free_and_without_one_was_not():
-    for name in ("paper", "paper_scratch", "certified"):
+    for name in ("paper", "paper_warm", "paper_scratch", "certified"):
         assert metrics(name)["training"]["collisions"] == 0
     assert metrics("none")["training"]["collisions"] > 0
     for name in NAMES:
         assert metrics(name)["timesteps"] >= 1_200_000
-    # the paper policy's warm start (the planner and its clone driving) did not collide either
-    warm = metrics("paper")["warm_start"]
+    # the warm-started policy's warm start (the planner and its clone driving) did not collide
+    warm = metrics("paper_warm")["warm_start"]
     assert warm["collisions"] == 0 and warm["episodes"] >= 1000
+
+
+def test_the_shipped_paper_policy_learned_from_a_random_start_without_demonstrations():
+    """Issue #18: the `paper` policy is the paper's method — PPO with R_ADAS from a random
+    initialisation — not a clone of our planner; it is deployed under the paper's logic."""
+    config = load_config(SHIPPED_DIR / "paper" / "config.yaml")
+    assert config.warm_start.episodes == 0 and metrics("paper")["warm_start"] is None
+    assert config.env.adas_penalty and config.deployed_env.switching == "paper"
+    assert metrics("paper")["deployed_switching"] == "paper"
+    assert load_config(SHIPPED_DIR / "paper_warm" / "config.yaml").warm_start.episodes > 0
 
 
 def test_paper_policy_is_safe_and_comfortable_on_unseen_scenarios(paper):
@@ -62,6 +74,8 @@ def test_paper_policy_is_safe_and_comfortable_on_unseen_scenarios(paper):
     assert paper["safety_activation_episodes"] <= 0.02 * 1000
     assert paper["comfort_violation_fraction"] <= 0.005
     assert paper["stops"] <= 0.10 * 1000
+    assert paper["cut_episodes"] >= 0.20 * 1000  # it cuts in front, and yields otherwise
+    assert paper["yield_episodes"] >= 0.20 * 1000
 
 
 def test_the_ablation_needs_the_safety_controller_more_than_the_paper_policy(paper):
@@ -75,6 +89,20 @@ def test_the_ablation_needs_the_safety_controller_more_than_the_paper_policy(pap
 def test_the_rule_baseline_is_safe_but_leans_on_the_safety_controller(rule, paper):
     assert rule["collisions"] == 0
     assert rule["safety_activation_episodes"] > 10 * max(paper["safety_activation_episodes"], 1)
+
+
+def test_the_certified_policy_learned_from_a_random_start_to_clear_the_crossing():
+    """Issue #18's `certified` row: trained from scratch (no demonstrations) under the
+    certified logic, it never collides, clears the crossing in at least 99 % of the scenarios
+    and keeps at least 0.80 of the oracle."""
+    config = load_config(SHIPPED_DIR / "certified" / "config.yaml")
+    assert config.env.switching == "certified"
+    assert config.warm_start.episodes == 0 and metrics("certified")["warm_start"] is None
+    run = evaluate("learned", "certified", switching=None, **EVAL)
+    assert run["collisions"] == 0
+    assert run["cleared_episodes"] >= 0.99 * EVAL["episodes"]
+    assert run["mean_efficiency"] >= 0.80
+    assert run["cut_episodes"] >= 0.20 * EVAL["episodes"]
 
 
 # -- the paper's Section VI results, on the shipped policies ---------------------------------

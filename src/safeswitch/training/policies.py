@@ -33,6 +33,7 @@ SHIPPED_DIR = Path(__file__).resolve().parent.parent / "policies"
 SHIPPED = {
     "shipped": "paper",
     "paper": "paper",
+    "paper-warm": "paper_warm",
     "paper-scratch": "paper_scratch",
     "no-adas": "no_adas",
     "certified": "certified",
