@@ -89,6 +89,8 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     assert "3 m/s²" in page and "5 m/s²" in page  # the comfort limits, with their values
     policies = tables(page)[0]
     made = {row[0]: row[1] for row, _ in policies[1:]}
+    evaluated_under = {row[0]: row[2] for row, _ in policies[1:]}
+    assert evaluated_under["ppo-paper"] == "paper"  # trained under guarded, run under paper
     assert made["ppo-paper"].startswith("PPO from a random initialisation")
     assert "trained under guarded, deployed under paper" in made["ppo-paper"]
     assert made["ppo-paper-warm"].startswith("warm start (behaviour cloning of the planner")

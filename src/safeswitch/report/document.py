@@ -149,7 +149,8 @@ def scenario_table(summary: dict[str, Any]) -> Table:
 
 
 def policy_table(summary: dict[str, Any]) -> Table:
-    header = ["controller", "how it was made", "switching", "R_ADAS", "collisions in training"]
+    header = ["controller", "how it was made", "switching (evaluated under)", "R_ADAS",
+              "collisions in training"]  # fmt: skip
     rows = []
     for name, result in summary["controllers"].items():
         t = result.get("training")
@@ -157,7 +158,7 @@ def policy_table(summary: dict[str, Any]) -> Table:
             rows.append([name, result["label"], result["switching"] or "–", "–", "–"])
             continue
         rows.append(
-            [name, t["method"], t["switching"], "on" if t["adas_penalty"] else "off",
+            [name, t["method"], result["switching"], "on" if t["adas_penalty"] else "off",
              str(t["collisions"])]
         )  # fmt: skip
     return Table(header, rows, [False] * len(rows), text_columns=(0, 1, 2, 3))
