@@ -5,12 +5,13 @@ episodes of the shipped policy.
 2. Scaling: the same campaign (``--episodes`` of a controller under ``paper``, shards of
    10,000) with 1 and with 2 workers, in one run; the ratio of their work times (start-up
    excluded; the machine has 2 cores).
-3. ``--million``: 1,000,000 episodes of the shipped policy under ``paper`` with 2 workers.
+3. ``--million``: 1,000,000 episodes of the policy under ``paper`` with 2 workers.
 
-Run: ``python benchmarks/bench_campaign.py [--episodes 100000] [--controller rule] [--million]
-[--json]``; writes ``benchmarks/results/campaign.json`` (``campaign_learned.json`` with
-``--controller learned``, the shipped policy). Run it on an otherwise idle machine: a second
-job on one of the two cores halves what two workers can give.
+Run: ``python benchmarks/bench_campaign.py [--episodes 100000] [--controller rule]
+[--model shipped] [--million] [--json]``; writes ``benchmarks/results/campaign.json``
+(``campaign_learned.json`` with ``--controller learned``, the shipped policy;
+``campaign_learned_<model>.json`` with another ``--model``). Run it on an otherwise idle
+machine: a second job on one of the two cores halves what two workers can give.
 """
 
 from __future__ import annotations
@@ -64,10 +65,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=100_000)
     parser.add_argument("--controller", default="rule")
-    parser.add_argument("--million", action="store_true", help="also 1 M shipped-policy episodes")
+    parser.add_argument(
+        "--model", default="shipped",
+        help="the learned controller's policy (default the shipped one; e.g. paper-warm)",
+    )  # fmt: skip
+    parser.add_argument("--million", action="store_true", help="also 1 M episodes of the policy")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    cell = Cell(args.controller, "shipped" if args.controller == "learned" else None)
+    learned = args.controller == "learned"
+    cell = Cell(args.controller, args.model if learned else None)
     result: dict[str, object] = {"benchmark": "campaign", **_common.machine(), "threads": 2}
     result["ray_startup_s"] = startup()
     one = timed(cell, args.episodes, 1, 5)
@@ -81,14 +87,17 @@ def main(argv: list[str] | None = None) -> int:
         file=sys.stderr,
     )
     if args.million:
-        million = timed(Cell("learned", "shipped"), 1_000_000, 2, 7)
-        result["million_shipped"] = million
+        million = timed(Cell("learned", args.model), 1_000_000, 2, 7)
+        result["million_shipped" if args.model == "shipped" else "million"] = million
         print(
-            f"1,000,000 episodes of the shipped policy, 2 workers: {million['wall_time_s']:.0f} s "
+            f"1,000,000 episodes of {args.model}, 2 workers: {million['wall_time_s']:.0f} s "
             f"({million['episodes_per_s']:,.0f} episodes/s), {million['collisions']} collisions",
             file=sys.stderr,
         )
     name = "campaign.json" if args.controller == "rule" else f"campaign_{args.controller}.json"
+    if learned and args.model != "shipped":
+        name = f"campaign_learned_{args.model}.json"
+        result["model"] = args.model
     write_json(RESULTS.with_name(name), result)
     _common.emit(result, args.json)
     return 0
