@@ -1,7 +1,8 @@
 """The README's evaluation section: ``safeswitch reproduce --quick`` on 1,000 random scenarios
 (seed 1000003), its comparison table printed, and the README's two figures copied to ``docs/``.
 
-Usage: ``python benchmarks/report.py [--out DIR]`` (default ``out/report``; one torch thread).
+Usage: ``python benchmarks/report.py [--out DIR]`` (default ``out/report``, whose earlier files
+of the report it replaces; one torch thread).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ def main() -> None:
     parser.add_argument("--out", default="out/report")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    reproduce(args.out, quick=True, episodes=1000)
+    reproduce(args.out, quick=True, episodes=1000, overwrite=True)
     DOCS.mkdir(exist_ok=True)
     for stem in ("comparison", "ppo-paper_cut", "ppo-paper_yield1", "ppo-no-adas_yield1"):
         shutil.copyfile(Path(args.out) / "figures" / f"{stem}.png", DOCS / f"{stem}.png")

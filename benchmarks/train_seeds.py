@@ -36,7 +36,8 @@ RESULTS = Path(__file__).parent / "results"
 #: What each evaluation reports (``safeswitch evaluate``'s fields).
 EVALUATED = (
     "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
-    "cut_episodes", "cleared_episodes", "mean_efficiency",
+    "cut_episodes", "cleared_episodes", "mean_efficiency", "speeding_episodes", "max_speed_kmh",
+    "faster_than_oracle_episodes",
 )  # fmt: skip
 
 

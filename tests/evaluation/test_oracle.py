@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from safeswitch.evaluation.evaluate import scenario_set
+from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.oracle import Oracle, efficiency
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import rollout
@@ -172,3 +173,39 @@ def test_efficiency_counts_a_never_cleared_episode_as_the_whole_horizon():
     ratio = efficiency(np.array([6.0, 6.0, np.nan]), np.array([8.0, np.nan, 7.0]), 12.0)
     np.testing.assert_allclose(ratio[:2], [0.75, 0.5])
     assert np.isnan(ratio[2])
+
+
+def test_the_summary_counts_speeding_and_every_episode_faster_than_the_oracle(oracle, random_plan):
+    """A cruise to 40 km/h (without a switching logic) speeds in most episodes and beats the
+    oracle where it cuts: the summary counts both as the ticks themselves show, and here each
+    episode faster than the oracle broke its speed or comfort limits. The oracle itself never
+    speeds."""
+    scenarios, plan = random_plan
+    base = LeftTurnConfig()
+    config = replace(base, switching="none",
+                     episode=replace(base.episode, learned_scope="episode"))  # fmt: skip
+    tolerated = base.rewards.tolerated_speed
+    assert tolerated == pytest.approx(30.0 / 3.6) == pytest.approx(oracle.limits.max_speed)
+    top, fast_ticks = np.zeros(EPISODES), np.zeros(EPISODES, dtype=np.int64)
+
+    def watch(state, record, tick):
+        np.maximum(top, record.ego_speed, out=top)
+        fast_ticks[:] += record.ego_speed > tolerated + 0.1 / 3.6  # by more than 0.1 km/h
+
+    result = rollout(LeftTurnTask(config), scenarios, cruise(40), on_tick=watch)
+    horizon = base.episode.horizon_s
+    summary = summarize(result, plan.time_to_clear, horizon)
+    whole = ~result.collision  # a collision ends the episode; the watch sees every tick
+    assert whole.sum() >= EPISODES // 2
+    np.testing.assert_array_equal(result.speeding_steps[whole], fast_ticks[whole])
+    np.testing.assert_allclose(result.max_speed[whole], top[whole])
+    assert summary["speeding_episodes"] == int((result.speeding_steps > 0).sum()) > EPISODES // 2
+    assert summary["speeding_steps"] == int(result.speeding_steps.sum())
+    assert summary["max_speed_kmh"] == pytest.approx(3.6 * result.max_speed.max())
+    faster = efficiency(plan.time_to_clear, result.time_to_clear, horizon) > 1.0 + 1e-9
+    assert summary["faster_than_oracle_episodes"] == int(faster.sum()) > 0
+    broke = (result.speeding_steps > 0) | (result.comfort_violation_steps > 0)
+    assert broke[faster].all()
+    own = summarize(oracle.as_rollout(plan), plan.time_to_clear, horizon)
+    assert own["speeding_episodes"] == own["faster_than_oracle_episodes"] == 0
+    assert own["max_speed_kmh"] <= 30.0 + 1e-6

@@ -40,14 +40,15 @@ def make(n, switching="guarded", horizon_s=4.0, interval=1, **constraints):
 
 def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_per_episode():
     """With a decision per tick the costs of a step are what its ``info`` reports — a tick over
-    a comfort limit, the episode's first safety action, the ego not yet clear, an episode that
-    ends uncleared — and PPO's reward is the paper's minus each cost times its multiplier.
-    What the wrapper measures over the ended episodes equals the episode summaries the
-    environment itself reports."""
+    a comfort limit, a tick over the tolerated speed, the episode's first safety action, the
+    ego not yet clear, an episode that ends uncleared — and PPO's reward is the paper's minus
+    each cost times its multiplier. What the wrapper measures over the ended episodes equals
+    the episode summaries the environment itself reports."""
     base, env = make(
         24,
         horizon_s=8.0,
         comfort={"budget": 0.01, "initial_multiplier": 3.0, **FIXED},
+        speeding={"budget": 0.01, "initial_multiplier": 2.0, **FIXED},
         safety={"budget": 0.01, "initial_multiplier": 20.0, **FIXED},
         clear_time={"budget": 3.0, "initial_multiplier": 0.5, **FIXED},
         uncleared={"budget": 0.1, "initial_multiplier": 7.0, **FIXED},
@@ -57,19 +58,20 @@ def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_pe
     rng = np.random.default_rng(1)
     episodes, seen = [], np.zeros(24, dtype=bool)
     for step in range(600):
-        if step % 10 == 0:  # bang-bang throttle: comfort breaks and both logics act
-            action = rng.choice([-1.0, 1.0], (24, 1))
+        if step % 10 == 0:  # bang-bang throttle: comfort breaks, both logics act, some speed
+            action = rng.choice([-1.0, 1.0], (24, 1), p=[0.3, 0.7])
         env.step_async(action)
         _, reward, done, infos = env.step_wait()
         paper = base.last_record.reward
         lon, lat = limits.comfort_accel_lon, limits.comfort_accel_lat
         comfort = np.array([abs(i["accel_lon"]) > lon or abs(i["accel_lat"]) > lat for i in infos])
+        fast = np.array([i["ego_speed"] > 30.1 / 3.6 for i in infos])  # R_v's best + 0.1 km/h
         safety = np.array([i["safety_active"] for i in infos])
         first_safety = safety & ~seen
         seen |= safety
         uncleared = ~base.last_record.ego_cleared
         ended_uncleared = done & uncleared
-        expected = paper - 3.0 * comfort - 20.0 * first_safety - 0.5 * uncleared
+        expected = paper - 3.0 * comfort - 2.0 * fast - 20.0 * first_safety - 0.5 * uncleared
         expected -= 7.0 * ended_uncleared
         np.testing.assert_allclose(reward, expected, atol=1e-3)
         episodes += [infos[int(i)]["episode"] for i in np.flatnonzero(done)]
@@ -79,6 +81,10 @@ def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_pe
     assert measured["comfort"] == pytest.approx(
         sum(e["comfort_violation_steps"] for e in episodes) / ticks
     )
+    assert measured["speeding"] == pytest.approx(sum(e["speeding_steps"] for e in episodes) / ticks)
+    assert all(
+        (e["speeding_steps"] > 0) == (e["max_speed"] > 30.1 / 3.6) for e in episodes
+    )  # the episode summary's two speeding figures agree
     with_safety = sum(e["safety_steps"] > 0 for e in episodes)
     assert measured["safety"] == pytest.approx(with_safety / len(episodes))
     # the time to clear: the tick on which the ego cleared (it is not charged), or the horizon
@@ -89,7 +95,8 @@ def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_pe
     assert measured["clear_time"] == pytest.approx(np.mean(times))
     never = [np.isnan(e["time_to_clear"]) for e in episodes]
     assert measured["uncleared"] == pytest.approx(np.mean(never)) and 0 < np.mean(never) < 1
-    assert measured["comfort"] > 0 and measured["safety"] > 0  # both costs were there to charge
+    assert measured["comfort"] > 0 and measured["safety"] > 0  # the costs were there to charge
+    assert 0 < sum(e["speeding_steps"] > 0 for e in episodes) < len(episodes)
     assert min(times) < horizon  # and some egos cleared
 
 

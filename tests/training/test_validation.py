@@ -135,6 +135,7 @@ def canned(**given):
         "episodes": 100, "ticks": 60_000, "mean_return": 0.0, "collisions": 0,
         "safety_activation_episodes": 0, "safety_activation_steps": 0,
         "comfort_violation_steps": 0, "cleared_episodes": 100, "mean_time_to_clear_s": 8.0,
+        "speeding_steps": 0, "speeding_episodes": 0,
     } | given  # fmt: skip
 
 
@@ -179,5 +180,12 @@ def test_constraints_then_return_puts_the_limits_first_then_the_time_then_the_re
         "clear_time": {"budget": 7.5}}})  # fmt: skip
     assert constraint_key(looser, candidates[0], 12.0) > constraint_key(looser, candidates[1], 12.0)
     assert constraint_key(config, candidates[0], 12.0) < constraint_key(config, candidates[1], 12.0)
+    # speeding on 1 % of ticks, against a 0.2 % budget, ranks with the limits: below any return
+    speedy = from_dict(TrainConfig, {**to_dict(config), "constraints": {
+        **to_dict(config)["constraints"], "speeding": {"budget": 0.002}}})  # fmt: skip
+    fast = canned(mean_return=2000.0, speeding_steps=600, speeding_episodes=40)
+    slow = canned(mean_return=10.0)
+    assert constraint_key(speedy, fast, 12.0) < constraint_key(speedy, slow, 12.0)
+    assert constraint_key(config, fast, 12.0) > constraint_key(config, slow, 12.0)
     times = [float(r["clear_time_s"]) for r in rows(tmp_path)]
     assert times[2] == pytest.approx(0.95 * 7.0 + 0.05 * 12.0)

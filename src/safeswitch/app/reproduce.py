@@ -497,6 +497,7 @@ def reproduce(
             "lon": defaults.rewards.comfort_accel_lon,
             "lat": defaults.rewards.comfort_accel_lat,
             "horizon": defaults.episode.horizon_s,
+            "tolerated_kmh": defaults.rewards.tolerated_speed * 3.6,
         },
         "controllers": results,
         "paper_findings": [{"finding": f, "reproduced": ok} for f, ok in findings],

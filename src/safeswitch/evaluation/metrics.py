@@ -12,10 +12,16 @@ Fields:
     comfort_violation_steps: Ticks beyond a comfort limit (|a_lon| > 5 or |a_lat| > 3 m/s²).
     comfort_violation_fraction: The same as a share of all ticks.
     stops: Episodes in which the ego came to a full stop (speed below 0.1 m/s).
+    speeding_episodes: Episodes in which the ego drove faster than the tolerated speed (the
+        highest at which ``R_v`` is at its best: the speed limit plus 5 km/h, 30 km/h; the
+        oracle's ``v_max``). An episode that clears sooner than the oracle broke this or
+        another of the oracle's limits.
+    speeding_steps: Ticks, over all episodes, faster than the tolerated speed.
     cut_episodes / yield_episodes: Episodes in which the ego crossed before / after the north car.
     mean_return: Mean episode return.
     mean_terms: Each reward term of Eq. 5, summed per episode, mean over episodes.
     mean_min_speed_kmh: Mean over episodes of the lowest ego speed [km/h].
+    max_speed_kmh: Highest ego speed of any episode [km/h].
     max_accel_lon / max_accel_lat: Largest |a_lon| and |a_lat| of any episode [m/s²].
     max_lateral_deviation_m: Largest distance from the route's centre line [m].
     ticks: Ticks simulated (all episodes).
@@ -29,6 +35,11 @@ Fields:
     mean_efficiency: Mean over scenarios of the oracle's time to clear divided by the
         controller's; an episode that never clears counts with the whole horizon (with an
         oracle).
+    faster_than_oracle_episodes: Episodes that cleared sooner than the oracle (efficiency
+        above 1), with an oracle. Each did something the oracle's model rules out: speeding,
+        breaking a comfort limit, being in its conflict zone while the north car is in its own,
+        or entering the turn faster than a point mass may (the plant's lateral acceleration
+        lags the route's curvature; README, "Evaluation").
 
 Sums are taken per chunk with numpy and combined exactly (``math.fsum``), so a summary
 depends only on the episodes and the chunk size — not on how many processes ran the chunks.
@@ -61,11 +72,14 @@ class SummaryAccumulator:
         "cleared_episodes",
         "comfort_violation_steps",
         "stops",
+        "speeding_episodes",
+        "speeding_steps",
         "cut_episodes",
         "yield_episodes",
         "ticks",
         "oracle_cleared",
         "efficiency_count",
+        "faster_than_oracle_episodes",
         "collision_course_episodes",
         "ttc_conflict_episodes",
         "encroachment_episodes",
@@ -73,7 +87,7 @@ class SummaryAccumulator:
     )
     _SUMS = ("time_to_clear", "return", "min_speed", "oracle_time", "efficiency", "min_ttc",
              "min_pet")  # fmt: skip
-    _MAXIMA = ("max_accel_lon", "max_accel_lat", "max_lateral_deviation_m")
+    _MAXIMA = ("max_accel_lon", "max_accel_lat", "max_lateral_deviation_m", "max_speed")
 
     def __init__(self) -> None:
         self.counts = dict.fromkeys(self._COUNTS, 0)
@@ -98,6 +112,8 @@ class SummaryAccumulator:
         c["cleared_episodes"] += int(cleared.sum())
         c["comfort_violation_steps"] += int(r.comfort_violation_steps.sum())
         c["stops"] += int((r.min_speed < STOP_SPEED).sum())
+        c["speeding_episodes"] += int((r.speeding_steps > 0).sum())
+        c["speeding_steps"] += int(r.speeding_steps.sum())
         c["cut_episodes"] += int((r.outcome == 1).sum())
         c["yield_episodes"] += int((r.outcome == 2).sum())
         c["ticks"] += int(r.ticks.sum())
@@ -118,6 +134,7 @@ class SummaryAccumulator:
                 ("max_accel_lon", r.max_accel_lon),
                 ("max_accel_lat", r.max_accel_lat),
                 ("max_lateral_deviation_m", r.max_lateral),
+                ("max_speed", r.max_speed),
             ):
                 self.maxima[key] = max(self.maxima[key], float(values.max()))
         if oracle_time is not None:
@@ -130,6 +147,7 @@ class SummaryAccumulator:
             ratio = efficiency(oracle_time, r.time_to_clear, horizon_s)
             finite = np.isfinite(ratio)
             c["efficiency_count"] += int(finite.sum())
+            c["faster_than_oracle_episodes"] += int((ratio[finite] > 1.0 + 1e-9).sum())
             s["efficiency"].append(float(ratio[finite].sum()))
 
     def merge(self, other: SummaryAccumulator) -> None:
@@ -161,9 +179,9 @@ class SummaryAccumulator:
         accumulator.counts.update(state["counts"])
         accumulator.sums.update({k: list(v) for k, v in state["sums"].items()})
         accumulator.term_sums = {k: list(v) for k, v in state["term_sums"].items()}
-        accumulator.maxima = {
-            k: (-math.inf if v is None else v) for k, v in state["maxima"].items()
-        }
+        accumulator.maxima.update(
+            {k: (-math.inf if v is None else v) for k, v in state["maxima"].items()}
+        )
         accumulator.with_oracle = bool(state["with_oracle"])
         return accumulator
 
@@ -187,6 +205,8 @@ class SummaryAccumulator:
             "comfort_violation_steps": c["comfort_violation_steps"],
             "comfort_violation_fraction": c["comfort_violation_steps"] / max(c["ticks"], 1),
             "stops": c["stops"],
+            "speeding_episodes": c["speeding_episodes"],
+            "speeding_steps": c["speeding_steps"],
             "cut_episodes": c["cut_episodes"],
             "yield_episodes": c["yield_episodes"],
             "mean_return": mean("return", n),
@@ -194,6 +214,7 @@ class SummaryAccumulator:
                 name: math.fsum(parts) / n if n else None for name, parts in self.term_sums.items()
             },
             "mean_min_speed_kmh": None if not n else 3.6 * math.fsum(self.sums["min_speed"]) / n,
+            "max_speed_kmh": None if not n else 3.6 * self.maxima["max_speed"],
             "max_accel_lon": largest("max_accel_lon"),
             "max_accel_lat": largest("max_accel_lat"),
             "max_lateral_deviation_m": largest("max_lateral_deviation_m"),
@@ -206,6 +227,7 @@ class SummaryAccumulator:
         if self.with_oracle:
             out["mean_oracle_time_to_clear_s"] = mean("oracle_time", c["oracle_cleared"])
             out["mean_efficiency"] = mean("efficiency", c["efficiency_count"])
+            out["faster_than_oracle_episodes"] = c["faster_than_oracle_episodes"]
         return out
 
 

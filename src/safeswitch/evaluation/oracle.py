@@ -41,6 +41,7 @@ from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import ConflictArrays, LeftTurnTask
+from safeswitch.leftturn.vec_env import SPEEDING_MARGIN
 from safeswitch.sim.collision import rectangle_separation
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import (
@@ -77,12 +78,8 @@ class OracleLimits:
         """The limits of a task configuration: comfort limits of the reward, ``v_max`` the
         highest speed at which ``R_v`` is at its best."""
         r = config.rewards
-        best = max(r.speed_values)
-        top_kmh = max(
-            p for p, v in zip(r.speed_points_kmh, r.speed_values, strict=True) if v == best
-        )
         return cls(
-            max_speed=top_kmh / 3.6,
+            max_speed=r.tolerated_speed,
             accel_lon=r.comfort_accel_lon,
             accel_lat=r.comfort_accel_lat,
             max_decel=min(r.comfort_accel_lon, config.vehicle.max_brake_deceleration),
@@ -386,6 +383,8 @@ class Oracle:
             safety_steps=np.zeros(batch, dtype=np.int64),
             invalid_steps=np.zeros(batch, dtype=np.int64),
             min_speed=plan.speed.min(axis=1),
+            max_speed=plan.speed.max(axis=1),
+            speeding_steps=(plan.speed[:, 1:] > self.limits.max_speed + SPEEDING_MARGIN).sum(1),
             time_to_clear=plan.time_to_clear,
             outcome=plan.outcome,
             comfort_violation_steps=comfort.sum(axis=1).astype(np.int64),

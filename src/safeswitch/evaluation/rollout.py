@@ -28,6 +28,9 @@ class RolloutResult:
         safety_steps: Ticks on which a safety action was executed.
         invalid_steps: Ticks on which the learned action was NaN or infinite.
         min_speed: Lowest ego speed [m/s].
+        max_speed: Highest ego speed [m/s].
+        speeding_steps: Ticks faster than the tolerated speed (``R_v``'s best, 30 km/h by
+            default; :func:`~safeswitch.leftturn.vec_env.speeding`).
         time_to_clear: Time until the ego left its conflict zone [s] (NaN if it never did).
         outcome: Who crossed first: 0 undecided, 1 cut, 2 yield.
         comfort_violation_steps: Ticks beyond a comfort limit.
@@ -47,6 +50,8 @@ class RolloutResult:
     safety_steps: NDArray[np.int64]
     invalid_steps: NDArray[np.int64]
     min_speed: NDArray[np.float64]
+    max_speed: NDArray[np.float64]
+    speeding_steps: NDArray[np.int64]
     time_to_clear: NDArray[np.float64]
     outcome: NDArray[np.int8]
     comfort_violation_steps: NDArray[np.int64]
@@ -115,6 +120,8 @@ def rollout(
         safety_steps=stats.safety_steps,
         invalid_steps=invalid,
         min_speed=stats.min_speed,
+        max_speed=stats.max_speed,
+        speeding_steps=stats.speeding_steps,
         time_to_clear=stats.time_to_clear,
         outcome=ended_outcome,
         comfort_violation_steps=stats.comfort_violation_steps,

@@ -317,6 +317,14 @@ class RewardConfig:
         _check_piecewise(o, "accel_lon_points", self.accel_lon_points, self.accel_lon_values)
         _check_piecewise(o, "accel_lat_points", self.accel_lat_points, self.accel_lat_values)
 
+    @property
+    def tolerated_speed(self) -> float:
+        """The highest speed at which ``R_v`` is at its best [m/s] (the speed limit plus the
+        tolerated speeding: 30 km/h by default). Faster counts as speeding in the metrics."""
+        best = max(self.speed_values)
+        points = zip(self.speed_points_kmh, self.speed_values, strict=True)
+        return max(p for p, v in points if v == best) / 3.6
+
 
 @dataclass(frozen=True)
 class ScenarioConfig:

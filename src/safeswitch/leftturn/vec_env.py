@@ -43,6 +43,8 @@ EPISODE_KEYS: tuple[str, ...] = (
     "collision",
     "safety_steps",
     "min_speed",
+    "max_speed",
+    "speeding_steps",
     "comfort_violation_steps",
     "outcome",
     "time_to_clear",
@@ -59,6 +61,19 @@ def comfort_exceeded(record: StepRecord, config: LeftTurnConfig) -> NDArray[np.b
     )
 
 
+#: Speeding counts from this much above the tolerated speed [m/s] (0.1 km/h): a controller
+#: that holds the tolerated speed itself (the planner) overshoots it by rounding only.
+SPEEDING_MARGIN = 0.1 / 3.6
+
+
+def speeding(record: StepRecord, config: LeftTurnConfig) -> NDArray[np.bool_]:
+    """Per environment ``[B]``: the ego was faster than the tolerated speed, the highest at
+    which ``R_v`` is at its best (:attr:`~safeswitch.leftturn.config.RewardConfig.
+    tolerated_speed`; the oracle's ``v_max``, 30 km/h by default), by more than
+    :data:`SPEEDING_MARGIN`."""
+    return record.ego_speed > config.rewards.tolerated_speed + SPEEDING_MARGIN
+
+
 class TickCosts:
     """Per environment, what the ticks of one step held (arrays ``[B]``, counts of ticks):
     what the learning-only costs of :mod:`safeswitch.training.constraints` read.
@@ -67,6 +82,7 @@ class TickCosts:
         ticks: Ticks the episode was live for in the step (fewer than the decision interval
             at the step that ends it).
         comfort: Of those, ticks that exceeded a comfort limit.
+        speeding: Of those, ticks faster than the tolerated speed (:func:`speeding`).
         safety: Ticks on which the safety action was executed (any reason).
         uncleared: Ticks that ended with the ego not yet clear of its conflict zone.
     """
@@ -74,17 +90,19 @@ class TickCosts:
     def __init__(self, batch: int) -> None:
         self.ticks = np.zeros(batch, dtype=np.int64)
         self.comfort = np.zeros(batch, dtype=np.int64)
+        self.speeding = np.zeros(batch, dtype=np.int64)
         self.safety = np.zeros(batch, dtype=np.int64)
         self.uncleared = np.zeros(batch, dtype=np.int64)
 
     def clear(self) -> None:
-        for counts in (self.ticks, self.comfort, self.safety, self.uncleared):
+        for counts in (self.ticks, self.comfort, self.speeding, self.safety, self.uncleared):
             counts[:] = 0
 
     def add(self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_]) -> None:
         """Add one tick of the episodes ``live`` selects."""
         self.ticks += live
         self.comfort += live & comfort_exceeded(record, config)
+        self.speeding += live & speeding(record, config)
         self.safety += live & record.safety_active
         self.uncleared += live & ~record.ego_cleared
 
@@ -98,6 +116,8 @@ class EpisodeStatistics:
         self.collision = np.zeros(batch, dtype=bool)
         self.safety_steps = np.zeros(batch, dtype=np.int64)
         self.min_speed = np.full(batch, np.inf)
+        self.max_speed = np.zeros(batch)
+        self.speeding_steps = np.zeros(batch, dtype=np.int64)
         self.comfort_violation_steps = np.zeros(batch, dtype=np.int64)
         self.time_to_clear = np.full(batch, np.nan)
         self.max_lateral = np.zeros(batch)
@@ -115,6 +135,8 @@ class EpisodeStatistics:
         self.collision |= r.collision & on
         self.safety_steps += r.safety_active & on
         self.min_speed = np.where(on, np.minimum(self.min_speed, r.ego_speed), self.min_speed)
+        self.max_speed = np.where(on, np.maximum(self.max_speed, r.ego_speed), self.max_speed)
+        self.speeding_steps += on & speeding(r, config)
         self.comfort_violation_steps += on & comfort_exceeded(r, config)
         just_cleared = on & r.ego_cleared & np.isnan(self.time_to_clear)
         self.time_to_clear[just_cleared] = self.length[just_cleared] * config.episode.dt
@@ -135,6 +157,8 @@ class EpisodeStatistics:
             "collision": self.collision[index].copy(),
             "safety_steps": self.safety_steps[index].copy(),
             "min_speed": self.min_speed[index].copy(),
+            "max_speed": self.max_speed[index].copy(),
+            "speeding_steps": self.speeding_steps[index].copy(),
             "comfort_violation_steps": self.comfort_violation_steps[index].copy(),
             "outcome": record.outcome[index].copy(),
             "time_to_clear": self.time_to_clear[index].copy(),
@@ -150,6 +174,8 @@ class EpisodeStatistics:
         self.collision[index] = False
         self.safety_steps[index] = 0
         self.min_speed[index] = np.inf
+        self.max_speed[index] = 0.0
+        self.speeding_steps[index] = 0
         self.comfort_violation_steps[index] = 0
         self.time_to_clear[index] = np.nan
         self.max_lateral[index] = 0.0

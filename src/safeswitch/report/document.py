@@ -25,6 +25,8 @@ COMPARISON = (
     ("safety_activation_episodes", "safety episodes", "{:d}"),
     ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
     ("stops", "full stops", "{:d}"),
+    ("speeding_episodes", "speeding", "{:d}"),
+    ("max_speed_kmh", "top speed [km/h]", "{:.1f}"),
     ("cut_episodes", "cut", "{:d}"),
     ("yield_episodes", "yield", "{:d}"),
     ("cleared_episodes", "cleared", "{:d}"),
@@ -61,6 +63,13 @@ DEFINITIONS = (
     ),
     ("full stops", "episodes in which the ego's speed fell below 0.1 m/s"),
     (
+        "speeding",
+        "episodes in which the ego drove faster than {tolerated_kmh:.0f} km/h (the speed limit "
+        "plus the 5 km/h at which R_v is still at its best; the oracle's speed limit), by "
+        "more than 0.1 km/h",
+    ),
+    ("top speed", "the ego's highest speed in any episode"),
+    (
         "cut / yield",
         "episodes in which the ego left its conflict zone before the north car left its own / "
         "after it (neither: undecided within the horizon)",
@@ -74,7 +83,10 @@ DEFINITIONS = (
     (
         "efficiency",
         "mean over scenarios of the oracle's time to clear divided by the controller's; an "
-        "episode that never clears counts with the whole {horizon:g} s horizon",
+        "episode that never clears counts with the whole {horizon:g} s horizon; above 1 in a "
+        "scenario, the controller did what the oracle's point-mass model rules out (speeding, "
+        "breaking a comfort limit, sharing the conflict area with the north car, or taking "
+        "the turn faster than a point mass may)",
     ),
     (
         "TTC ≤ 1.5 s",

@@ -263,7 +263,8 @@ class ValidationConfig:
             highest mean return. The paper's reward has no collision term — a collision only
             ends the episode early — so two policies can score the same return with and
             without one. ``"constraints_then_return"`` (ours, with ``constraints``): the
-            fewest collisions, then the smallest excess over the comfort and safety budgets,
+            fewest collisions, then the smallest excess over the comfort, speeding and safety
+            budgets,
             then over the clear-time budget, then the highest return — the constrained
             problem's priorities (:func:`safeswitch.training.validation.constraint_key`).
     """
@@ -291,7 +292,8 @@ class ConstraintConfig:
     """One constraint of constrained PPO (see :mod:`safeswitch.training.constraints`).
 
     Attributes:
-        budget: What the constraint allows: a share of ticks (``comfort``, ``overrule``), a
+        budget: What the constraint allows: a share of ticks (``comfort``, ``speeding``,
+            ``overrule``), a
             share of episodes (``safety``, ``uncleared``) or a mean time to clear [s]
             (``clear_time``), > 0.
         integral_gain: Added to the multiplier's integral term per rollout per unit of
@@ -348,6 +350,8 @@ class ConstraintsConfig:
 
     Attributes:
         comfort: Ticks over a comfort limit, as a share of ticks.
+        speeding: Ticks faster than the tolerated speed (``R_v``'s best, 30 km/h by default),
+            as a share of ticks.
         safety: Episodes with a safety action (of ``reasons``), as a share of episodes.
         overrule: Under ``guarded``: ticks on which the certified filter overruled the paper
             logic's own safety action (its braking was unsafe there: deployed under ``paper``
@@ -359,18 +363,19 @@ class ConstraintsConfig:
     """
 
     comfort: ConstraintConfig | None = None
+    speeding: ConstraintConfig | None = None
     safety: ConstraintConfig | None = None
     overrule: ConstraintConfig | None = None
     clear_time: ConstraintConfig | None = None
     uncleared: ConstraintConfig | None = None
 
     def __post_init__(self) -> None:
-        for name in ("comfort", "clear_time", "uncleared"):
+        for name in ("comfort", "speeding", "clear_time", "uncleared"):
             given = getattr(self, name)
             if given is not None:
                 check(not given.reasons, f"constraints.{name}", "reasons", given.reasons,
                       "are for the safety constraint only")  # fmt: skip
-        for name in ("comfort", "safety", "overrule", "uncleared"):
+        for name in ("comfort", "speeding", "safety", "overrule", "uncleared"):
             given = getattr(self, name)
             if given is not None:
                 check(given.budget < 1, f"constraints.{name}", "budget", given.budget,
@@ -378,8 +383,9 @@ class ConstraintsConfig:
 
     def active(self) -> dict[str, ConstraintConfig]:
         """The constraints that are on, by cost name."""
-        named = {"comfort": self.comfort, "safety": self.safety, "overrule": self.overrule,
-                 "clear_time": self.clear_time, "uncleared": self.uncleared}  # fmt: skip
+        named = {"comfort": self.comfort, "speeding": self.speeding, "safety": self.safety,
+                 "overrule": self.overrule, "clear_time": self.clear_time,
+                 "uncleared": self.uncleared}  # fmt: skip
         return {name: c for name, c in named.items() if c is not None}
 
 

@@ -25,6 +25,10 @@ ended since the last update (pooled until there are enough of them; see
 
 * ``comfort`` — the tick exceeded a comfort limit (the evaluation's comfort violation);
   measured as a share of the episodes' ticks.
+* ``speeding`` — the ego was faster than the tolerated speed on the tick (the highest speed at
+  which ``R_v`` is at its best, 30 km/h by default: the evaluation's ``speeding_steps``); a
+  share of ticks. ``R_v`` alone still pays +0.5 at 32.5 km/h, and a time constraint can buy
+  its seconds there.
 * ``safety`` — the episode's first tick on which the safety action was executed (with
   ``reasons``: one of those reasons' safety actions; under ``guarded`` the paper logic's own,
   which is what fires when the policy is deployed under ``paper``); measured as the share of
@@ -228,6 +232,8 @@ class ConstraintCosts(VecEnvWrapper):
             out["uncleared"] = (done & ~record.ego_cleared).astype(np.float64)
         if "comfort" in self.multipliers:
             out["comfort"] = counts.comfort.astype(np.float64)
+        if "speeding" in self.multipliers:
+            out["speeding"] = counts.speeding.astype(np.float64)
         if "safety" in self.multipliers and "safety" not in self._reasons:
             out["safety"] = counts.safety.astype(np.float64)
         for name, codes in self._reasons.items():

@@ -48,6 +48,7 @@ VALIDATION_FIELDS = (
     "mean_efficiency",
     "safety_activation_steps",
     "clear_time_s",
+    "speeding_episodes",
     "best",
 )
 
@@ -114,8 +115,12 @@ class Validator(BaseCallback):
                "best": int(better)}  # fmt: skip
         path = self.run / "validation.csv"
         new_file = not path.exists()
+        fields: list[str] = list(VALIDATION_FIELDS)
+        if not new_file:  # a resumed run keeps its file's columns (an older version's too)
+            with open(path, newline="", encoding="utf-8") as handle:
+                fields = next(csv.reader(handle), fields)
         with open(path, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=VALIDATION_FIELDS, extrasaction="ignore")
+            writer = csv.DictWriter(handle, fieldnames=fields, extrasaction="ignore")
             if new_file:
                 writer.writeheader()
             writer.writerow(row)
@@ -159,15 +164,17 @@ class Validator(BaseCallback):
 def constraint_measures(summary: dict[str, Any], horizon_s: float) -> dict[str, float]:
     """What each constraint of :mod:`safeswitch.training.constraints` measures, from an
     evaluation's summary (the deterministic policy's): the share of ticks over a comfort limit,
-    the share of episodes with a safety action (any reason: validation runs under one logic),
-    the mean time to clear [s] with an episode that never clears counted at the horizon, and
-    the share of episodes that never clear."""
+    the share of ticks faster than the tolerated speed, the share of episodes with a safety
+    action (any reason: validation runs under one logic), the mean time to clear [s] with an
+    episode that never clears counted at the horizon, and the share of episodes that never
+    clear."""
     ticks = max(float(summary["ticks"]), 1.0)
     episodes = max(float(summary["episodes"]), 1.0)
     cleared = float(summary["cleared_episodes"])
     cleared_time = float(summary["mean_time_to_clear_s"]) if cleared else 0.0
     return {
         "comfort": float(summary["comfort_violation_steps"]) / ticks,
+        "speeding": float(summary["speeding_steps"]) / ticks,
         "safety": float(summary["safety_activation_episodes"]) / episodes,
         "clear_time": (cleared * cleared_time + (episodes - cleared) * horizon_s) / episodes,
         "uncleared": (episodes - cleared) / episodes,
@@ -178,7 +185,8 @@ def constraint_key(
     config: TrainConfig, summary: dict[str, Any], horizon_s: float
 ) -> tuple[float, float, float]:
     """``constraints_then_return``'s order, to maximise: the safety constraints first (minus
-    the summed excess ``max(0, measured / budget − 1)`` of ``comfort`` and ``safety``, each
+    the summed excess ``max(0, measured / budget − 1)`` of ``comfort``, ``speeding`` and
+    ``safety``, each
     against its ``validation_budget``, by default its training budget), then the task's (the
     summed excess of ``clear_time`` and ``uncleared``), then the mean return — the constrained
     problem's priorities: a policy that keeps its limits before a faster one, a faster one
@@ -189,7 +197,7 @@ def constraint_key(
         for name, c in config.constraints.active().items()
         if name in measured
     }
-    safe = excess.get("comfort", 0.0) + excess.get("safety", 0.0)
+    safe = sum(excess.get(name, 0.0) for name in ("comfort", "speeding", "safety"))
     task = excess.get("clear_time", 0.0) + excess.get("uncleared", 0.0)
     return (-safe, -task, float(summary["mean_return"]))
 
