@@ -264,9 +264,9 @@ class ValidationConfig:
             ends the episode early — so two policies can score the same return with and
             without one. ``"constraints_then_return"`` (ours, with ``constraints``): the
             fewest collisions, then the smallest excess over the comfort, speeding and safety
-            budgets,
-            then over the clear-time budget, then the highest return — the constrained
-            problem's priorities (:func:`safeswitch.training.validation.constraint_key`).
+            budgets, then over the clear-time budget, then the highest return — the
+            constrained problem's priorities
+            (:func:`safeswitch.training.validation.constraint_key`).
     """
 
     every: int = 0
@@ -293,9 +293,8 @@ class ConstraintConfig:
 
     Attributes:
         budget: What the constraint allows: a share of ticks (``comfort``, ``speeding``,
-            ``overrule``), a
-            share of episodes (``safety``, ``uncleared``) or a mean time to clear [s]
-            (``clear_time``), > 0.
+            ``overrule``), a share of episodes (``safety``, ``uncleared``) or a mean time to
+            clear [s] (``clear_time``), > 0.
         integral_gain: Added to the multiplier's integral term per rollout per unit of
             relative excess (``measured / budget − 1``) [reward per unit of the cost].
         proportional_gain: Multiplier per unit of the rollout's relative excess.
