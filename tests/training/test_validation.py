@@ -189,3 +189,25 @@ def test_constraints_then_return_puts_the_limits_first_then_the_time_then_the_re
     assert constraint_key(config, fast, 12.0) > constraint_key(config, slow, 12.0)
     times = [float(r["clear_time_s"]) for r in rows(tmp_path)]
     assert times[2] == pytest.approx(0.95 * 7.0 + 0.05 * 12.0)
+
+
+def test_a_resumed_run_appends_in_its_validation_files_own_columns(tmp_path):
+    """A run validated by an older version has fewer columns in ``validation.csv``; resumed,
+    its new rows follow that header instead of shifting every value after a new column."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    from safeswitch.training.validation import VALIDATION_FIELDS, Validator
+
+    old = [f for f in VALIDATION_FIELDS if f != "speeding_episodes"]
+    (tmp_path / "validation.csv").write_text(",".join(old) + "\n", encoding="utf-8")
+    validator = Validator(from_dict(TrainConfig, SMALL), tmp_path)
+    validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
+    validator._save_best = lambda: None  # type: ignore[method-assign]
+    validator.validate = lambda: canned(mean_return=5.0, cut_episodes=7)  # type: ignore[method-assign]
+    validator.num_timesteps = 2048
+    validator._on_rollout_end()
+    (row,) = rows(tmp_path)
+    assert list(row) == old
+    assert row["timesteps"] == "2048" and row["cut_episodes"] == "7" and row["best"] == "1"
