@@ -6,6 +6,7 @@ are SI unless the name says otherwise (``_kmh``).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass, field, fields
@@ -317,7 +318,7 @@ class RewardConfig:
         _check_piecewise(o, "accel_lon_points", self.accel_lon_points, self.accel_lon_values)
         _check_piecewise(o, "accel_lat_points", self.accel_lat_points, self.accel_lat_values)
 
-    @property
+    @functools.cached_property
     def tolerated_speed(self) -> float:
         """The highest speed at which ``R_v`` is at its best [m/s] (the speed limit plus the
         tolerated speeding: 30 km/h by default). Faster counts as speeding in the metrics."""

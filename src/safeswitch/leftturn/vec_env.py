@@ -98,11 +98,12 @@ class TickCosts:
         for counts in (self.ticks, self.comfort, self.speeding, self.safety, self.uncleared):
             counts[:] = 0
 
-    def add(self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_]) -> None:
-        """Add one tick of the episodes ``live`` selects."""
+    def add(self, record: StepRecord, stats: EpisodeStatistics, live: NDArray[np.bool_]) -> None:
+        """Add one tick of the episodes ``live`` selects (``stats`` just took the same tick:
+        its comfort and speeding flags are reused)."""
         self.ticks += live
-        self.comfort += live & comfort_exceeded(record, config)
-        self.speeding += live & speeding(record, config)
+        self.comfort += live & stats.tick_comfort
+        self.speeding += live & stats.tick_speeding
         self.safety += live & record.safety_active
         self.uncleared += live & ~record.ego_cleared
 
@@ -118,6 +119,10 @@ class EpisodeStatistics:
         self.min_speed = np.full(batch, np.inf)
         self.max_speed = np.zeros(batch)
         self.speeding_steps = np.zeros(batch, dtype=np.int64)
+        #: The last tick's flags (every environment, live or not): over a comfort limit, and
+        #: faster than the tolerated speed.
+        self.tick_comfort = np.zeros(batch, dtype=bool)
+        self.tick_speeding = np.zeros(batch, dtype=bool)
         self.comfort_violation_steps = np.zeros(batch, dtype=np.int64)
         self.time_to_clear = np.full(batch, np.nan)
         self.max_lateral = np.zeros(batch)
@@ -136,8 +141,10 @@ class EpisodeStatistics:
         self.safety_steps += r.safety_active & on
         self.min_speed = np.where(on, np.minimum(self.min_speed, r.ego_speed), self.min_speed)
         self.max_speed = np.where(on, np.maximum(self.max_speed, r.ego_speed), self.max_speed)
-        self.speeding_steps += on & speeding(r, config)
-        self.comfort_violation_steps += on & comfort_exceeded(r, config)
+        self.tick_speeding = speeding(r, config)
+        self.tick_comfort = comfort_exceeded(r, config)
+        self.speeding_steps += on & self.tick_speeding
+        self.comfort_violation_steps += on & self.tick_comfort
         just_cleared = on & r.ego_cleared & np.isnan(self.time_to_clear)
         self.time_to_clear[just_cleared] = self.length[just_cleared] * config.episode.dt
         self.max_lateral = np.where(
@@ -324,7 +331,7 @@ class LeftTurnVecEnv(VecEnv):
                 acted = np.flatnonzero(tick.safety_active & live)
                 counts[acted, tick.reason[acted]] += 1
             if costs is not None:
-                costs.add(tick, self.config, live)
+                costs.add(tick, self._stats, live)
 
         self._state, record = self.task.hold(self.state, self._actions, on_tick)
         self._actions = None
