@@ -211,3 +211,28 @@ def test_a_resumed_run_appends_in_its_validation_files_own_columns(tmp_path):
     (row,) = rows(tmp_path)
     assert list(row) == old
     assert row["timesteps"] == "2048" and row["cut_episodes"] == "7" and row["best"] == "1"
+
+
+@pytest.mark.parametrize("criterion", ["return", "collisions_then_return"])
+def test_a_run_resumed_from_before_selection_keys_keeps_its_best(tmp_path, criterion):
+    """A checkpoint from before validation kept its selection key holds only the best return
+    and collisions: a resumed run still compares new validations against that best."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    from safeswitch.training.validation import Validator
+
+    config = from_dict(
+        TrainConfig, SMALL | {"validation": {**SMALL["validation"], "criterion": criterion}}
+    )
+    validator = Validator(config, tmp_path)
+    validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
+    validator._save_best = lambda: None  # type: ignore[method-assign]
+    validator.state = {"best_return": 100.0, "best_collisions": 0, "best_timesteps": 1024}
+    for k, mean_return in enumerate((90.0, 110.0)):
+        validator.validate = lambda r=mean_return: canned(mean_return=r)  # type: ignore[method-assign]
+        validator.num_timesteps = 2048 * (k + 1)
+        validator._on_rollout_end()
+        expected = 1024 if mean_return < 100.0 else 4096
+        assert validator.state["best_timesteps"] == expected

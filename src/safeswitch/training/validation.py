@@ -99,7 +99,7 @@ class Validator(BaseCallback):
         key = self.key(summary)
         best = self.state.get("best_key")
         if best is None and self.state["best_return"] is not None:  # a run from before keys
-            best = [-float(self.state.get("best_collisions", 0)), self.state["best_return"]]
+            best = self._old_key(self.state)
         better = best is None or tuple(key) > tuple(best)
         if better:
             self.state = {
@@ -128,6 +128,17 @@ class Validator(BaseCallback):
         self.logger.record("validation/efficiency", summary.get("mean_efficiency", np.nan))
         self.logger.record("validation/safety_activation_episodes",
                            summary["safety_activation_episodes"])  # fmt: skip
+
+    def _old_key(self, state: dict[str, Any]) -> list[float] | None:
+        """The key of the best policy a run resumed from before keys recorded (its return and
+        collisions); ``None`` under ``constraints_then_return``, which that state cannot rank:
+        the next validation then becomes the best."""
+        criterion = self.config.validation.criterion
+        if criterion == "return":
+            return [float(state["best_return"])]
+        if criterion == "collisions_then_return":
+            return [-float(state.get("best_collisions", 0)), float(state["best_return"])]
+        return None
 
     def key(self, summary: dict[str, Any]) -> tuple[float, ...]:
         """What ``validation.criterion`` maximises, from a validation's summary."""
