@@ -1,9 +1,15 @@
 """The Table I controllers on the plant (SPEC §2)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from safeswitch.core.config import ConfigError
 from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.leftturn.config import ControllerConfig, LeftTurnConfig
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.vec_env import SPEEDING_MARGIN
 from safeswitch.sim.vehicle import VehicleState, vehicle_step
 
 
@@ -25,3 +31,77 @@ def test_pid_b_holds_the_emergency_deceleration(task, v0):
     p = c.paper
     reserved = v0**2 / (2 * target) + v0 * p.latency_s + p.stop_margin_m
     assert state.x[0] <= reserved
+
+
+def _limited_task(limit_kmh, switching="none"):
+    c = LeftTurnConfig()
+    return LeftTurnTask(
+        replace(
+            c,
+            switching=switching,
+            episode=replace(c.episode, learned_scope="episode"),
+            controllers=replace(c.controllers, learned_speed_limiter_kmh=limit_kmh),
+        )
+    )
+
+
+def _drive(task, action, ticks):
+    state = task.initial(task.draw_scenarios(0, np.arange(4), np.zeros(4, dtype=np.int64)))
+    records = []
+    for _ in range(ticks):
+        state, record = task.step(state, np.full(4, action))
+        records.append(record)
+    return records
+
+
+def test_the_learned_speed_limiter_holds_full_throttle_at_the_tolerated_speed():
+    ticks = 600  # 12 s: the turn, and the straight after it
+    free = _drive(_limited_task(None), 1.0, ticks)
+    limited = _drive(_limited_task(29.9), 1.0, ticks)
+    tolerated = LeftTurnConfig().rewards.tolerated_speed
+    free_top = max(r.ego_speed.max() for r in free)
+    top = max(r.ego_speed.max() for r in limited)
+    assert free_top > tolerated + 10 / 3.6  # without it, full throttle is far over 30 km/h
+    # Never counted as speeding (the lag's overshoot stays inside the 0.1 km/h margin) ...
+    assert top <= tolerated + SPEEDING_MARGIN
+    # ... and it does not make the car crawl: within 1.5 s of the start it is at 29.5 km/h.
+    assert min(r.ego_speed.min() for r in limited[75:]) >= 29.5 / 3.6
+    # The learned throttle asked for is recorded as asked; what ran was cut.
+    assert all(np.all(r.learned_throttle == 1.0) for r in limited)
+    assert min(r.throttle.min() for r in limited) < 0.5
+
+
+def test_the_learned_speed_limiter_leaves_a_slower_controller_alone(task):
+    limited = _limited_task(29.9, switching=task.config.switching)
+    free = LeftTurnTask(replace(task.config, episode=limited.config.episode))
+    action = 0.4 * 2 - 1  # a throttle of 0.4 settles well below 29.9 km/h
+    for a, b in zip(_drive(free, action, 400), _drive(limited, action, 400), strict=True):
+        assert b.ego_speed.max() < 29 / 3.6
+        np.testing.assert_array_equal(a.throttle, b.throttle)
+        np.testing.assert_array_equal(a.ego_speed, b.ego_speed)
+
+
+def test_the_learned_speed_limiter_keeps_the_action_checks():
+    task = _limited_task(29.9, switching="paper")
+    state = task.initial(task.draw_scenarios(0, np.arange(3), np.zeros(3, dtype=np.int64)))
+    for _ in range(100):  # full throttle up to the limiter's speed
+        state, record = task.step(state, np.ones(3))
+    assert record.ego_speed.min() > 29.5 / 3.6
+    cap = task.limit_speed(np.ones(3), record.ego_speed)
+    assert np.all(cap < 0.5)
+    state, record = task.step(state, np.array([5.0, np.nan, 1.0]))
+    # Out of range: still reported as clipped, and cut to the limiter's cap, not to 1.
+    assert record.action_clipped[0] and not record.action_clipped[2]
+    np.testing.assert_array_equal(record.throttle[[0, 2]], cap[[0, 2]])
+    # NaN is still refused by the logic, not turned into a throttle by the limiter.
+    assert task.reasons[record.reason[1]] == "invalid_learned_action"
+
+
+@pytest.mark.parametrize("bad", [float("nan"), 2.0, 500.0])
+def test_a_bad_speed_limiter_is_named(bad):
+    with pytest.raises(
+        ConfigError, match=r"controllers\.learned_speed_limiter_kmh.*" + str(bad)[:3]
+    ):
+        ControllerConfig(learned_speed_limiter_kmh=bad)
+    with pytest.raises(ConfigError, match="learned_speed_limiter_gain"):
+        ControllerConfig(learned_speed_limiter_gain=0.0)

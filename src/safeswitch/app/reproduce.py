@@ -165,6 +165,9 @@ def training_record(model_dir: str | Path) -> dict[str, Any]:
     constrained = config.constraints.active()
     if constrained:
         method += f", constrained ({', '.join(constrained)}: Lagrange multipliers, learning only)"
+    limiter = config.deployed_env.controllers.learned_speed_limiter_kmh
+    if limiter is not None:
+        method += f", its throttle through a speed limiter at {limiter:g} km/h"
     if config.deployed_env.switching != config.env.switching:
         method += (
             f"; trained under {config.env.switching}, deployed under "

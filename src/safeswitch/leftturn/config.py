@@ -46,6 +46,15 @@ class ControllerConfig:
         emergency_decel: ``a_max_lon``, the deceleration ``PID_b`` tracks and Eq. 3 uses
             [m/s²] (ours: above the 5 m/s² comfort limit — the Safety controller may sacrifice
             comfort — and well inside the tyres' 8.3 m/s²).
+        learned_speed_limiter_kmh: A speed limiter on the learned controller's throttle [km/h]
+            (ours, off by default; the paper has none): above ``cap = clip(u_ss(v_cap) +
+            gain · (v_cap − v), 0, 1)`` — ``u_ss`` the throttle that holds ``v_cap`` on a level
+            road — the learned throttle is cut to ``cap``, as a production car's speed limiter
+            (intelligent speed assistance) cuts the pedal. It is part of the learned
+            controller: the switching logic sees and judges the limited throttle, and braking
+            is never limited. ``None``: no limiter.
+        learned_speed_limiter_gain: Throttle taken off per m/s of speed towards and over the
+            limit (ours).
     """
 
     speed_limit_kmh: float = 25.0
@@ -56,9 +65,26 @@ class ControllerConfig:
     lane_pid: PIDGains = field(default_factory=lambda: PIDGains(0.2, 0.01, 0.020, -1.0, 1.0))
     lane_lookahead_m: float = 5.0
     emergency_decel: float = 6.0
+    learned_speed_limiter_kmh: float | None = None
+    learned_speed_limiter_gain: float = 1.0
 
     def __post_init__(self) -> None:
         o = "controllers"
+        limit = self.learned_speed_limiter_kmh
+        check(
+            limit is None or 5 <= limit <= 130,
+            o,
+            "learned_speed_limiter_kmh",
+            limit,
+            "must be None or in [5, 130] km/h",
+        )
+        check(
+            0 < self.learned_speed_limiter_gain <= 10,
+            o,
+            "learned_speed_limiter_gain",
+            self.learned_speed_limiter_gain,
+            "must be in (0, 10] per m/s",
+        )
         check(
             0 < self.speed_limit_kmh <= 130,
             o,

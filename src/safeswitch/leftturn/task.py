@@ -292,6 +292,13 @@ class LeftTurnTask:
         self._limits = EpisodeLimits(
             ep.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1]
         )
+        #: The learned controller's speed limiter (``None`` if off): its speed [m/s], the
+        #: throttle that holds that speed and the gain (see ControllerConfig).
+        self._limiter: tuple[float, float, float] | None = None
+        if ctrl.learned_speed_limiter_kmh is not None:
+            v_cap = ctrl.learned_speed_limiter_kmh / 3.6
+            hold = float(steady_state_throttle(config.vehicle, np.asarray(v_cap)))
+            self._limiter = (v_cap, hold, ctrl.learned_speed_limiter_gain)
 
     # -- pure functions -------------------------------------------------------------------
 
@@ -346,6 +353,15 @@ class LeftTurnTask:
         brake = c.controllers.emergency_decel * c.vehicle.mass / c.vehicle.max_brake_force
         ki = c.controllers.brake_pid.ki
         return min(brake, 1.0) / ki if ki > 0 else 0.0
+
+    def limit_speed(self, throttle: FloatArray, speed: FloatArray) -> FloatArray:
+        """The learned controller's speed limiter (``controllers.learned_speed_limiter_kmh``):
+        ``throttle`` no higher than the limiter's cap at ``speed`` (NaN stays NaN); without a
+        limiter, ``throttle`` unchanged."""
+        if self._limiter is None:
+            return throttle
+        v_cap, hold, gain = self._limiter
+        return np.minimum(throttle, np.clip(hold + gain * (v_cap - speed), 0.0, 1.0))
 
     @property
     def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -494,6 +510,15 @@ class LeftTurnTask:
         pid_lane = PIDState(*two[1:4])
         proposed, safe, fallback = two[4:7]
         both, in_charge = flags
+        cut_over_range = None
+        if self._limiter is not None:
+            # The learned controller's speed limiter cuts its finite throttle (NaN/inf is left
+            # for the logic to refuse); one above 1 that it cut still counts as clipped.
+            raw = proposed[:, 0].copy()
+            cut = self.limit_speed(raw, v.speed[:, 0])
+            limited = in_charge & np.isfinite(raw) & (cut < raw)
+            proposed[:, 0] = np.where(limited, cut, raw)
+            cut_over_range = limited & (raw > 1.0)
         # 2. The switching logic decides through the framework's one supervision step: the
         # proposal (learned while in charge, else PID_th), PID_b's brake as the safety action,
         # and the pedals held where they are in place of an invalid learned action (braking
@@ -566,7 +591,7 @@ class LeftTurnTask:
             controller=controller,
             both_at_intersection=both,
             learned_throttle=learned_throttle,
-            action_clipped=sup.clipped,
+            action_clipped=sup.clipped if cut_over_range is None else sup.clipped | cut_over_range,
             safety_brake=safety_brake,
             throttle=throttle,
             brake=brake,
