@@ -93,6 +93,8 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     assert evaluated_under["ppo-paper"] == "paper"  # trained under guarded, run under paper
     assert made["ppo-paper"].startswith("PPO from a random initialisation")
     assert "trained under guarded, deployed under paper" in made["ppo-paper"]
+    assert "speed limiter at 29.9 km/h" in made["ppo-certified"]
+    assert "speed limiter" not in made["ppo-paper"]  # trained without one
     assert made["ppo-paper-warm"].startswith("warm start (behaviour cloning of the planner")
     assert made["ppo-paper-scratch"].startswith("PPO from a random initialisation, 1,200,")
     story = tables(page)[1]  # the training curves beside what the paper says of its own

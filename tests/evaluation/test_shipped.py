@@ -103,6 +103,9 @@ def test_the_certified_policy_learned_from_a_random_start_to_clear_the_crossing(
     assert run["cleared_episodes"] >= 0.99 * EVAL["episodes"]
     assert run["mean_efficiency"] >= 0.80
     assert run["cut_episodes"] >= 0.20 * EVAL["episodes"]
+    # Its throttle goes through the speed limiter: never above the tolerated 30 km/h.
+    assert config.env.controllers.learned_speed_limiter_kmh == 29.9
+    assert run["speeding_episodes"] == 0 and run["max_speed_kmh"] <= 30.1
 
 
 # -- the paper's Section VI results, on the shipped policies ---------------------------------
