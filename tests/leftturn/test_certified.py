@@ -394,3 +394,56 @@ def test_invalid_learned_actions_add_no_collisions(scope, switching):
     assert invalid.invalid_steps.sum() > 10_000  # NaN ticks while the learned controller drove
     expected = int(alone.collision.sum())
     assert invalid.collision.sum() <= expected + 3 * np.sqrt(expected + 1) + 2
+
+
+# -- narrower certified zones for an ego behind a speed limiter ---------------------------------
+
+LIMITED = {"controllers": {"learned_speed_limiter_kmh": 29.9}}
+NARROW = {"certified": {"ego_max_lateral_m": 0.45, "zone_margin_m": 0.9}}
+
+
+@pytest.mark.parametrize("adversary", ["uniform", "bang_bang", "full_throttle", "enter_then_stop"])
+def test_behind_the_speed_limiter_no_throttle_takes_the_ego_045_m_off_its_route(adversary):
+    """What lets a training guard (configs/paper.yaml) assume ``ego_max_lateral_m`` 0.45 instead
+    of 0.6: the limited ego takes the turn at no more than 30 km/h, where ``PID_lka`` holds it
+    within 0.44 m whatever the throttle does — without the limiter, full throttle reaches 0.51 m."""
+    config = {"episode": {"learned_scope": "episode"}, **LIMITED}
+    task = LeftTurnTask(resolve_config(config, switching="none"))
+    for scenarios in scenarios_for(task, 1000):
+        batch = scenarios.ego_speed.shape[0]
+        result = rollout(task, scenarios, catalogue(task, batch, 0)[adversary]())
+        assert result.max_lateral.max() <= 0.45
+    free = LeftTurnTask(resolve_config({"episode": {"learned_scope": "episode"}}, switching="none"))
+    random, _ = scenarios_for(free, 1000)
+    assert (
+        rollout(free, random, catalogue(free, 1000, 0)["full_throttle"]()).max_lateral.max() > 0.45
+    )
+
+
+@pytest.mark.parametrize("switching", ["certified", "guarded"])
+@pytest.mark.parametrize("adversary", ["uniform", "full_throttle", "enter_then_stop", "creep"])
+def test_no_adversary_collides_behind_the_limiter_with_the_narrower_zones(switching, adversary):
+    config = {"episode": {"learned_scope": "episode"}, **LIMITED, **NARROW}
+    task = LeftTurnTask(resolve_config(config, switching=switching))
+    for scenarios in scenarios_for(task, 1000):
+        batch = scenarios.ego_speed.shape[0]
+        result = rollout(task, scenarios, catalogue(task, batch, 0)[adversary]())
+        assert result.collision.sum() == 0
+
+
+def test_the_narrower_zones_let_the_ego_follow_a_north_car_it_yielded_to_more_closely():
+    """Why a training guard narrows them: under `guarded` the planner (which plans around the
+    paper logic alone and enters right behind the north car it yielded to) is braked by the
+    filter; with the zones the limited ego needs, it keeps less of a gap and clears sooner."""
+    from safeswitch.evaluation.planner import Planner
+
+    runs = {}
+    for name, zones in (("wide", {}), ("narrow", NARROW)):
+        config = {"episode": {"learned_scope": "episode"}, **LIMITED, **zones}
+        task = LeftTurnTask(resolve_config(config, switching="guarded"))
+        random, _ = scenarios_for(task, 500)
+        runs[name] = rollout(task, random, Planner(task))
+    wide, narrow = runs["wide"], runs["narrow"]
+    assert wide.collision.sum() == 0 and narrow.collision.sum() == 0
+    assert np.nanmean(narrow.time_to_clear) < np.nanmean(wide.time_to_clear) - 0.2
+    assert np.nanmean(narrow.min_pet) < np.nanmean(wide.min_pet) - 0.3
