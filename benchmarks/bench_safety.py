@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import _common
+from safeswitch.core.config import to_dict
 from safeswitch.evaluation.adversaries import catalogue, noisy_cruise, with_invalid
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
@@ -101,18 +102,21 @@ def invalid_actions(count: int) -> list[dict[str, object]]:
 
 def sensible_drivers(count: int) -> list[dict[str, object]]:
     """Interventions when the driver is reasonable: PID_th alone, a cruise P-controller, and
-    the shipped paper policy (each under both logics)."""
+    the shipped paper policy (each under both logics; the policy with its own controllers,
+    the speed limiter on its throttle included)."""
     rows = []
     drivers = (
         ("rule (PID_th cruise)", "never"),
         ("cruise P-controller", "episode"),
         ("shipped paper policy", "episode"),
     )
+    shipped = load_policy("shipped").config.deployed_env.controllers
     for driver, scope in drivers:
         for switching in ("certified", "paper"):
-            task = LeftTurnTask(
-                resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
-            )
+            override: dict[str, object] = {"episode": {"learned_scope": scope}}
+            if driver.startswith("shipped"):
+                override["controllers"] = to_dict(shipped)
+            task = LeftTurnTask(resolve_config(override, switching=switching))
             scenarios = task.draw_scenarios(99, np.arange(count), np.zeros(count, int))
             if driver.startswith("shipped"):
                 policy = load_policy("shipped").as_policy()

@@ -13,8 +13,8 @@ import shutil
 import sys
 from pathlib import Path
 
+from safeswitch.app.train import train_and_plot
 from safeswitch.training.config import load_config
-from safeswitch.training.run import train
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = (
@@ -117,7 +117,7 @@ def main(argv: list[str]) -> int:
         if not from_runs:
             run = ROOT / "runs" / name
             shutil.rmtree(run, ignore_errors=True)
-            train(load_config(name), run, progress_bar=False)
+            train_and_plot(load_config(name), run, progress_bar=False)
         ship(name)
         print(f"shipped {name}")
     return 0
