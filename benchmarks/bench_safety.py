@@ -102,8 +102,8 @@ def invalid_actions(count: int) -> list[dict[str, object]]:
 
 def sensible_drivers(count: int) -> list[dict[str, object]]:
     """Interventions when the driver is reasonable: PID_th alone, a cruise P-controller, and
-    the shipped paper policy (each under both logics; the policy with its own controllers,
-    the speed limiter on its throttle included)."""
+    the shipped paper policy (each under both logics; the policy with its own controllers, so
+    one trained behind a speed limiter drives behind it)."""
     rows = []
     drivers = (
         ("rule (PID_th cruise)", "never"),
