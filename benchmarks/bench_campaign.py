@@ -10,13 +10,15 @@ episodes of the shipped policy.
 Run: ``python benchmarks/bench_campaign.py [--episodes 100000] [--controller rule]
 [--model shipped] [--million] [--json]``; writes ``benchmarks/results/campaign.json``
 (``campaign_learned.json`` with ``--controller learned``, the shipped policy;
-``campaign_learned_<model>.json`` with another ``--model``). Run it on an otherwise idle
+``campaign_learned_<model>.json`` with another ``--model``, a run directory's path separators
+as underscores). Run it on an otherwise idle
 machine: a second job on one of the two cores halves what two workers can give.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import statistics
 import sys
 import tempfile
@@ -96,7 +98,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     name = "campaign.json" if args.controller == "rule" else f"campaign_{args.controller}.json"
     if learned and args.model != "shipped":
-        name = f"campaign_learned_{args.model}.json"
+        # A run directory is a path: its separators become underscores in the file name.
+        slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", args.model.strip("/"))
+        name = f"campaign_learned_{slug}.json"
         result["model"] = args.model
     write_json(RESULTS.with_name(name), result)
     _common.emit(result, args.json)
