@@ -514,11 +514,11 @@ class LeftTurnTask:
         if self._limiter is not None:
             # The learned controller's speed limiter cuts its finite throttle (NaN/inf is left
             # for the logic to refuse); one above 1 that it cut still counts as clipped.
-            raw = proposed[:, 0].copy()
+            raw = proposed[:, 0]  # a view: the cut is written into the proposal in place
             cut = self.limit_speed(raw, v.speed[:, 0])
             limited = in_charge & np.isfinite(raw) & (cut < raw)
-            proposed[:, 0] = np.where(limited, cut, raw)
             cut_over_range = limited & (raw > 1.0)
+            raw[limited] = cut[limited]
         # 2. The switching logic decides through the framework's one supervision step: the
         # proposal (learned while in charge, else PID_th), PID_b's brake as the safety action,
         # and the pedals held where they are in place of an invalid learned action (braking
