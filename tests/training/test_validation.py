@@ -236,3 +236,87 @@ def test_a_run_resumed_from_before_selection_keys_keeps_its_best(tmp_path, crite
         validator._on_rollout_end()
         expected = 1024 if mean_return < 100.0 else 4096
         assert validator.state["best_timesteps"] == expected
+
+
+# where full throttle with no safety net collides in some scenarios, not all
+STRESS = {"episodes": 200, "seed": 5_000_011, "scenarios": {"arrival_offset_s": [-1.5, -0.5]}}
+
+
+def test_a_stress_set_counts_its_collisions_and_is_driven_only_for_a_would_be_best(tmp_path):
+    """``validation.stress``: a policy that would become the best is also driven on the
+    stress set and its collisions there count first; one that would not is not driven there
+    (its rank could only fall) and its row leaves the column blank."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    from safeswitch.training.validation import Validator
+
+    validation = {**SMALL["validation"], "criterion": "collisions_then_return", "stress": STRESS}
+    config = from_dict(TrainConfig, SMALL | {"validation": validation})
+    validator = Validator(config, tmp_path)
+    validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
+    validator._save_best = lambda: None  # type: ignore[method-assign]
+    stressed = {1024: 0, 3072: 2, 4096: 0}  # timesteps -> its collisions on the stress set
+    driven = []
+
+    def stress_collisions():
+        driven.append(validator.num_timesteps)
+        return stressed[validator.num_timesteps]
+
+    validator.stress_collisions = stress_collisions  # type: ignore[method-assign]
+    for k, mean_return in enumerate((100.0, 90.0, 120.0, 110.0)):
+        validator.validate = lambda r=mean_return: canned(mean_return=r)  # type: ignore[method-assign]
+        validator.num_timesteps = 1024 * (k + 1)
+        validator._on_rollout_end()
+    assert driven == [1024, 3072, 4096]  # 2048 (a lower return) never was
+    assert validator.state["best_timesteps"] == 4096  # 3072's return is higher, but it collided
+    assert validator.state["best_stress_collisions"] == 0
+    table = rows(tmp_path)
+    assert [r["stress_collisions"] for r in table] == ["0", "", "2", "0"]
+    assert [r["best"] for r in table] == ["1", "0", "0", "1"]
+
+
+def test_the_stress_set_drives_the_policy_on_its_own_scenarios(tmp_path):
+    """Its scenarios come from its own distribution and seed; its count is the collisions of
+    the deterministic policy there, as a rollout of its own finds them."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from safeswitch.evaluation.rollout import rollout
+    from safeswitch.leftturn.config import ScenarioConfig
+    from safeswitch.training.validation import Validator
+
+    config = from_dict(TrainConfig, SMALL | {
+        "env": {"switching": "none", "episode": {"learned_scope": "episode"}},
+        "validation": {**SMALL["validation"], "stress": STRESS}})  # fmt: skip
+    validator = Validator(config, tmp_path)
+    offsets = validator.stress_scenarios.arrival_offset
+    assert offsets.shape == (200,) and offsets.min() >= -1.5 and offsets.max() <= -0.5
+    assert validator.scenarios.arrival_offset.max() > 2.0  # the validation set keeps its own
+
+    def full_throttle(obs, state, tick):
+        return np.ones(state.batch_size)
+
+    validator._policy = lambda: SimpleNamespace(as_policy=lambda: full_throttle)  # type: ignore[method-assign]
+    band = dataclasses.replace(config.env, scenarios=ScenarioConfig(arrival_offset_s=(-1.5, -0.5)))
+    task = build_task(None, band)
+    scenarios = task.draw_scenarios(5_000_011, np.arange(200), np.zeros(200, int))
+    expected = int(np.count_nonzero(rollout(task, scenarios, full_throttle).collision))
+    assert 0 < expected < 200
+    assert validator.stress_collisions() == expected
+
+
+def test_a_bad_stress_set_is_named():
+    def stress(**given):
+        return SMALL | {"validation": {**SMALL["validation"], "stress": STRESS | given}}
+
+    with pytest.raises(ConfigError, match=r"validation\.stress\.seed .*2000003"):
+        from_dict(TrainConfig, stress(seed=2_000_003))
+    with pytest.raises(ConfigError, match=r"validation\.stress\.episodes"):
+        from_dict(TrainConfig, stress(episodes=0))
+    with pytest.raises(ConfigError, match=r"arrival_offset_s"):
+        from_dict(TrainConfig, stress(scenarios={"arrival_offset_s": [3.0, 1.8]}))
+    with pytest.raises(ConfigError, match=r"validation\.stress"):
+        from_dict(TrainConfig, SMALL | {"traffic": "light", "validation": {
+            **SMALL["validation"], "stress": STRESS}})  # fmt: skip

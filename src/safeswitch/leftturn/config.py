@@ -368,15 +368,26 @@ class ScenarioConfig:
         ego_speed_kmh: Ego's initial speed [km/h].
         north_speed_kmh: North car's (constant target) speed [km/h].
         arrival_offset_s: North arrival time minus ego arrival time [s].
+        focus_share: Share of scenarios whose arrival offset is drawn from
+            ``focus_arrival_offset_s`` instead (ours; 0: none, the distribution above). A
+            training distribution that dwells on where rare failures concentrate
+            (``train_scenarios`` of the training configuration); evaluations keep the plain one.
+        focus_arrival_offset_s: The focused range of the arrival offset [s].
     """
 
     ego_start_distance_m: tuple[float, float] = (32.0, 40.0)
     ego_speed_kmh: tuple[float, float] = (18.0, 25.0)
     north_speed_kmh: tuple[float, float] = (20.0, 32.0)
     arrival_offset_s: tuple[float, float] = (-3.0, 5.0)
+    focus_share: float = 0.0
+    focus_arrival_offset_s: tuple[float, float] = (1.8, 3.0)
 
     def __post_init__(self) -> None:
+        check(0.0 <= self.focus_share <= 1.0, "scenarios", "focus_share", self.focus_share,
+              "must be in [0, 1]")  # fmt: skip
         for f in fields(self):
+            if f.name == "focus_share":
+                continue
             low, high = getattr(self, f.name)
             check(
                 math.isfinite(low) and math.isfinite(high) and low <= high,

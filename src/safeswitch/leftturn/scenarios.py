@@ -108,17 +108,29 @@ NAMED_SCENARIOS: dict[str, dict[str, float]] = {
 assert tuple(NAMED_SCENARIOS) == SCENARIO_NAMES
 
 
+def scenario_uniforms(config: ScenarioConfig) -> int:
+    """Uniforms per scenario :func:`sample_scenarios` needs: 4, and a fifth that picks the
+    focused ones when ``focus_share`` is set (so the plain distribution's draws stay what they
+    were)."""
+    return 5 if config.focus_share > 0 else 4
+
+
 def sample_scenarios(config: ScenarioConfig, uniforms: FloatArray) -> Scenarios:
-    """Scenarios from uniforms ``[B, 4]`` (see :func:`counter_uniforms`)."""
+    """Scenarios from uniforms ``[B, scenario_uniforms(config)]`` (see
+    :func:`counter_uniforms`)."""
 
     def between(bounds: tuple[float, float], u: FloatArray) -> FloatArray:
         return bounds[0] + (bounds[1] - bounds[0]) * u
 
+    offset = between(config.arrival_offset_s, uniforms[:, 3])
+    if config.focus_share > 0:
+        focused = uniforms[:, 4] < config.focus_share
+        offset = np.where(focused, between(config.focus_arrival_offset_s, uniforms[:, 3]), offset)
     return Scenarios(
         ego_start_distance=between(config.ego_start_distance_m, uniforms[:, 0]),
         ego_speed=between(config.ego_speed_kmh, uniforms[:, 1]) / 3.6,
         north_speed=between(config.north_speed_kmh, uniforms[:, 2]) / 3.6,
-        arrival_offset=between(config.arrival_offset_s, uniforms[:, 3]),
+        arrival_offset=offset,
     )
 
 

@@ -50,6 +50,7 @@ from safeswitch.leftturn.scenarios import (
     counter_uniforms,
     named_scenarios,
     sample_scenarios,
+    scenario_uniforms,
 )
 from safeswitch.leftturn.switching import ConflictState
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
@@ -309,7 +310,8 @@ class LeftTurnTask:
         the configured named scenario, or draws from the random distribution."""
         if self.config.scenario is not None:
             return named_scenarios(self.config.scenario, len(env_ids))
-        return sample_scenarios(self.config.scenarios, counter_uniforms(seed, env_ids, episodes, 4))
+        draws = counter_uniforms(seed, env_ids, episodes, scenario_uniforms(self.config.scenarios))
+        return sample_scenarios(self.config.scenarios, draws)
 
     def initial(self, scenarios: Scenarios) -> TaskState:
         """Episodes at their start: both cars on their routes at the scenario's speeds."""

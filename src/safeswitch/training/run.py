@@ -340,7 +340,7 @@ def train(
     if checkpoint is not None:
         config = load_config(run / "config.yaml")
     vec = LeftTurnVecEnv(
-        config.n_envs, config=config.env, seed=config.seed, traffic=config.traffic_settings,
+        config.n_envs, config=config.train_env, seed=config.seed, traffic=config.traffic_settings,
         stagger=config.stagger_starts,
     )  # fmt: skip
     if checkpoint is not None:

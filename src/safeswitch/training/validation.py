@@ -11,6 +11,11 @@ statistics, written into a temporary folder and renamed); each validation is a r
 ``validation.csv`` with the evaluation's summary fields. At the end of the run the best policy
 becomes the run's ``model.zip`` and the last one is kept in ``last/``.
 
+With ``validation.stress`` set, a policy that would become the best is also driven on a
+second, narrower set of scenarios where rare collisions concentrate, and its collisions there
+count with the validation set's (``stress_collisions`` in ``validation.csv``; blank where it
+was not driven there: its rank could only have fallen).
+
 The oracle's plan of the validation scenarios is made once (the other vehicles never react to
 the ego's policy in the paper's scene; in traffic the oracle plans against the others' world
 without the ego), so a validation costs one batched rollout.
@@ -31,6 +36,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.evaluation.oracle import OraclePlan
+from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.task import build_task
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import TrainedPolicy
@@ -49,6 +55,7 @@ VALIDATION_FIELDS = (
     "safety_activation_steps",
     "clear_time_s",
     "speeding_episodes",
+    "stress_collisions",
     "best",
 )
 
@@ -73,6 +80,16 @@ class Validator(BaseCallback):
         ids = np.arange(v.episodes)
         self.scenarios = self.task.draw_scenarios(v.seed, ids, np.zeros(v.episodes, dtype=int))
         self._plan: OraclePlan | None = None
+        self.stress_task, self.stress_scenarios = None, None
+        if v.stress is not None:
+            stress = v.stress
+            self.stress_task = build_task(
+                None, dataclasses.replace(env, scenarios=stress.scenarios)
+            )
+            ids = np.arange(stress.episodes)
+            self.stress_scenarios = self.stress_task.draw_scenarios(
+                stress.seed, ids, np.zeros(stress.episodes, dtype=int)
+            )
         saved = run / "best" / "state.json"
         #: The best score and when it was reached (``None``: no validation yet).
         self.state: dict[str, Any] = (
@@ -101,12 +118,21 @@ class Validator(BaseCallback):
         if best is None and self.state["best_return"] is not None:  # a run from before keys
             best = self._old_key(self.state)
         better = best is None or tuple(key) > tuple(best)
+        if better and self.stress_task is not None:
+            summary["stress_collisions"] = self.stress_collisions()
+            key = self.key(summary)
+            better = best is None or tuple(key) > tuple(best)
         if better:
             self.state = {
                 "best_return": score,
                 "best_collisions": int(summary["collisions"]),
                 "best_timesteps": int(self.num_timesteps),
                 "best_key": list(key),
+                **(
+                    {"best_stress_collisions": int(summary["stress_collisions"])}
+                    if "stress_collisions" in summary
+                    else {}
+                ),
             }
             self._save_best()
         horizon = self.task.config.episode.horizon_s
@@ -128,6 +154,8 @@ class Validator(BaseCallback):
         self.logger.record("validation/efficiency", summary.get("mean_efficiency", np.nan))
         self.logger.record("validation/safety_activation_episodes",
                            summary["safety_activation_episodes"])  # fmt: skip
+        if "stress_collisions" in summary:
+            self.logger.record("validation/stress_collisions", summary["stress_collisions"])
 
     def _old_key(self, state: dict[str, Any]) -> list[float] | None:
         """The key of the best policy a run resumed from before keys recorded (its return and
@@ -141,23 +169,33 @@ class Validator(BaseCallback):
         return None
 
     def key(self, summary: dict[str, Any]) -> tuple[float, ...]:
-        """What ``validation.criterion`` maximises, from a validation's summary."""
+        """What ``validation.criterion`` maximises, from a validation's summary (its
+        collisions include the stress set's, where it was driven there)."""
         criterion = self.config.validation.criterion
         mean_return = float(summary["mean_return"])
+        collisions = float(summary["collisions"]) + float(summary.get("stress_collisions", 0))
         if criterion == "collisions_then_return":
-            return (-float(summary["collisions"]), mean_return)
+            return (-collisions, mean_return)
         if criterion == "constraints_then_return":
             horizon = self.task.config.episode.horizon_s
-            return (-float(summary["collisions"]), *constraint_key(self.config, summary, horizon))
+            return (-collisions, *constraint_key(self.config, summary, horizon))
         return (mean_return,)
+
+    def _policy(self) -> TrainedPolicy:
+        env = self.model.get_env()
+        normalizer = env if self.config.ppo.normalize_observations else None
+        return TrainedPolicy(self.model, normalizer, self.config, self.run)  # type: ignore[arg-type]
+
+    def stress_collisions(self) -> int:
+        """The current deterministic policy's collisions on the stress set."""
+        assert self.stress_task is not None and self.stress_scenarios is not None
+        result = rollout(self.stress_task, self.stress_scenarios, self._policy().as_policy())
+        return int(np.count_nonzero(result.collision))
 
     def validate(self) -> dict[str, Any]:
         """The current deterministic policy's summary on the validation scenarios."""
-        env = self.model.get_env()
-        normalizer = env if self.config.ppo.normalize_observations else None
-        policy = TrainedPolicy(self.model, normalizer, self.config, self.run)  # type: ignore[arg-type]
         result, self._plan = run_controller(
-            self.task, policy.as_policy(), self.scenarios, plan=self._plan, trace=False
+            self.task, self._policy().as_policy(), self.scenarios, plan=self._plan, trace=False
         )
         return summary_against_oracle(result, self._plan, self.task.config.episode.horizon_s)
 

@@ -124,14 +124,14 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
     began = time.perf_counter()
     # the training task, in traffic too (the clone then sees the traffic observation)
     traffic = config.traffic_settings
-    task = build_task(None, config.env, traffic=traffic)
+    task = build_task(None, config.train_env, traffic=traffic)
     planner: Policy = (
         GapPlanner(task, ws.gap_planner)
         if ws.teacher == "gap_planner"
         else Planner(task, ws.planner)
     )
     learner_task = build_task(
-        None, dataclasses.replace(config.env, switching="certified"), traffic=traffic
+        None, dataclasses.replace(config.train_env, switching="certified"), traffic=traffic
     )
     store: tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]] = ([], [])
     observations, labels = store

@@ -1,0 +1,102 @@
+"""The random scenario distribution, and a training distribution focused on a band of it."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from safeswitch.core.config import ConfigError, from_dict
+from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig
+from safeswitch.leftturn.task import build_task
+
+N = 20_000
+
+
+def draw(scenarios: ScenarioConfig, seed: int = 9):
+    task = build_task(None, LeftTurnConfig(scenarios=scenarios))
+    return task.draw_scenarios(seed, np.arange(N), np.zeros(N, dtype=np.int64))
+
+
+def test_a_focused_distribution_moves_only_the_focused_share_of_arrival_offsets():
+    plain = draw(ScenarioConfig())
+    focused = draw(ScenarioConfig(focus_share=0.25, focus_arrival_offset_s=(1.8, 3.0)))
+    # every other parameter is drawn from the same numbers
+    for name in ("ego_start_distance", "ego_speed", "north_speed"):
+        assert np.array_equal(getattr(plain, name), getattr(focused, name))
+    moved = focused.arrival_offset != plain.arrival_offset
+    assert abs(moved.mean() - 0.25) < 0.015
+    assert np.all((focused.arrival_offset[moved] >= 1.8) & (focused.arrival_offset[moved] <= 3.0))
+    in_band = (focused.arrival_offset >= 1.8) & (focused.arrival_offset <= 3.0)
+    # 15 % of the plain distribution (1.2 of its 8 s) plus the focused quarter
+    assert abs(in_band.mean() - (0.25 + 0.75 * 1.2 / 8.0)) < 0.015
+    assert plain.arrival_offset.min() >= -3.0 and plain.arrival_offset.max() <= 5.0
+
+
+def test_the_plain_distribution_is_what_it_was_before_the_focus_existed():
+    """``focus_share`` 0 draws four numbers per scenario, as before it was added: the
+    scenarios behind every recorded result stay the same."""
+    from safeswitch.leftturn.scenarios import counter_uniforms
+
+    u = counter_uniforms(9, np.arange(N), np.zeros(N, dtype=np.int64), 4)
+    plain = draw(ScenarioConfig())
+    assert np.array_equal(plain.arrival_offset, -3.0 + 8.0 * u[:, 3])
+    assert np.array_equal(plain.ego_start_distance, 32.0 + 8.0 * u[:, 0])
+
+
+@pytest.mark.parametrize(
+    ("given", "named"),
+    [({"focus_share": 1.5}, "focus_share"), ({"focus_share": float("nan")}, "focus_share"),
+     ({"focus_arrival_offset_s": (3.0, 1.8)}, "focus_arrival_offset_s")],
+)  # fmt: skip
+def test_a_bad_focus_is_named(given, named):
+    with pytest.raises(ConfigError, match=named):
+        ScenarioConfig(**given)
+
+
+def test_only_training_draws_from_train_scenarios(monkeypatch, tmp_path):
+    """``train_scenarios`` is the training environments' distribution; the validation and the
+    evaluations keep ``env.scenarios``."""
+    from safeswitch.training import run as run_module
+    from safeswitch.training.config import TrainConfig
+    from safeswitch.training.validation import Validator
+
+    config = from_dict(TrainConfig, {
+        "n_envs": 4, "timesteps": 1024, "train_only": {"scenarios": {"focus_share": 0.5}},
+        "validation": {"every": 1024, "episodes": 50}})  # fmt: skip
+    assert config.train_env.scenarios.focus_share == 0.5
+    assert config.env.scenarios.focus_share == 0.0
+    assert config.train_env == dataclasses.replace(
+        config.env, scenarios=dataclasses.replace(config.env.scenarios, focus_share=0.5)
+    )
+    assert Validator(config, tmp_path).task.config.scenarios.focus_share == 0.0
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def capture(n, *, config, **kwargs):
+        seen.append(config)
+        raise Stop
+
+    monkeypatch.setattr(run_module, "LeftTurnVecEnv", capture)
+    with pytest.raises(Stop):
+        run_module.train(config, tmp_path / "run", progress_bar=False)
+    assert seen[0].scenarios.focus_share == 0.5
+
+
+def test_train_only_changes_the_training_environment_alone_and_names_a_bad_key():
+    from safeswitch.training.config import TrainConfig
+
+    given = {"deploy_switching": "paper", "env": {"switching": "guarded"},
+             "train_only": {"paper": {"ttr_threshold_s": 2.3}}}  # fmt: skip
+    config = from_dict(TrainConfig, given)
+    assert config.train_env.paper.ttr_threshold_s == 2.3
+    assert config.train_env.switching == "guarded"  # the rest of env is kept, key by key
+    assert config.env.paper.ttr_threshold_s == 2.0
+    assert config.deployed_env.paper.ttr_threshold_s == 2.0
+    with pytest.raises(ConfigError, match=r"train_only\.paper.*'ttr_thresh'"):
+        from_dict(TrainConfig, {"train_only": {"paper": {"ttr_thresh": 2.3}}})
+    with pytest.raises(ConfigError, match=r"ttr_threshold_s.*-1"):
+        from_dict(TrainConfig, {"train_only": {"paper": {"ttr_threshold_s": -1.0}}})
+    with pytest.raises(ConfigError, match=r"train_only\.scenarios: expected a mapping"):
+        from_dict(TrainConfig, {"train_only": {"scenarios": 3}})
