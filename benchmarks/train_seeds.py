@@ -12,7 +12,7 @@ Every seed's row is reported (no seed is picked over another). 2 to 4 minutes pe
 two-core machine, by recipe.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
-[--deploy LOGIC] [--parallel N] [--out FILE]``; writes
+[--deploy LOGIC] [--parallel N] [--keep DIR] [--out FILE]``; writes
 ``benchmarks/results/train_seeds_<config>[_<switching>][_deployed_<logic>].json``.
 """
 
@@ -57,15 +57,21 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
     }
 
 
-def one_seed(config: TrainConfig, seed: int, deploy: str | None) -> dict[str, object]:
-    """Train ``config`` with ``seed`` (one torch thread) in a temporary run directory and
-    return its row (with ``deploy``: also evaluated under that logic)."""
+def one_seed(
+    config: TrainConfig, seed: int, deploy: str | None, keep: Path | None = None
+) -> dict[str, object]:
+    """Train ``config`` with ``seed`` (one torch thread) in a temporary run directory (or in
+    ``keep/seed_<seed>``) and return its row (with ``deploy``: also evaluated under that
+    logic)."""
     with tempfile.TemporaryDirectory() as tmp:
-        metrics = train(replace(config, seed=seed, torch_threads=1), tmp, progress_bar=False)
+        run = keep / f"seed_{seed}" if keep else Path(tmp)
+        metrics = train(replace(config, seed=seed, torch_threads=1), run, progress_bar=False)
         result = row(seed, metrics)
+        if keep:
+            result["run"] = str(run)
         if deploy:
             deployed = replace(config, deploy_switching=deploy)
-            e = evaluate_trained(load_policy(tmp), deployed, config.eval_episodes,
+            e = evaluate_trained(load_policy(run), deployed, config.eval_episodes,
                                  config.eval_seed)  # fmt: skip
             result["deployed"] = {"switching": deploy, **{k: e[k] for k in EVALUATED}}
     return result
@@ -87,13 +93,19 @@ def main(argv: list[str] | None = None) -> int:
         help="seeds trained at once, one process and one torch thread each (default 1: the "
         "wall times are then of a run alone on the machine)",
     )  # fmt: skip
+    parser.add_argument(
+        "--keep", type=Path,
+        help="keep each run as KEEP/seed_<seed> (for a campaign: bench_campaign.py --model)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     config = load_config(args.config)
     if args.switching:
         config = replace(config, env=replace(config.env, switching=args.switching),
                          deploy_switching=None)  # fmt: skip
     with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
-        futures = [pool.submit(one_seed, config, seed, args.deploy) for seed in args.seeds]
+        futures = [
+            pool.submit(one_seed, config, seed, args.deploy, args.keep) for seed in args.seeds
+        ]
         rows = []
         for future in futures:
             rows.append(future.result())

@@ -154,3 +154,73 @@ def test_the_task_switches_exactly_as_supervise_with_the_registered_logic(switch
     assert invalid > 0
     if switching != "none":
         assert interventions > 0  # the comparison covered the logic's own decisions
+
+
+OVERRULES = tuple(
+    f"guard:{r}:overrules_primary"
+    for r in (
+        "backup_stop",
+        "backup_clear",
+        "no_certified_backup_brake",
+        "no_certified_backup_clear",
+    )
+)
+
+
+def test_a_reason_in_end_on_reasons_ends_the_episode_on_its_first_tick():
+    """``episode.end_on_reasons``: the first tick on which one of those reasons' safety action
+    runs ends the episode (terminated, as a collision would, not truncated); every episode
+    without one plays exactly as without the setting."""
+    import dataclasses
+
+    from safeswitch.core.config import from_dict
+    from safeswitch.evaluation.rollout import rollout
+    from safeswitch.leftturn.config import LeftTurnConfig
+    from safeswitch.leftturn.task import build_task
+
+    plain_config = from_dict(
+        LeftTurnConfig, {"switching": "guarded", "episode": {"learned_scope": "episode"}}
+    )
+    ending_config = dataclasses.replace(
+        plain_config, episode=dataclasses.replace(plain_config.episode, end_on_reasons=OVERRULES)
+    )
+
+    def cruise(obs, state, tick):
+        return np.full(state.batch_size, 0.6)
+
+    def play(config):
+        task = build_task(None, config)
+        scenarios = task.draw_scenarios(3, np.arange(400), np.zeros(400, dtype=np.int64))
+        codes = [task.reasons.index(r) for r in OVERRULES]
+        first_overrule = np.full(400, -1)
+        ended = np.full(400, -1)
+        live = np.ones(400, dtype=bool)
+
+        def record(state, rec, tick):
+            hit = live & rec.safety_active & np.isin(rec.reason, codes) & (first_overrule < 0)
+            first_overrule[hit] = tick
+            stop = live & (rec.terminated | rec.truncated)
+            ended[stop & rec.terminated] = tick
+            live[stop] = False
+
+        return rollout(task, scenarios, cruise, record), first_overrule, ended
+
+    plain, overruled, _ = play(plain_config)
+    ending, overruled_too, ended = play(ending_config)
+    hit = overruled >= 0
+    assert 50 < hit.sum() < 400  # some episodes have an overrule, some do not
+    assert np.array_equal(overruled_too, overruled)  # the same up to the first one
+    assert np.array_equal(ended[hit], overruled[hit])  # which ends the episode
+    assert np.all(ended[~hit] == -1) and not ending.collision.any()
+    assert np.array_equal(ending.episode_return[~hit], plain.episode_return[~hit])
+    assert np.all(ending.ticks[hit] < plain.ticks[hit])
+
+
+def test_an_unknown_reason_to_end_on_is_named():
+    from safeswitch.core.config import from_dict
+    from safeswitch.leftturn.config import LeftTurnConfig
+    from safeswitch.leftturn.task import build_task
+
+    config = from_dict(LeftTurnConfig, {"episode": {"end_on_reasons": [OVERRULES[0]]}})
+    with pytest.raises(ValueError, match=r"end_on_reasons.*overrules_primary.*'paper'"):
+        build_task(None, config)  # the paper logic alone never overrules itself

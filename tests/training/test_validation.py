@@ -260,7 +260,7 @@ def test_a_stress_set_counts_its_collisions_and_is_driven_only_for_a_would_be_be
     stressed = {1024: 0, 3072: 2, 4096: 0}  # timesteps -> its collisions on the stress set
     driven = []
 
-    def stress_collisions():
+    def stress_collisions(still_better):
         driven.append(validator.num_timesteps)
         return stressed[validator.num_timesteps]
 
@@ -305,6 +305,48 @@ def test_the_stress_set_drives_the_policy_on_its_own_scenarios(tmp_path):
     expected = int(np.count_nonzero(rollout(task, scenarios, full_throttle).collision))
     assert 0 < expected < 200
     assert validator.stress_collisions() == expected
+
+
+def test_the_stress_set_stops_once_its_collisions_rule_the_policy_out(tmp_path, monkeypatch):
+    """Driven in chunks: a policy is driven on until ``still_better`` says its collisions so
+    far rule it out; the count is then the collisions of the chunks driven."""
+    from types import SimpleNamespace
+
+    from safeswitch.evaluation.rollout import rollout
+    from safeswitch.training import validation as module
+
+    monkeypatch.setattr(module, "STRESS_CHUNK", 40)
+    config = from_dict(TrainConfig, SMALL | {
+        "env": {"switching": "none", "episode": {"learned_scope": "episode"}},
+        "validation": {**SMALL["validation"], "stress": STRESS}})  # fmt: skip
+    validator = module.Validator(config, tmp_path)
+
+    def full_throttle(obs, state, tick):
+        return np.ones(state.batch_size)
+
+    validator._policy = lambda: SimpleNamespace(as_policy=lambda: full_throttle)  # type: ignore[method-assign]
+    per_chunk = [
+        int(np.count_nonzero(rollout(validator.stress_task,
+                                     validator.stress_scenarios.take(np.arange(k, k + 40)),
+                                     full_throttle).collision))
+        for k in range(0, 200, 40)
+    ]  # fmt: skip
+    assert sum(per_chunk) == validator.stress_collisions()
+    seen = []
+
+    def below(limit):
+        def still_better(collisions):
+            seen.append(collisions)
+            return collisions < limit
+
+        return still_better
+
+    found = validator.stress_collisions(below(1))
+    first = next(k for k, c in enumerate(per_chunk) if c > 0)
+    assert found == per_chunk[first] and len(seen) == first + 1
+    seen.clear()
+    assert validator.stress_collisions(below(10_000)) == sum(per_chunk)  # never ruled out
+    assert seen == list(np.cumsum(per_chunk))
 
 
 def test_a_bad_stress_set_is_named():

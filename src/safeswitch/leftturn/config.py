@@ -585,6 +585,12 @@ class EpisodeConfig:
             (ours; 1 = a decision every 20 ms tick, the paper's rate). The plant, the
             rule-based controllers and the switching logic keep their 50 Hz: the safety net
             acts on every tick.
+        end_on_reasons: Reasons of the switching logic whose safety action ends the episode
+            as a collision would (ours; none by default). For training alone (``train_only``):
+            under ``guarded`` the certified filter's overrules of the paper logic's own braking
+            (``guard:…:overrules_primary``) are where the paper logic alone would have stopped
+            the ego in the north car's path; ending the episode there gives the policy the
+            outcome it would meet deployed under ``paper``, without the crash.
     """
 
     dt: float = 0.02
@@ -593,6 +599,7 @@ class EpisodeConfig:
     learned_scope: LearnedScope = "window"
     conflict_margin_m: float = 0.3
     decision_interval: int = 1
+    end_on_reasons: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         o = "episode"

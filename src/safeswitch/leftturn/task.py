@@ -270,6 +270,15 @@ class LeftTurnTask:
         #: learned controller was not in charge; ``"learned"`` always means the learned action
         #: itself ran).
         self.reasons = (*reason_names(self.switching), RULE_IN_CHARGE)
+        ends = config.episode.end_on_reasons
+        unknown = sorted(set(ends) - set(self.reasons[1:-1]))
+        if unknown:
+            raise ValueError(
+                f"episode.end_on_reasons: {unknown} not reasons of the switching logic "
+                f"{config.switching!r} (its reasons: {', '.join(self.reasons[1:-1])})"
+            )
+        #: Per reason code: its safety action ends the episode (``episode.end_on_reasons``).
+        self._ends_episode = np.isin(np.array(self.reasons), ends) if ends else None
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
         ctrl = config.controllers
@@ -566,6 +575,9 @@ class LeftTurnTask:
         )  # fmt: skip
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
         collision, terminated, truncated, ego_cleared = ends
+        if self._ends_episode is not None:
+            ended = sup.safety_active & self._ends_episode[reason]
+            terminated, truncated = terminated | ended, truncated & ~ended
 
         new_state = self.make_state(
             TaskState(

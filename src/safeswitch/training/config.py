@@ -250,8 +250,11 @@ class StressConfig:
     campaign (under ``paper``: the north car arriving 1.8–3.0 s after the ego), so the
     validation also drives the policy on ``episodes`` scenarios drawn from that narrower
     distribution, and its collisions there count with the validation set's (the criteria's
-    first term). Only a policy that would otherwise become the best is driven there: its
-    collisions can only lower its rank, so the others need not be.
+    first term). Only a policy that would otherwise become the best is driven there (its
+    collisions can only lower its rank, so the others need not be), and only until its
+    collisions there rule it out (in chunks of 5,000). 20,000 scenarios: a policy that
+    collides in 5 of 10,000 of them shows none in 5,000 one time in twelve, in 20,000 one
+    time in 22,000.
 
     Attributes:
         episodes: Scenarios of the stress set.
@@ -261,7 +264,7 @@ class StressConfig:
             defaults, not the environment's).
     """
 
-    episodes: int = 5000
+    episodes: int = 20_000
     seed: int = 5_000_011
     scenarios: ScenarioConfig = field(default_factory=ScenarioConfig)
 
