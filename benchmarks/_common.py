@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+from pathlib import Path
 
 # One core: pin every numeric library before it is imported anywhere.
 for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -18,6 +19,22 @@ def machine() -> dict[str, object]:
         "cpus": os.cpu_count(),
         "threads": 1,
     }
+
+
+def write_json(path: Path, result: dict[str, object]) -> None:
+    """Write ``result`` as indented JSON to ``path`` whole: into a temporary file, renamed."""
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def publish(result: dict[str, object], out: Path | None, as_json: bool) -> bool:
+    """Write ``result`` to ``out`` (if given) and print it as JSON (if asked); returns whether
+    it was printed (the caller then prints no table)."""
+    if out is not None:
+        write_json(out, result)
+    emit(result, as_json)
+    return as_json
 
 
 def emit(result: dict[str, object], as_json: bool) -> None:

@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
-import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -233,9 +232,7 @@ def main() -> None:
         if "traffic" in previous:
             result["traffic"] = previous["traffic"]
     RESULTS.parent.mkdir(exist_ok=True)
-    tmp = RESULTS.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2) + "\n")
-    os.replace(tmp, RESULTS)
+    _common.write_json(RESULTS, result)
     _common.emit(result, args.json)
 
 

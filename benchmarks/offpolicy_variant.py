@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -153,9 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         "evaluation": test,
     }
     path = args.out or RESULTS / f"{args.algo}_variant.json"
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    _common.write_json(path, result)
     print(json.dumps({k: v for k, v in result.items() if k != "validation"}, indent=1))
     return 0
 

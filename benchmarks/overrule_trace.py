@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -84,12 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rows = [trace(run) for run in args.model]
     result = {"benchmark": "overrule_trace", **_common.machine(), "seed": SEED, "runs": rows}
-    if args.out:
-        tmp = args.out.with_suffix(".tmp")
-        tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-        os.replace(tmp, args.out)
-    if args.json:
-        _common.emit(result, True)
+    if _common.publish(result, args.out, args.json):
         return 0
     for row in rows:
         print(f"{row['model']}: {row['collisions_under_paper']} collisions under paper "

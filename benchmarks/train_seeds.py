@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
@@ -123,9 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     suffix = f"_{args.switching}" if args.switching else ""
     suffix += f"_deployed_{args.deploy}" if args.deploy else ""
     out = args.out or RESULTS / f"train_seeds_{name}{suffix}.json"
-    tmp_out = out.with_suffix(".tmp")
-    tmp_out.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp_out, out)
+    _common.write_json(out, result)
     print(f"wrote {out}")
     return 0
 

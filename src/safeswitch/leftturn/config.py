@@ -371,7 +371,8 @@ class ScenarioConfig:
         focus_share: Share of scenarios whose arrival offset is drawn from
             ``focus_arrival_offset_s`` instead (ours; 0: none, the distribution above). A
             training distribution that dwells on where rare failures concentrate
-            (``train_scenarios`` of the training configuration); evaluations keep the plain one.
+            (``train_only.scenarios`` of the training configuration); evaluations keep the plain
+            one.
         focus_arrival_offset_s: The focused range of the arrival offset [s].
     """
 

@@ -247,14 +247,14 @@ class StressConfig:
     A policy that collides once in 3,000 random scenarios shows no collision on a validation
     set of 1,000 — and a million-scenario campaign finds hundreds
     (docs/learning_experiments.md). Where the collisions concentrate is known from such a
-    campaign (under ``paper``: the north car arriving 1.8–3.0 s after the ego), so the
-    validation also drives the policy on ``episodes`` scenarios drawn from that narrower
-    distribution, and its collisions there count with the validation set's (the criteria's
-    first term). Only a policy that would otherwise become the best is driven there (its
-    collisions can only lower its rank, so the others need not be), and only until its
-    collisions there rule it out (in chunks of 5,000). 20,000 scenarios: a policy that
-    collides in 5 of 10,000 of them shows none in 5,000 one time in twelve, in 20,000 one
-    time in 22,000.
+    campaign (under ``paper``: the north car arriving 1.0–3.5 s after the ego, between
+    cutting and yielding), so the validation also drives the policy on ``episodes``
+    scenarios drawn from that narrower distribution, and its collisions there count with the
+    validation set's (the criteria's first term). Only a policy that would otherwise become
+    the best is driven there (its collisions can only lower its rank, so the others need not
+    be), and only until its collisions there rule it out (in chunks of 5,000). 20,000
+    scenarios: a policy that collides in 5 of 10,000 of them shows none in 5,000 one time in
+    twelve, in 20,000 one time in 22,000.
 
     Attributes:
         episodes: Scenarios of the stress set.
