@@ -21,17 +21,12 @@ def machine() -> dict[str, object]:
     }
 
 
-def write_json(path: Path, result: dict[str, object]) -> None:
-    """Write ``result`` as indented JSON to ``path`` whole: into a temporary file, renamed."""
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-
-
 def publish(result: dict[str, object], out: Path | None, as_json: bool) -> bool:
     """Write ``result`` to ``out`` (if given) and print it as JSON (if asked); returns whether
     it was printed (the caller then prints no table)."""
     if out is not None:
+        from safeswitch.io import write_json  # here: importing safeswitch waits for the pins
+
         write_json(out, result)
     emit(result, as_json)
     return as_json

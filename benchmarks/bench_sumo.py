@@ -43,6 +43,7 @@ import _common
 from safeswitch.app.evaluate import evaluate
 from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.rollout import rollout
+from safeswitch.io import write_json
 from safeswitch.leftturn import LeftTurnEnv
 from safeswitch.sumo.task import LeftTurnSumoEnv, sumo_task
 
@@ -232,7 +233,7 @@ def main() -> None:
         if "traffic" in previous:
             result["traffic"] = previous["traffic"]
     RESULTS.parent.mkdir(exist_ok=True)
-    _common.write_json(RESULTS, result)
+    write_json(RESULTS, result)
     _common.emit(result, args.json)
 
 

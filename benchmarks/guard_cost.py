@@ -36,7 +36,6 @@ from safeswitch.app.reproduce import EVAL_SEED
 from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.oracle import efficiency
 from safeswitch.evaluation.planner import Planner
-from safeswitch.io import write_json
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
 from safeswitch.training.policies import load_policy
@@ -102,9 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": _common.machine(),
         "rows": rows,
     }
-    write_json(RESULTS, report)
-    if args.json:
-        _common.emit(report, True)
+    if _common.publish(report, RESULTS, args.json):
         return 0
     print(f"{EPISODES} random scenarios, seed {EVAL_SEED}; PET: post-encroachment time")
     print(

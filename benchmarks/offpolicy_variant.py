@@ -38,6 +38,7 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 import _common
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
+from safeswitch.io import write_json
 from safeswitch.leftturn.task import build_task
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.config import load_config
@@ -152,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         "evaluation": test,
     }
     path = args.out or RESULTS / f"{args.algo}_variant.json"
-    _common.write_json(path, result)
+    write_json(path, result)
     print(json.dumps({k: v for k, v in result.items() if k != "validation"}, indent=1))
     return 0
 

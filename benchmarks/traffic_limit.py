@@ -31,7 +31,6 @@ from safeswitch.app.reproduce import EVAL_SEED
 from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.logic_limit import PaperLogicLimit
 from safeswitch.evaluation.oracle import efficiency
-from safeswitch.io import write_json
 from safeswitch.leftturn.task import build_task
 from safeswitch.training.policies import SHIPPED_DIR
 
@@ -130,9 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": _common.machine(),
         "densities": results,
     }
-    write_json(RESULTS, report)
-    if args.json:
-        _common.emit(report, True)
+    _common.publish(report, RESULTS, args.json)
     return 0
 
 

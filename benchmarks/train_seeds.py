@@ -27,6 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import _common
+from safeswitch.io import write_json
 from safeswitch.training.config import TrainConfig, load_config
 from safeswitch.training.policies import load_policy
 from safeswitch.training.run import evaluate_trained, train
@@ -122,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     suffix = f"_{args.switching}" if args.switching else ""
     suffix += f"_deployed_{args.deploy}" if args.deploy else ""
     out = args.out or RESULTS / f"train_seeds_{name}{suffix}.json"
-    _common.write_json(out, result)
+    write_json(out, result)
     print(f"wrote {out}")
     return 0
 
