@@ -5,9 +5,10 @@ import pytest
 
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
-from safeswitch.training.config import EnvTrainConfig, PPOConfig
+from safeswitch.training.config import EnvTrainConfig, PPOConfig, TrainConfig
 from safeswitch.training.shaping import (
     ClearTimePenalty,
+    CounterfactualPenalty,
     PenaltySchedule,
     ProgressShaping,
     ReasonPenalty,
@@ -259,3 +260,98 @@ def test_bad_reason_penalties_are_named():
         PPOConfig(reason_penalties_initial_scale=0.0)
     with pytest.raises(ConfigError, match="reason_penalties"):
         EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(reason_penalties={"x": -1.0}))
+
+
+def _episodes_hit(env, vec, actions, episodes, hit):
+    """``{(environment, episode)}`` on whose steps ``hit()`` held (after each step), with
+    ``actions`` held in every environment for its first ``episodes`` episodes; and the
+    rewards of every step."""
+    env.reset()
+    count = np.zeros(vec.num_envs, int)
+    hits, rewards = set(), []
+    while count.min() < episodes:
+        env.step_async(actions)
+        _, reward, done, _ = env.step_wait()
+        live = count < episodes
+        hits |= {(i, count[i]) for i in np.flatnonzero(hit() & live)}
+        rewards.append(np.where(live, reward, 0.0))
+        count += done
+    return hits, np.array(rewards)
+
+
+BAND = {  # where the paper logic's gap lies
+    "episode": {"learned_scope": "episode", "decision_interval": 5},
+    "scenarios": {"arrival_offset_s": [1.0, 3.5]},
+}
+
+
+def test_the_first_counterfactual_of_an_episode_is_the_episode_under_the_deployed_logic_alone():
+    """``ppo.counterfactual_penalty``: with a constant action per environment the guarded and
+    the paper-alone episodes are the same until the guard first intervenes, so the
+    counterfactual rolled from there is the paper-alone episode: the episodes whose first
+    counterfactual collides are exactly those that collide under ``paper`` alone (on the same
+    scenarios). The real episodes never collide, and the reward PPO sees differs from the
+    guarded one by the penalty on exactly the steps whose counterfactual collided."""
+    n, episodes, penalty = 64, 3, -1000.0
+    actions = np.linspace(-0.6, 1.0, n)[:, None]
+
+    def make(switching):
+        return LeftTurnVecEnv(n, switching=switching, seed=11, config=BAND)
+
+    paper = make("paper")
+    collided, _ = _episodes_hit(
+        paper, paper, actions, episodes, lambda: paper.last_record.collision
+    )
+    plain = make("guarded")
+    real, plain_rewards = _episodes_hit(
+        plain, plain, actions, episodes, lambda: plain.last_record.collision
+    )
+    env = CounterfactualPenalty(make("guarded"), penalty, 30.0, "paper")
+    env.reset()
+    count = np.zeros(n, int)
+    first: dict[tuple[int, int], bool] = {}  # (environment, episode) -> first one collided
+    for plain_reward in plain_rewards:
+        env.step_async(actions)
+        _, reward, done, _ = env.step_wait()
+        live = count < episodes
+        for i in np.flatnonzero(env.rolled & live):
+            first.setdefault((i, count[i]), bool(env.collided[i]))
+        extra = np.where(live, reward - plain_reward, 0.0)
+        np.testing.assert_allclose(extra, np.where(live & env.collided, penalty, 0.0), atol=1e-3)
+        count += done
+    assert len(collided) >= 2  # the comparison has collisions in it
+    assert {key for key, hit in first.items() if hit} == collided
+    assert not real
+    assert env.collisions >= len(collided) and env.rollouts > env.collisions
+
+
+def test_a_short_counterfactual_horizon_misses_collisions_beyond_it():
+    """The rollout stops at its horizon: rolled for 0.1 s only, it cannot see a collision
+    that the paper logic's braking brings about later."""
+    actions = np.linspace(-0.6, 1.0, 64)[:, None]
+    vec = LeftTurnVecEnv(64, switching="guarded", seed=11, config=BAND)
+    env = CounterfactualPenalty(vec, -1000.0, 0.1, "paper")
+    charged, _ = _episodes_hit(env, vec, actions, 3, lambda: env.collided)
+    assert not charged and env.rollouts > 0
+
+
+def test_bad_counterfactual_settings_are_named():
+    guarded = LeftTurnVecEnv(2, seed=1, switching="guarded")
+    with pytest.raises(ValueError, match=r"penalty=5\.0"):
+        CounterfactualPenalty(guarded, 5.0, 4.0, "paper")
+    with pytest.raises(ValueError, match=r"horizon_s=nan"):
+        CounterfactualPenalty(guarded, -1.0, float("nan"), "paper")
+    with pytest.raises(ValueError, match=r"'paper' has no 'guard:' reasons"):
+        CounterfactualPenalty(LeftTurnVecEnv(2, seed=1, switching="paper"), -1.0, 4.0, "paper")
+    with pytest.raises(TypeError, match="single-car left turn"):
+        CounterfactualPenalty(
+            LeftTurnVecEnv(2, seed=1, switching="guarded", traffic="light"), -1.0, 4.0, "paper"
+        )
+    with pytest.raises(ConfigError, match=r"counterfactual_penalty .*got 3"):
+        PPOConfig(counterfactual_penalty=3)
+    with pytest.raises(ConfigError, match=r"counterfactual_horizon_s .*got 0"):
+        PPOConfig(counterfactual_horizon_s=0)
+    with pytest.raises(ConfigError, match="counterfactual_penalty"):
+        EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(counterfactual_penalty=-1.0))
+    with pytest.raises(ConfigError, match="needs deploy_switching"):
+        TrainConfig(ppo=PPOConfig(counterfactual_penalty=-1.0), env={"switching": "guarded"})

@@ -87,6 +87,13 @@ class PPOConfig:
             added to the reward PPO learns from only (ours; 0: off): the paper's reward is
             all but indifferent to when the crossing is cleared; see
             :class:`safeswitch.training.shaping.ClearTimePenalty`.
+        counterfactual_penalty: Under ``guarded``: reward added, once per episode, to the
+            step on which the guard first intervened if the episode, rolled forward from that
+            step under the deployed logic alone (``deploy_switching``) with the learned action
+            held, collides (ours; 0: off). It charges the collisions the paper logic alone
+            would let through, and only those; see
+            :class:`safeswitch.training.shaping.CounterfactualPenalty`.
+        counterfactual_horizon_s: How far that counterfactual is rolled [s].
     """
 
     learning_rate: float = 2.5e-4
@@ -117,9 +124,17 @@ class PPOConfig:
     reason_penalties: dict[str, float] = field(default_factory=dict)
     reason_penalties_initial_scale: float = 1.0
     clear_time_penalty: float = 0.0
+    counterfactual_penalty: float = 0.0
+    counterfactual_horizon_s: float = 4.0
 
     def __post_init__(self) -> None:
         o = "ppo"
+        check(math.isfinite(self.counterfactual_penalty)
+              and -100_000 <= self.counterfactual_penalty <= 0, o, "counterfactual_penalty",
+              self.counterfactual_penalty, "must be in [-100000, 0]")  # fmt: skip
+        check(math.isfinite(self.counterfactual_horizon_s)
+              and 0.1 <= self.counterfactual_horizon_s <= 30, o, "counterfactual_horizon_s",
+              self.counterfactual_horizon_s, "must be in [0.1, 30] s")  # fmt: skip
         penalties = self.reason_penalties
         check(isinstance(penalties, dict) and all(isinstance(k, str) for k in penalties), o,
               "reason_penalties", penalties, "must map reason names to numbers")  # fmt: skip
@@ -510,6 +525,11 @@ class TrainConfig:
             check(self.deploy_switching in logic_names(), o, "deploy_switching",
                   self.deploy_switching,
                   f"must be null or a registered switching logic ({known})")  # fmt: skip
+        if self.ppo.counterfactual_penalty:
+            check(self.deploy_switching is not None and self.traffic is None, "ppo",
+                  "counterfactual_penalty", self.ppo.counterfactual_penalty,
+                  "rolls the single-car scene under deploy_switching: needs deploy_switching "
+                  "and no traffic")  # fmt: skip
         clear = self.constraints.clear_time
         if clear is not None:
             horizon = self.env.episode.horizon_s
@@ -689,6 +709,9 @@ class EnvTrainConfig:
         check(not self.ppo.reason_penalties, "ppo", "reason_penalties",
               self.ppo.reason_penalties, "are read from the left turn's records: must be empty "
               f"for env_id {self.env_id!r}")  # fmt: skip
+        check(self.ppo.counterfactual_penalty == 0, "ppo", "counterfactual_penalty",
+              self.ppo.counterfactual_penalty, "is read from the left turn's records: must be "
+              f"0 for env_id {self.env_id!r}")  # fmt: skip
         check(self.ppo.clear_time_penalty == 0, "ppo", "clear_time_penalty",
               self.ppo.clear_time_penalty, "is read from the left turn's records: must be 0 "
               f"for env_id {self.env_id!r}")  # fmt: skip

@@ -52,6 +52,8 @@ from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.shaping import (
     ClearTimePenalty,
+    CounterfactualLog,
+    CounterfactualPenalty,
     PenaltySchedule,
     ProgressShaping,
     ReasonPenalty,
@@ -81,10 +83,16 @@ class LearningEnv:
         vec: The batched left-turn environment.
         ppo: The configuration's ``ppo`` section (its learning-only settings and ``gamma``).
         constraints: The configuration's ``constraints`` section (default: none).
+        deploy_switching: The logic the policy is deployed under (the counterfactual
+            penalty's; needed only with ``ppo.counterfactual_penalty``).
     """
 
     def __init__(
-        self, vec: LeftTurnVecEnv, ppo: PPOConfig, constraints: ConstraintsConfig | None = None
+        self,
+        vec: LeftTurnVecEnv,
+        ppo: PPOConfig,
+        constraints: ConstraintsConfig | None = None,
+        deploy_switching: str | None = None,
     ) -> None:
         self.ppo = ppo
         self.shaped = (
@@ -94,6 +102,13 @@ class LearningEnv:
         self.charged = None
         if ppo.reason_penalties:
             env = self.charged = ReasonPenalty(env, ppo.reason_penalties)
+        self.counterfactual = None
+        if ppo.counterfactual_penalty:
+            if deploy_switching is None:
+                raise ValueError("ppo.counterfactual_penalty needs deploy_switching")
+            env = self.counterfactual = CounterfactualPenalty(
+                env, ppo.counterfactual_penalty, ppo.counterfactual_horizon_s, deploy_switching
+            )
         if ppo.clear_time_penalty:
             env = ClearTimePenalty(env, ppo.clear_time_penalty)
         self.constrained = None
@@ -111,6 +126,8 @@ class LearningEnv:
             )
         if self.charged is not None and ppo.reason_penalties_initial_scale != 1.0:
             out.append(PenaltySchedule(self.charged, ppo.reason_penalties_initial_scale))
+        if self.counterfactual is not None:
+            out.append(CounterfactualLog(self.counterfactual))
         if self.constrained is not None:
             out.append(ConstraintUpdate(self.constrained))
         return out
@@ -345,7 +362,7 @@ def train(
     )  # fmt: skip
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
-    learning = LearningEnv(vec, config.ppo, config.constraints)
+    learning = LearningEnv(vec, config.ppo, config.constraints, config.deploy_switching)
     if checkpoint is not None:
         learning.restore(checkpoint)
     env = normalized(learning.env, config, checkpoint)
