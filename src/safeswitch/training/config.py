@@ -87,10 +87,10 @@ class PPOConfig:
             added to the reward PPO learns from only (ours; 0: off): the paper's reward is
             all but indifferent to when the crossing is cleared; see
             :class:`safeswitch.training.shaping.ClearTimePenalty`.
-        counterfactual_penalty: Under ``guarded``: reward added, once per episode, to the
-            step on which the guard first intervened if the episode, rolled forward from that
-            step under the deployed logic alone (``deploy_switching``) with the learned action
-            held, collides (ours; 0: off). It charges the collisions the paper logic alone
+        counterfactual_penalty: Under ``guarded``: reward added to each step on which the
+            guard starts intervening if the episode, rolled forward from that step under the
+            deployed logic alone (``deploy_switching``) with the learned action held,
+            collides (ours; 0: off). It charges the collisions the paper logic alone
             would let through, and only those; see
             :class:`safeswitch.training.shaping.CounterfactualPenalty`.
         counterfactual_horizon_s: How far that counterfactual is rolled [s].
