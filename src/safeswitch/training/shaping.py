@@ -238,14 +238,14 @@ class CounterfactualPenalty(VecEnvWrapper):
     collision-free, so the policy never meets the collisions the paper logic alone lets
     through (it brakes an ego that has started across, to a stop inside the north car's
     path). Charging every tick on which the filter intervened (``ppo.reason_penalties``) is a
-    broad proxy: a constant cruise meets such an overrule in about half of the random
-    scenarios and collides under the paper logic in 0.15 % of them. This charges only the
-    ones that matter: on every step on which the guard starts intervening (any ``guard:…``
-    reason, after a step of the same episode without one), a copy of the episode as it was
-    at the start of that step is rolled forward under the deployed logic alone
-    (``switching``), the step's learned action held, for at most ``horizon_s`` or until
-    either car has left its conflict zone; if that copy collides, ``penalty`` is added to the
-    reward of the step. The real episode goes on under the guard, so training stays
+    broad proxy: a constant throttle of 0.6 meets such an overrule in 1,077 of 2,000 random
+    scenarios and collides under the paper logic alone in 1 (``benchmarks/overrule_breadth.py``).
+    This charges only the ones that matter: on every step on which the guard starts
+    intervening (any ``guard:…`` reason, after a step of the same episode without one), a copy
+    of the episode as it was at the start of that step is rolled forward under the deployed
+    logic alone (``switching``), the step's learned action held, for at most ``horizon_s`` or
+    until either car has left its conflict zone; if that copy collides, ``penalty`` is added
+    to the reward of the step. The real episode goes on under the guard, so training stays
     collision-free. The counterfactual is exact for the north car (its behaviour does not
     depend on the ego) and a model for the policy (its action held): an episode's first one
     *is* that episode under the deployed logic alone if the policy's action has been
