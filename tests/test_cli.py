@@ -1,6 +1,7 @@
 """What a new user meets on the command line: help, version, errors that name the problem
 (exit 2, one line, nothing lost), rounded output, strict JSON, configs by name, checkpoints."""
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -11,7 +12,7 @@ import yaml
 
 from safeswitch import __version__
 from safeswitch.cli import DEFAULT_CONFIG, main
-from safeswitch.core.config import from_dict
+from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.training.config import TrainConfig, load_config, packaged_config_names
 from safeswitch.training.policies import SHIPPED_DIR
 from safeswitch.training.run import train
@@ -52,6 +53,54 @@ def test_packaged_configs_by_name_and_the_default_is_the_papers_recipe(tmp_path,
     for name in packaged_config_names():  # every packaged recipe is valid, experiments too
         assert load_config(name).timesteps > 0, name
     assert load_config("experimental/scratch_shaped").ppo.progress_shaping == 5.0
+
+
+def test_a_config_with_a_base_is_its_base_with_the_values_it_names(tmp_path):
+    """``base:``: the base's values, this file's in place of them mapping by mapping (a nested
+    mapping changes only the keys it names; null, an empty mapping or a number replaces)."""
+    base = load_config("paper")
+    child = tmp_path / "child.yaml"
+    child.write_text(
+        "base: paper\n"
+        "seed: 7\n"
+        "ppo: {learning_rate_final: 0.0001, reason_penalties: {}, "
+        "reason_penalties_initial_scale: 1.0}\n"
+        "constraints: {clear_time: null}\n"
+        "env: {episode: {decision_interval: 2}}\n"
+    )
+    loaded = load_config(child)
+    assert loaded.seed == 7 and base.seed == 1
+    assert loaded.ppo.learning_rate_final == 1e-4
+    assert loaded.ppo.learning_rate == base.ppo.learning_rate  # kept: not named
+    assert loaded.ppo.reason_penalties == {} and base.ppo.reason_penalties  # emptied
+    assert loaded.constraints.clear_time is None and base.constraints.clear_time is not None
+    assert loaded.constraints.comfort == base.constraints.comfort
+    assert loaded.env.episode.decision_interval == 2
+    assert loaded.env.episode.learned_scope == base.env.episode.learned_scope
+    grandchild = tmp_path / "sub" / "grandchild.yaml"
+    grandchild.parent.mkdir()
+    grandchild.write_text("base: ../child.yaml\ntimesteps: 1000\n")  # beside the file
+    assert load_config(grandchild) == dataclasses.replace(loaded, timesteps=1000)
+
+
+def test_a_bad_base_is_named(tmp_path):
+    loop_a, loop_b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    loop_a.write_text("base: b.yaml\n")
+    loop_b.write_text("base: a.yaml\nseed: 3\n")
+    with pytest.raises(ConfigError, match=r"a\.yaml: base 'b\.yaml' comes back to itself"):
+        load_config(loop_b)
+    missing = tmp_path / "missing.yaml"
+    missing.write_text("base: no_such_recipe\n")
+    with pytest.raises(ConfigError, match=r"missing\.yaml: base 'no_such_recipe': no config"):
+        load_config(missing)
+    number = tmp_path / "number.yaml"
+    number.write_text("base: 3\n")
+    with pytest.raises(ConfigError, match=r"number\.yaml: base must name a configuration, got 3"):
+        load_config(number)
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("base: paper\nppo: {learning_rat: 0.1}\n")
+    with pytest.raises(ConfigError, match="learning_rat"):
+        load_config(typo)
 
 
 def test_bad_configs_are_refused_by_name(tmp_path, capsys):

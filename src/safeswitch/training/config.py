@@ -465,7 +465,8 @@ class TrainConfig:
         constraints: Constrained PPO: costs with self-adjusting multipliers (off by default).
         env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
         train_only: Changes of ``env`` for the training environments alone (ours; a mapping
-            merged into ``env``, key by key; ``null``: none). The validation and every
+            merged into ``env``, key by key, as ``base:`` merges (:func:`read_config`);
+            ``null``: none). The validation and every
             evaluation of the run keep ``env``. E.g. ``{scenarios: {focus_share: 0.25}}``: a
             training distribution that dwells on where rare failures concentrate;
             ``{paper: {ttr_threshold_s: 2.3}}``: train against a stricter trigger of the
@@ -578,12 +579,14 @@ class TrainConfig:
 
 
 def _merged(base: dict[str, Any], over: Any, where: str) -> dict[str, Any]:
-    """``base`` with ``over``'s values in place of its own, mapping by mapping."""
+    """``base`` with ``over``'s values in place of its own, mapping by mapping: a non-empty
+    nested mapping changes only the keys it names; any other value (an empty mapping
+    included) replaces the base's whole."""
     if not isinstance(over, dict):
         raise ConfigError(f"{where}: expected a mapping, got {over!r}")
     out = dict(base)
     for key, value in over.items():
-        if isinstance(value, dict) and isinstance(base.get(key), dict):
+        if isinstance(value, dict) and value and isinstance(base.get(key), dict):
             out[key] = _merged(base[key], value, f"{where}.{key}")
         else:
             out[key] = value
@@ -642,11 +645,47 @@ def _read_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
+#: The key with which a configuration names the one it changes (see :func:`read_config`).
+BASE_KEY = "base"
+
+
+def read_config(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """The mapping of a configuration file with its ``base`` resolved.
+
+    A configuration may start from another: ``base: NAME`` (a packaged configuration's name,
+    or a path, relative to the file that names it or to the working directory) takes every
+    value of that one, and this file's values replace its values mapping by mapping — a
+    nested mapping changes only the keys it names, anything else (a number, a list, ``null``,
+    an empty mapping) replaces the base's value whole. Bases may have bases.
+
+    Raises:
+        ConfigError: ``base`` is not a string, names no configuration, or the chain of bases
+            comes back to a file already in it (each names the file and the value).
+    """
+    path = Path(path)
+    data = _read_yaml(path)
+    base = data.pop(BASE_KEY, None)
+    if base is None:
+        return data
+    if not isinstance(base, str) or not base:
+        raise ConfigError(f"{path}: {BASE_KEY} must name a configuration, got {base!r}")
+    beside = path.parent / base
+    try:
+        base_path = beside if beside.is_file() else config_path(base)
+    except FileNotFoundError as exc:
+        raise ConfigError(f"{path}: {BASE_KEY} {base!r}: {exc}") from exc
+    chain = (*_chain, path.resolve())
+    if base_path.resolve() in chain:
+        names = " -> ".join(str(p) for p in (*chain, base_path.resolve()))
+        raise ConfigError(f"{path}: {BASE_KEY} {base!r} comes back to itself ({names})")
+    return _merged(read_config(base_path, chain), data, BASE_KEY)
+
+
 def load_config(path: str | Path) -> TrainConfig:
     """A :class:`TrainConfig` from a YAML file or a packaged name (missing keys keep their
-    defaults)."""
+    defaults; ``base:`` starts from another configuration, see :func:`read_config`)."""
     path = config_path(path)
-    return from_dict(TrainConfig, _read_yaml(path), where="")
+    return from_dict(TrainConfig, read_config(path), where="")
 
 
 def dump_config(config: TrainConfig) -> str:
@@ -730,8 +769,8 @@ class EnvTrainConfig:
 
 
 def load_env_config(path: str | Path) -> EnvTrainConfig:
-    """An :class:`EnvTrainConfig` from YAML."""
-    return from_dict(EnvTrainConfig, _read_yaml(config_path(path)))
+    """An :class:`EnvTrainConfig` from YAML (``base:`` as for :func:`read_config`)."""
+    return from_dict(EnvTrainConfig, read_config(config_path(path)))
 
 
 def dump_env_config(config: EnvTrainConfig) -> str:
@@ -742,7 +781,7 @@ def load_any_config(path: str | Path) -> TrainConfig | EnvTrainConfig:
     """A run's configuration: an :class:`EnvTrainConfig` if it names an ``env_id``, else the
     left turn's :class:`TrainConfig`."""
     path = config_path(path)
-    data = _read_yaml(path)
+    data = read_config(path)
     if isinstance(data, dict) and "env_id" in data:
         return from_dict(EnvTrainConfig, data)
     return from_dict(TrainConfig, data)
