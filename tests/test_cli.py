@@ -13,7 +13,12 @@ import yaml
 from safeswitch import __version__
 from safeswitch.cli import DEFAULT_CONFIG, main
 from safeswitch.core.config import ConfigError, from_dict
-from safeswitch.training.config import TrainConfig, load_config, packaged_config_names
+from safeswitch.training.config import (
+    TrainConfig,
+    config_path,
+    load_config,
+    packaged_config_names,
+)
 from safeswitch.training.policies import SHIPPED_DIR
 from safeswitch.training.run import train
 
@@ -81,6 +86,22 @@ def test_a_config_with_a_base_is_its_base_with_the_values_it_names(tmp_path):
     grandchild.parent.mkdir()
     grandchild.write_text("base: ../child.yaml\ntimesteps: 1000\n")  # beside the file
     assert load_config(grandchild) == dataclasses.replace(loaded, timesteps=1000)
+
+
+def test_an_experiment_starts_only_from_another_experiment():
+    """An experimental configuration is the record of runs in the learning log: its ``base``
+    chain may name only experimental configurations (themselves records, never edited), not
+    a shipped recipe, which changes when a better one ships."""
+    for name in packaged_config_names():
+        if not name.startswith("experimental/"):
+            continue
+        path = config_path(name)
+        while True:
+            base = yaml.safe_load(path.read_text()).get("base")
+            if base is None:
+                break
+            assert base.startswith("experimental/"), f"{name}: base {base!r}"
+            path = config_path(base)
 
 
 def test_a_bad_base_is_named(tmp_path):
