@@ -239,7 +239,8 @@ class CounterfactualPenalty(VecEnvWrapper):
     through (it brakes an ego that has started across, to a stop inside the north car's
     path). Charging every tick on which the filter intervened (``ppo.reason_penalties``) is a
     broad proxy: a constant throttle of 0.6 meets such an overrule in 1,077 of 2,000 random
-    scenarios and collides under the paper logic alone in 1 (``benchmarks/overrule_breadth.py``).
+    scenarios and collides under the paper logic alone in 1 (``benchmarks/overrule_trace.py
+    --throttle``).
     This charges only the ones that matter: on every step on which the guard starts
     intervening (any ``guard:…`` reason, after a step of the same episode without one), a copy
     of the episode as it was at the start of that step is rolled forward under the deployed
