@@ -41,7 +41,7 @@ def band(model: str, offsets: tuple[float, float], episodes: int, seed: int) -> 
     env = load_config(f"{run_of(model)}/config.yaml").env
     scenarios = dataclasses.replace(env.scenarios, arrival_offset_s=offsets)
     task = build_task(None, dataclasses.replace(env, switching="paper", scenarios=scenarios))
-    batch = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
+    batch = task.scenario_set(seed, episodes)
     collided = np.flatnonzero(rollout(task, batch, load_policy(model).as_policy()).collision)
     return {
         "model": model,

@@ -48,7 +48,7 @@ def adversarial_table(random_count: int) -> list[dict[str, object]]:
         task = LeftTurnTask(
             resolve_config({"episode": {"learned_scope": "episode"}}, switching=switching)
         )
-        random = task.draw_scenarios(2024, np.arange(random_count), np.zeros(random_count, int))
+        random = task.scenario_set(2024, random_count)
         trained = load_policy("shipped").act
         for name in catalogue(task, 1, 0, trained):
             row: dict[str, object] = {"switching": switching, "adversary": name}
@@ -82,7 +82,7 @@ def invalid_actions(count: int) -> list[dict[str, object]]:
             task = LeftTurnTask(
                 resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
             )
-            scenarios = task.draw_scenarios(99, np.arange(count), np.zeros(count, int))
+            scenarios = task.scenario_set(99, count)
             for name in ("uniform", "bang_bang", "creep", "noisy_cruise", "zero_throttle"):
                 alone = rollout(task, scenarios, catalogue(task, count, 5)[name]())
                 broken = with_invalid(catalogue(task, count, 5)[name](), np.random.default_rng(3))
@@ -117,7 +117,7 @@ def sensible_drivers(count: int) -> list[dict[str, object]]:
             if driver.startswith("shipped"):
                 override["controllers"] = to_dict(shipped)
             task = LeftTurnTask(resolve_config(override, switching=switching))
-            scenarios = task.draw_scenarios(99, np.arange(count), np.zeros(count, int))
+            scenarios = task.scenario_set(99, count)
             if driver.startswith("shipped"):
                 policy = load_policy("shipped").as_policy()
             else:
@@ -150,7 +150,7 @@ def assumption_breaks(count: int) -> list[dict[str, object]]:
         task = LeftTurnTask(
             resolve_config({"episode": {"learned_scope": "episode"}}, switching=switching)
         )
-        scenarios = task.draw_scenarios(5, np.arange(count), np.zeros(count, int))
+        scenarios = task.scenario_set(5, count)
         north_entry = task.conflict.zone_b[0]
         for label, (speed_kmh, before) in cases.items():
             triggered = np.zeros(count, dtype=bool)
@@ -201,7 +201,7 @@ def cost(rounds: int = 9) -> dict[str, float]:
         for name in SWITCHINGS
     }
     base = tasks["none"]
-    start = base.initial(base.draw_scenarios(0, np.arange(n), np.zeros(n, int)))
+    start = base.initial(base.scenario_set(0, n))
     near = start
     cruise = noisy_cruise(base, np.random.default_rng(0), sigma=0.0)
     for tick in range(150):

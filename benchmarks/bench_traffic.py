@@ -138,7 +138,7 @@ def safety(episodes: int, paper_episodes: int) -> list[dict[str, object]]:
                 None, {"episode": {"learned_scope": "episode"}}, traffic=preset,
                 switching=switching,
             )  # fmt: skip
-            random = task.draw_scenarios(2024, np.arange(count), np.zeros(count, int))
+            random = task.scenario_set(2024, count)
             cells = grid_cells(task)
             for name in catalogue(task, 1, 0):
                 row: dict[str, object] = {"preset": preset, "switching": switching,

@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     task = build_task(None, CERTIFIED, traffic={"preset": "train"})
     n = args.scenes
-    state = task.initial(task.draw_scenarios(11, np.arange(n), np.zeros(n, dtype=np.int64)))
+    state = task.initial(task.scenario_set(11, n))
     full = GapPlanner(task, GapPlannerConfig(foresight="full"))
     observed = GapPlanner(task, GapPlannerConfig(foresight="observed"))
     counts = dict.fromkeys(("decisions", "differ", "full_goes_observed_waits",

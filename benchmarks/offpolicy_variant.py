@@ -54,8 +54,7 @@ class Evaluation:
 
     def __init__(self, task: Any, env: VecNormalize, episodes: int, seed: int) -> None:
         self.task, self.env = task, env
-        ids = np.arange(episodes)
-        self.scenarios = task.draw_scenarios(seed, ids, np.zeros(episodes, dtype=int))
+        self.scenarios = task.scenario_set(seed, episodes)
         self.plan: Any = None
 
     def __call__(self, model: OffPolicyAlgorithm) -> dict[str, Any]:

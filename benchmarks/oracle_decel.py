@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     task = LeftTurnTask(resolve_config(switching="none", adas_penalty=False))
     n = args.episodes
-    scenarios = task.draw_scenarios(EVAL_SEED, np.arange(n), np.zeros(n, dtype=np.int64))
+    scenarios = task.scenario_set(EVAL_SEED, n)
     limits = OracleLimits.from_config(task.config)
     rows = []
     for decel in (limits.max_decel, 2.0, 1.2):

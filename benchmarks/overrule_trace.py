@@ -50,7 +50,7 @@ def drive(
     logic's reasons, which of them acted in each episode until it ended
     (``[episodes, reasons]``), and which episodes collided."""
     task = build_task(None, dataclasses.replace(env, switching=switching))
-    scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
+    scenarios = task.scenario_set(seed, episodes)
     hit = np.zeros((episodes, len(task.reasons)), dtype=bool)
     live = np.ones(episodes, dtype=bool)
 

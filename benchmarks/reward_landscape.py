@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     env = load_config(args.config).env
     task = build_task(None, env)
-    scenarios = task.draw_scenarios(SEED, np.arange(EPISODES), np.zeros(EPISODES, dtype=int))
+    scenarios = task.scenario_set(SEED, EPISODES)
     _, plan = run_controller(task, None, scenarios)
     limit = PaperLogicLimit(task, braking="throttle").times(scenarios)
     result = {

@@ -55,7 +55,7 @@ def scenario_set(
         raise ValueError(f"--scenarios must be 'paper' or 'random', got {which!r}")
     if episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {episodes}")
-    scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
+    scenarios = task.scenario_set(seed, episodes)
     return scenarios, [f"random-{i}" for i in range(episodes)]
 
 

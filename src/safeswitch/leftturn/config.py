@@ -387,8 +387,8 @@ class ScenarioConfig:
         check(0.0 <= self.focus_share <= 1.0, "scenarios", "focus_share", self.focus_share,
               "must be in [0, 1]")  # fmt: skip
         for f in fields(self):
-            if f.name == "focus_share":
-                continue
+            if isinstance(getattr(self, f.name), int | float):
+                continue  # a share (checked above); every other field is a range
             low, high = getattr(self, f.name)
             check(
                 math.isfinite(low) and math.isfinite(high) and low <= high,

@@ -322,6 +322,11 @@ class LeftTurnTask:
         draws = counter_uniforms(seed, env_ids, episodes, scenario_uniforms(self.config.scenarios))
         return sample_scenarios(self.config.scenarios, draws)
 
+    def scenario_set(self, seed: int, count: int) -> Scenarios:
+        """A fixed set of ``count`` scenarios under ``seed`` (the first episode of environments
+        ``0 … count-1``): what an evaluation, a validation or a benchmark drives."""
+        return self.draw_scenarios(seed, np.arange(count), np.zeros(count, dtype=np.int64))
+
     def initial(self, scenarios: Scenarios) -> TaskState:
         """Episodes at their start: both cars on their routes at the scenario's speeds."""
         c = self.config

@@ -336,7 +336,7 @@ def evaluate_trained(
     logic the policy is deployed under, with the oracle's efficiency (``safeswitch
     evaluate``'s fields)."""
     task = build_task(None, config.deployed_env, traffic=config.traffic_settings)
-    scenarios = task.draw_scenarios(seed, np.arange(episodes), np.zeros(episodes, dtype=int))
+    scenarios = task.scenario_set(seed, episodes)
     result, plan = run_controller(task, policy.as_policy(), scenarios, trace=False)
     return summary_against_oracle(result, plan, task.config.episode.horizon_s)
 

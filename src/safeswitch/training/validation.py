@@ -84,8 +84,7 @@ class Validator(BaseCallback):
         if v.switching is not None:
             env = dataclasses.replace(env, switching=v.switching)
         self.task = build_task(None, env, traffic=config.traffic_settings)
-        ids = np.arange(v.episodes)
-        self.scenarios = self.task.draw_scenarios(v.seed, ids, np.zeros(v.episodes, dtype=int))
+        self.scenarios = self.task.scenario_set(v.seed, v.episodes)
         self._plan: OraclePlan | None = None
         self.stress_task, self.stress_scenarios = None, None
         if v.stress is not None:
@@ -93,10 +92,7 @@ class Validator(BaseCallback):
             self.stress_task = build_task(
                 None, dataclasses.replace(env, scenarios=stress.scenarios)
             )
-            ids = np.arange(stress.episodes)
-            self.stress_scenarios = self.stress_task.draw_scenarios(
-                stress.seed, ids, np.zeros(stress.episodes, dtype=int)
-            )
+            self.stress_scenarios = self.stress_task.scenario_set(stress.seed, stress.episodes)
         saved = run / "best" / "state.json"
         #: The best score and when it was reached (``None``: no validation yet).
         self.state: dict[str, Any] = (
