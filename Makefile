@@ -7,7 +7,7 @@ PIP := $(PY) -m pip
 TORCH_PIN ?= torch==2.13.0
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test bench lint clean
+.PHONY: venv demo test test-slow test-all bench lint clean
 
 venv: $(STAMP)
 
@@ -21,8 +21,19 @@ $(STAMP): pyproject.toml Makefile
 demo: venv
 	$(VENV)/bin/safeswitch demo
 
+# Tests run on both cores (pytest-xdist). `make test` is the fast tier (within 5 minutes on two
+# cores); `make test-slow` runs the long ones (training, campaigns, the report, large safety
+# sweeps); CI runs both.
+PYTEST := $(PY) -m pytest -q -n 2
+
 test: venv
-	$(PY) -m pytest -q
+	$(PYTEST) -m "not slow"
+
+test-slow: venv
+	$(PYTEST) -m slow
+
+test-all: venv
+	$(PYTEST)
 
 bench: venv
 	$(PY) benchmarks/bench_sim.py

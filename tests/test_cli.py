@@ -249,6 +249,7 @@ def test_render_writes_an_animation_of_one_episode(tmp_path, capsys):
     assert "--overwrite" in error_line(capsys)
 
 
+@pytest.mark.slow
 def test_evaluate_in_traffic_and_on_sumo(capsys):
     """``--traffic`` and ``--sim`` reach the evaluation and its summary; a bad preset is one
     error line naming it."""

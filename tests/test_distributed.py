@@ -26,6 +26,7 @@ def no_ray_left_behind():
     assert ray_processes() == []
 
 
+@pytest.mark.slow
 def test_one_worker_and_two_give_identical_summaries_and_resume_loses_nothing(tmp_path):
     cells = [Cell("rule"), Cell("planner", switching="certified")]
     space = Space("random", 600, 11)
@@ -117,6 +118,7 @@ def test_no_ray_and_an_unreachable_cluster_are_clear_errors(monkeypatch, capsys,
     assert not (tmp_path / "never").exists()  # nothing written for a campaign that never ran
 
 
+@pytest.mark.slow
 def test_falsification_finds_the_paper_logics_failures_far_more_often_than_random(tmp_path):
     args = ["falsify", "--controller", "rule", "--budget", "4000", "--generation", "500",
             "--workers", "2", "--out", str(tmp_path / "f"), "--no-progress"]  # fmt: skip
@@ -137,6 +139,7 @@ def test_falsification_finds_the_paper_logics_failures_far_more_often_than_rando
         assert method["failures"] == 0 and method["min_separation_m"] > 0
 
 
+@pytest.mark.slow
 def test_falsification_finds_a_policys_rare_safety_actions_more_often_than_random(tmp_path):
     """The shipped policy needs the Safety controller in about 1 % of random scenarios, on a
     thin band of arrival offsets at the boundary between crossing first and giving way. Ranked
@@ -157,6 +160,7 @@ def test_falsification_finds_a_policys_rare_safety_actions_more_often_than_rando
     assert max(offsets) - min(offsets) < 1.0
 
 
+@pytest.mark.slow
 def test_a_sweep_trains_seeds_in_parallel_into_normal_run_directories(tmp_path, capsys):
     config = tmp_path / "tiny.yaml"
     config.write_text(

@@ -98,6 +98,7 @@ def test_vec_wrapper_decides_as_the_single_env_wrapper_per_environment():
                 env.reset()
 
 
+@pytest.mark.slow
 def test_sb3_ppo_and_sac_train_through_both_wrappers_without_a_crash():
     from stable_baselines3 import PPO, SAC
 

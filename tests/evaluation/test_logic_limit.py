@@ -128,6 +128,7 @@ def traffic():
     }
 
 
+@pytest.mark.slow
 def test_in_traffic_the_bound_without_the_logic_is_below_the_multi_conflict_oracle(traffic):
     """The oracle is one feasible plan (brake, then drive) around every occupied zone; the
     reachable set knows every plan, so it is never slower, and mostly within the grid."""

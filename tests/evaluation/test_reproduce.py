@@ -57,6 +57,7 @@ def tables(page):
     return parser.tables
 
 
+@pytest.mark.slow
 def test_the_report_embeds_every_figure_and_animation_it_lists(report):
     summary = json.loads((report / "summary.json").read_text())
     page = (report / "report.html").read_text()
@@ -82,6 +83,7 @@ def test_the_report_embeds_every_figure_and_animation_it_lists(report):
             assert gif.n_frames >= 50  # an animation of the whole episode, not a still
 
 
+@pytest.mark.slow
 def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report):
     page = (report / "report.html").read_text()
     for name, _ in DEFINITIONS:
@@ -105,6 +107,7 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     assert page.count("reproduced:") == 4
 
 
+@pytest.mark.slow
 def test_a_collision_is_shown_in_every_table_and_figure_caption(report):
     """The unshielded policy collides in yield1 and yield2 (raw CSV); the report must say so
     wherever those episodes appear, and say "never cleared" rather than a number."""
@@ -132,6 +135,7 @@ def test_a_collision_is_shown_in_every_table_and_figure_caption(report):
     assert not re.search(r"\bnan\b", (report / "report.md").read_text(), re.IGNORECASE)
 
 
+@pytest.mark.slow
 def test_the_raw_results_hold_one_row_per_episode(report):
     summary = json.loads((report / "summary.json").read_text())
     assert set(summary["controllers"]) == {e.name for e in ENTRIES}
@@ -158,6 +162,7 @@ def test_the_raw_results_hold_one_row_per_episode(report):
         assert traffic[preset, "ppo-traffic-certified", "certified"]["collisions"] == 0
 
 
+@pytest.mark.slow
 def test_reproduce_refuses_to_overwrite_a_report_without_overwrite(report, capsys):
     args = ["reproduce", "--quick", "--out", str(report), "--episodes", "2"]
     assert main(args) == 2

@@ -195,6 +195,7 @@ def test_the_traffic_policies_were_trained_in_traffic_as_clones_of_the_gap_plann
     assert m["training"]["collisions"] == 0 and m["warm_start"]["collisions"] == 0
 
 
+@pytest.mark.slow
 def test_the_certified_traffic_policy_meets_its_targets_on_the_test_family(traffic_runs):
     """The issue's targets in traffic: no collision, the safety action in at most 5 % of the
     episodes; and it clears more scenes than the rule under the same filter, which leans on
@@ -208,6 +209,7 @@ def test_the_certified_traffic_policy_meets_its_targets_on_the_test_family(traff
     assert ours["comfort_violation_fraction"] <= 0.01
 
 
+@pytest.mark.slow
 def test_the_paper_traffic_policy_collides_far_less_than_the_rule_under_that_logic(traffic_runs):
     """Under the paper logic (a heuristic) collisions stay possible in traffic; the policy that
     waits for the gaps the certified filter would accept has a fraction of the rule's."""

@@ -38,12 +38,14 @@ def drive():
     return drive_scenes()
 
 
+@pytest.mark.slow
 def test_the_certified_filter_never_acts_on_it(drive):
     _, result, _, _, _ = drive
     assert result.collision.sum() == 0
     assert np.all(result.safety_steps == 0)
 
 
+@pytest.mark.slow
 def test_it_clears_where_a_gap_comes_and_waits_before_every_crossing_zone_otherwise(drive):
     planner, result, progress, going, _ = drive
     cleared = np.isfinite(result.time_to_clear)
@@ -57,6 +59,7 @@ def test_it_clears_where_a_gap_comes_and_waits_before_every_crossing_zone_otherw
             assert progress[:, b].max() <= planner.first_entry - 0.5  # stopped short of it
 
 
+@pytest.mark.slow
 def test_a_wait_closes_the_throttle_near_its_stop(drive):
     """Within ``coast_band_m`` of where a wait stops the throttle is closed (-1), not the
     throttle of a walking pace that would creep on into the filter's stop."""
@@ -70,6 +73,7 @@ def test_a_wait_closes_the_throttle_near_its_stop(drive):
     assert np.any(actions[far] > -1.0)  # further back it tracks its approach speed
 
 
+@pytest.mark.slow
 def test_a_go_margin_starts_no_sooner_and_the_filter_still_never_acts(drive):
     """``go_margin_s``: a drive starts only if it would also pass begun later; until the
     planner without the margin first goes both drive alike, so the margin never goes sooner."""

@@ -56,6 +56,7 @@ def test_the_wrapper_records_and_penalises_every_safety_step():
     assert env.unwrapped.vehicle.on_road
 
 
+@pytest.mark.slow
 def test_train_and_evaluate_any_registered_env(tmp_path, capsys):
     run = tmp_path / "run"
     args = ["train", "--env", safeswitch.HIGHWAY_ENV_ID, "--switching", "ttc", "--timesteps",

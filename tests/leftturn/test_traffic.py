@@ -341,6 +341,7 @@ def test_unknown_preset_by_name():
 # -- the switching logics --------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["light", "heavy", "test"])
 def test_certified_never_collides_in_traffic(preset):
     """The certificate against every conflicting vehicle (and the ones still to come) holds

@@ -70,6 +70,7 @@ def test_the_paper_policy_does_on_sumo_what_it_does_on_ours(task, name):
     assert not task.assumption_breaks
 
 
+@pytest.mark.slow
 def test_certified_never_collides_on_sumo():
     """Adversaries drive whole episodes of random scenarios on SUMO under the certified
     logic: no collision, by our check or SUMO's."""
@@ -176,6 +177,7 @@ def _alive(pid):
         return handle.read().split()[2] != "Z"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["interrupt", "kill"])
 def test_no_worker_outlives_a_dying_parent(how):
     """The parent is interrupted (Ctrl-C) or killed outright mid-run: its SUMO workers end."""
