@@ -2,6 +2,7 @@
 down again: no Ray process is left behind)."""
 
 import json
+import os
 import subprocess
 import time
 
@@ -16,8 +17,17 @@ pytest.importorskip("ray")
 
 
 def ray_processes():
-    found = subprocess.run(["pgrep", "-f", "raylet|gcs_server"], capture_output=True, text=True)
-    return [line for line in found.stdout.split() if line]
+    """The Ray head processes this process started (its children: a local cluster's
+    ``gcs_server`` and ``raylet``; tests on another pytest-xdist worker start their own)."""
+    listing = subprocess.run(["ps", "-eo", "pid,ppid,args"], capture_output=True, text=True)
+    mine = str(os.getpid())
+    return [
+        fields[0]
+        for fields in (line.split(None, 2) for line in listing.stdout.splitlines()[1:])
+        if len(fields) == 3
+        and fields[1] == mine
+        and any(name in fields[2] for name in ("raylet/raylet", "gcs/gcs_server"))
+    ]
 
 
 @pytest.fixture(autouse=True)
@@ -57,22 +67,34 @@ def test_one_worker_and_two_give_identical_summaries_and_resume_loses_nothing(tm
 
 
 def test_a_crashing_shard_is_reported_and_the_rest_kept(tmp_path, capsys):
+    """A shard that fails at run time (here: a grid scenario whose ego would start before its
+    route does) is reported with its cell and episode range; every other shard is kept."""
+    args = ["campaign", "--controller", "rule", "planner", "--scenarios", "grid", "--grid",
+            "ego_start_distance_m=36,38,300", "arrival_offset_s=0", "--shard-size", "1",
+            "--workers", "2", "--out", str(tmp_path / "c"), "--json"]  # fmt: skip
+    assert main(args) == 1
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    for cell in ("rule", "planner"):
+        assert not summary["cells"][cell]["complete"] and summary["cells"][cell]["episodes"] == 2
+    failures = summary["failures"]
+    assert [(f["cell"], f["episodes"]) for f in failures] == [("planner", [2, 3]),
+                                                             ("rule", [2, 3])]  # fmt: skip
+    assert "starts a car before the start of its route" in failures[0]["error"]
+    assert "shard 2 of rule (episodes 2–3, seed 0) failed" in captured.err
+    assert captured.err.startswith("campaign: 2 cell(s) × 3 shard(s)")  # the plan came first
+
+
+def test_a_policy_that_cannot_load_is_refused_before_anything_is_written(tmp_path, capsys):
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "model.zip").write_bytes(b"not a zip")
     (broken / "config.yaml").write_text("seed: 3\n")
     args = ["campaign", "--controller", "rule", "learned", "--model", str(broken),
-            "--episodes", "300", "--shard-size", "150", "--workers", "2", "--out",
-            str(tmp_path / "c"), "--json"]  # fmt: skip
-    assert main(args) == 1
-    captured = capsys.readouterr()
-    summary = json.loads(captured.out)
-    assert summary["cells"]["rule"]["complete"] and summary["cells"]["rule"]["episodes"] == 300
-    assert not summary["cells"]["learned-broken"]["complete"]
-    failures = summary["failures"]
-    assert [f["episodes"] for f in failures] == [[0, 150], [150, 300]]
-    assert "not a readable SB3 model" in failures[0]["error"]
-    assert "shard 0 of learned-broken (episodes 0–150, seed 0) failed" in captured.err
+            "--episodes", "300", "--workers", "2", "--out", str(tmp_path / "c")]  # fmt: skip
+    assert main(args) == 2
+    assert "not a readable SB3 model" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
 
 
 def test_grids_are_checked_and_generated_lazily():
@@ -186,3 +208,27 @@ def test_a_sweep_trains_seeds_in_parallel_into_normal_run_directories(tmp_path, 
     assert "| gamma=0.99_seed1 |" in (tmp_path / "s" / "sweep.md").read_text()
     # a second call reuses the finished runs
     assert main([*args[:-2], "--workers", "0", "--out", str(tmp_path / "s")]) == 0
+
+
+def test_a_cluster_takes_its_tasks_lazily_within_a_window():
+    """Arguments are drawn from the iterator only as the window frees up: a campaign of any
+    length holds a bounded number of shards, here and on the cluster."""
+    from safeswitch.progress import format_duration
+
+    drawn = []
+
+    def arguments():
+        for i in range(60):
+            drawn.append(i)
+            yield (float(i),)
+
+    handed = []
+    with cluster(2) as where:
+        where.map(
+            format_duration, arguments(), lambda j, r: handed.append((j, r, len(drawn))),
+            lambda j, e: pytest.fail(str(e)), window=3,
+        )  # fmt: skip
+    assert sorted(j for j, _, _ in handed) == list(range(60))
+    assert all(r == format_duration(float(j)) for j, r, _ in handed)
+    for k, (_, _, seen) in enumerate(handed):
+        assert seen <= k + 3  # never more than the window ahead of what was handed back

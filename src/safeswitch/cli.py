@@ -7,17 +7,59 @@ import json
 import sys
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
+from typing import Any, NoReturn
 
 from safeswitch import __version__
 
-#: The configuration ``safeswitch train`` uses without ``--config``: the paper's recipe.
+#: The configuration ``safeswitch train`` uses without ``--config`` (kept in step with
+#: :data:`safeswitch.training.config.DEFAULT_CONFIG`, which importing here would load numba).
 DEFAULT_CONFIG = "paper_scratch"
 LEFT_TURN = "safeswitch/LeftTurn-v0"
 
 
 class UsageError(ValueError):
     """A combination of options that cannot work; the message says which."""
+
+
+#: The largest seed (NumPy's legacy seeding, which SB3 uses, takes 32 bits).
+SEED_MAX = 2**32 - 1
+
+
+def seed_value(text: str) -> int:
+    """An argparse type: a seed, an integer in ``[0, 2**32 - 1]`` (every command takes the same;
+    a negative seed would otherwise be wrapped modulo 2**64 by one command and refused by
+    another)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"{value} is not in [0, 2**32 - 1]")
+    return value
+
+
+def at_least(low: int) -> Callable[[str], int]:
+    """An argparse type: an integer no smaller than ``low`` (checked before anything runs)."""
+
+    def value(text: str) -> int:
+        try:
+            number = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if number < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {number}")
+        return number
+
+    value.__name__ = f"integer >= {low}"
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (``safeswitch train: error: …``, exit 2),
+    like every other error of the command line, instead of the usage block and the error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _errors() -> tuple[type[BaseException], ...]:
@@ -73,6 +115,21 @@ def print_summary(summary: dict[str, Any]) -> None:
             print(f"{key:>{width}}: {_number(value)}")
 
 
+def _training_counts(training: dict[str, Any]) -> str:
+    """What training met, for the train command's summary line; a count over no finished
+    episode is never printed as 0."""
+    episodes = int(training.get("episodes", 0))
+    if episodes == 0:
+        return "no training episode finished (no collision or safety counts to report)"
+    steps = training.get("safety_activation_steps")
+    per_episode = training.get("safety_activation_episodes")
+    safety = f"{per_episode:,} episodes" if per_episode is not None else f"{steps:,} steps"
+    return (
+        f"{training['collisions']:,} collisions in {episodes:,} training episodes; safety "
+        f"activations: {safety}"
+    )
+
+
 def _train(args: argparse.Namespace) -> int:
     from safeswitch.app.train import train_and_plot
 
@@ -105,8 +162,7 @@ def _train(args: argparse.Namespace) -> int:
     t, e = metrics["training"], metrics["evaluation"]
     print(
         f"trained {metrics['timesteps']:,} steps in {metrics['wall_time_s']:.0f} s "
-        f"({metrics['steps_per_s']:,.0f} steps/s); collisions during training: "
-        f"{t['collisions']}; safety activations: {t['safety_activation_episodes']} episodes"
+        f"({metrics['steps_per_s']:,.0f} steps/s); " + _training_counts(t)
     )
     if e.get("episodes"):
         clear = e["mean_time_to_clear_s"]
@@ -144,14 +200,48 @@ def _train_env(args: argparse.Namespace) -> int:
     t = metrics["training"]
     print(
         f"trained {metrics['timesteps']:,} steps on {config.env_id} in "
-        f"{metrics['wall_time_s']:.0f} s; collisions during training: {t['collisions']} in "
-        f"{t['episodes']:,} episodes; safety activations: {t['safety_activation_steps']:,} steps"
+        f"{metrics['wall_time_s']:.0f} s; " + _training_counts(t)
     )
     print(f"run directory: {args.out}")
     return 0
 
 
+#: ``evaluate``'s defaults of the options that have a default only where they apply (``None``
+#: in the parser, so that an option given where it does not apply can be refused).
+EVALUATE_DEFAULTS = {"controller": "learned", "scenarios": "random", "episodes": 1000,
+                     "sim": "embedded"}  # fmt: skip
+
+
+def _evaluate_options(args: argparse.Namespace) -> None:
+    """Refuse every option that would be silently ignored, then fill in the defaults."""
+    given = {k for k in EVALUATE_DEFAULTS if getattr(args, k) is not None}
+    if args.env not in (None, LEFT_TURN):
+        for option in ("scenarios", "sim"):
+            if option in given:
+                raise UsageError(
+                    f"--{option} is an option of the left turn; --env {args.env} runs its own "
+                    "episodes (--episodes, --seed)"
+                )
+        if args.traffic is not None:
+            raise UsageError(f"--traffic is an option of the left turn, not of --env {args.env}")
+    controller = args.controller or EVALUATE_DEFAULTS["controller"]
+    if controller == "oracle" and args.switching is not None:
+        raise UsageError(
+            "--switching does not apply to --controller oracle: the oracle plans the "
+            "minimum-time crossing with full knowledge, under no switching logic"
+        )
+    if args.scenarios == "paper" and "episodes" in given:
+        raise UsageError(
+            "--episodes counts random scenarios; --scenarios paper runs the paper's three "
+            "(cut, yield1, yield2)"
+        )
+    for key, value in EVALUATE_DEFAULTS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
+
+
 def _evaluate(args: argparse.Namespace) -> int:
+    _evaluate_options(args)
     if args.env not in (None, LEFT_TURN):
         summary = _evaluate_env(args)
     else:
@@ -166,7 +256,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             args.switching,
             args.out,
             overwrite=args.overwrite,
-            progress=not (args.no_progress or args.json),
+            progress=not args.no_progress,
             traffic=args.traffic,
             sim=args.sim,
         )
@@ -181,19 +271,32 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _evaluate_env(args: argparse.Namespace) -> dict[str, Any]:
     from safeswitch.io import prepare_output_dir, write_json
+    from safeswitch.training.config import EnvTrainConfig
     from safeswitch.training.generic import make_supervised_env, run_episodes
-    from safeswitch.training.policies import load_policy
+    from safeswitch.training.policies import check_fits, load_policy, trained_env_id
 
     if args.controller != "learned" or args.model is None:
         raise UsageError(f"--env {args.env} evaluates a trained policy: pass --model RUN")
     policy = load_policy(args.model)
-    folder = prepare_output_dir(args.out, args.overwrite) if args.out else None
+    trained_on = trained_env_id(policy)
+    if trained_on != args.env:
+        raise UsageError(
+            f"the policy in {policy.path} was trained on {trained_on}, not {args.env}"
+            + ("; evaluate it without --env" if not isinstance(policy.config, EnvTrainConfig)
+               else f"; evaluate it with --env {trained_on}")
+        )  # fmt: skip
     env_config = policy.config
     switching = args.switching or getattr(env_config, "switching", None)
     env = make_supervised_env(
         args.env, switching, getattr(env_config, "penalty", None),
         **getattr(env_config, "env_kwargs", {}),
     )  # fmt: skip
+    try:
+        check_fits(policy, args.env, env.observation_space, env.action_space)
+        folder = prepare_output_dir(args.out, args.overwrite) if args.out else None
+    except BaseException:
+        env.close()
+        raise
     summary = {
         "env_id": args.env,
         "model": str(args.model),
@@ -223,10 +326,6 @@ def _bench(args: argparse.Namespace) -> int:
 def _reproduce(args: argparse.Namespace) -> int:
     from safeswitch.app.reproduce import reproduce
 
-    if args.episodes < 1:
-        raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
-    if args.timesteps is not None and args.timesteps < 1:
-        raise UsageError(f"--timesteps must be >= 1, got {args.timesteps}")
     if args.quick and args.timesteps is not None:
         raise UsageError("--timesteps sets the training budget; --quick trains nothing")
     reproduce(
@@ -263,6 +362,11 @@ def _cells(args: argparse.Namespace) -> list[Any]:
 
     models = args.model or [None]
     switchings = args.switching or [None]
+    if args.model and "learned" not in args.controller:
+        raise UsageError(
+            f"--model is a trained policy for --controller learned; --controller "
+            f"{' '.join(args.controller)} uses none (drop --model or add learned)"
+        )
     cells = []
     for controller in args.controller:
         for model in models if controller == "learned" else [None]:
@@ -284,13 +388,10 @@ def _campaign(args: argparse.Namespace) -> int:
     elif args.scenarios == "paper":
         space = Space("paper", 3, args.seed)
     else:
-        if args.episodes < 1:
-            raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
         space = Space("random", args.episodes, args.seed)
-    quiet = args.no_progress or args.json
     result = campaign(
         _cells(args), space, args.out, workers=args.workers, address=args.address,
-        resume=args.resume, shard_size=args.shard_size, progress=not quiet,
+        resume=args.resume, shard_size=args.shard_size, progress=not args.no_progress,
     )  # fmt: skip
     if args.json:
         from safeswitch.io import to_json
@@ -345,7 +446,7 @@ def _falsify(args: argparse.Namespace) -> int:
 
 def _distributed(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--workers", type=int, default=2,
+        "--workers", type=at_least(0), default=2,
         help="CPUs of a local Ray cluster started for this run (0: no Ray, one process)",
     )  # fmt: skip
     parser.add_argument(
@@ -355,15 +456,16 @@ def _distributed(parser: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     from safeswitch.core.registry import logic_names
+    from safeswitch.training.shipped import SHIPPED
 
     logics = logic_names()
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="safeswitch",
         description="Safe reinforcement learning with a rule-based Safety controller, a learned "
         "controller and a switching logic (Aksjonov & Kyrki), on an embedded simulator.",
     )
     parser.add_argument("--version", action="version", version=f"safeswitch {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     train = sub.add_parser("train", help="train a PPO policy with the switching logic in the loop")
     train.add_argument(
@@ -375,16 +477,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--env",
         help=f"a Gymnasium id (default {LEFT_TURN}); others train through SafeSwitch",
     )
-    train.add_argument("--timesteps", type=int, help="environment steps (default: the config's)")
-    train.add_argument("--n-envs", type=int, help="environments stepped as one batch")
+    train.add_argument(
+        "--timesteps", type=at_least(1), help="environment steps (default: the config's)"
+    )
+    train.add_argument("--n-envs", type=at_least(1), help="environments stepped as one batch")
     train.add_argument("--switching", choices=logics, help="a registered switching logic")
     train.add_argument(
         "--no-adas-penalty",
         action="store_true",
         help="leave R_ADAS out of the reward (the paper's ablation)",
     )
-    train.add_argument("--seed", type=int, help="seed of PPO and of the training scenarios")
-    train.add_argument("--torch-threads", type=int, help="CPU threads for torch")
+    train.add_argument("--seed", type=seed_value, help="seed of PPO and of the training scenarios")
+    train.add_argument("--torch-threads", type=at_least(1), help="CPU threads for torch")
     train.add_argument("--out", required=True, help="run directory")
     train.add_argument(
         "--resume",
@@ -397,23 +501,26 @@ def build_parser() -> argparse.ArgumentParser:
     ev = sub.add_parser("evaluate", help="evaluate a controller on the paper's or random scenarios")
     ev.add_argument(
         "--model",
-        help="a run directory, one of its checkpoints (run/checkpoints/step_…), or a shipped "
-        "policy: shipped (the paper policy), paper, paper-scratch, no-adas, certified, none, "
-        "traffic-paper, traffic-certified (in traffic)",
+        help="a run directory (or its model.zip), one of its checkpoints "
+        "(run/checkpoints/step_…), or a shipped policy: "
+        + ", ".join(SHIPPED)
+        + " (shipped is the paper policy; traffic-* were trained in traffic)",
     )
     ev.add_argument(
         "--controller",
         choices=("learned", "rule", "planner", "gap_planner", "oracle"),
-        default="learned",
         help="learned: a trained policy (--model); rule: PID_th under the paper switching logic; "
         "planner: a throttle-only rule-based planner that avoids the paper logic's braking; "
         "gap_planner: in traffic (--traffic), waits for a gap the certified filter accepts; "
         "oracle: the minimum-time crossing planned with knowledge of the north car",
     )
     ev.add_argument("--env", help=f"a Gymnasium id (default {LEFT_TURN})")
-    ev.add_argument("--scenarios", choices=("paper", "random"), default="random")
-    ev.add_argument("--episodes", type=int, default=1000, help="random scenarios (default 1000)")
-    ev.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
+    ev.add_argument(
+        "--scenarios", choices=("paper", "random"),
+        help="the paper's three (cut, yield1, yield2) or random ones (default)",
+    )  # fmt: skip
+    ev.add_argument("--episodes", type=at_least(1), help="random scenarios (default 1000)")
+    ev.add_argument("--seed", type=seed_value, default=0, help="seed of the random scenarios")
     ev.add_argument(
         "--switching", choices=logics, help="override the switching logic it was trained with"
     )
@@ -425,13 +532,15 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--sim",
         choices=("embedded", "sumo"),
-        default="embedded",
         help="the simulator: ours (batched), or SUMO driving the north car (extra "
         "safeswitch[sumo]; one episode after another)",
     )
     ev.add_argument("--out", help="folder for episodes.csv and summary.json")
     ev.add_argument("--overwrite", action="store_true", help="replace files in a non-empty --out")
-    ev.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    ev.add_argument(
+        "--json", action="store_true",
+        help="print the summary as one JSON object on stdout (progress still goes to stderr)",
+    )  # fmt: skip
     ev.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     ev.set_defaults(func=_evaluate)
 
@@ -445,7 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="cut",
         help="cut, yield1, yield2 (the paper's) or random:K (random scenario K of --seed)",
     )
-    render.add_argument("--seed", type=int, default=0, help="seed of random:K scenarios")
+    render.add_argument("--seed", type=seed_value, default=0, help="seed of random:K scenarios")
     render.add_argument("--switching", choices=logics, help="override the switching logic")
     render.add_argument("--traffic", help="a traffic preset or none (as for evaluate)")
     render.add_argument("--out", required=True, help="the GIF to write (e.g. episode.gif)")
@@ -462,28 +571,35 @@ def build_parser() -> argparse.ArgumentParser:
     camp.add_argument("--model", nargs="+", help="trained policies (for --controller learned)")
     camp.add_argument("--switching", nargs="+", choices=logics, help="logics (default: each's own)")
     camp.add_argument("--scenarios", choices=("random", "grid", "paper"), default="random")
-    camp.add_argument("--episodes", type=int, default=100_000, help="random scenarios")
-    camp.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
+    camp.add_argument("--episodes", type=at_least(1), default=100_000, help="random scenarios")
+    camp.add_argument("--seed", type=seed_value, default=0, help="seed of the random scenarios")
     camp.add_argument(
         "--grid", nargs="+", metavar="NAME=SPEC",
         help="grid axes: arrival_offset_s=-3:5:0.25 north_speed_kmh=20,26,32 "
         "ego_speed_kmh=18:25:1 ego_start_distance_m=36 (stop included)",
     )  # fmt: skip
-    camp.add_argument("--shard-size", type=int, default=10_000, help="episodes per Ray task")
+    camp.add_argument(
+        "--shard-size", type=at_least(1), default=10_000, help="episodes per Ray task"
+    )
     camp.add_argument("--out", required=True, help="campaign folder")
     camp.add_argument("--resume", action="store_true", help="skip the shards already done")
-    camp.add_argument("--json", action="store_true", help="print the summary as JSON")
-    camp.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
+    camp.add_argument(
+        "--json", action="store_true",
+        help="print the summary as JSON on stdout (the plan and progress still go to stderr)",
+    )  # fmt: skip
+    camp.add_argument(
+        "--no-progress", action="store_true", help="no plan line, progress bar or lines"
+    )
     _distributed(camp)
     camp.set_defaults(func=_campaign)
 
     swp = sub.add_parser("sweep", help="train several seeds or settings of a config on Ray")
     swp.add_argument("--config", default=DEFAULT_CONFIG, help="a configuration (name or file)")
-    swp.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    swp.add_argument("--seeds", type=seed_value, nargs="+", default=[1, 2, 3])
     swp.add_argument(
         "--set", nargs="+", metavar="KEY=V1,V2", help="vary a key, e.g. ppo.gamma=0.99,0.995"
     )
-    swp.add_argument("--timesteps", type=int, help="override the config's training steps")
+    swp.add_argument("--timesteps", type=at_least(1), help="override the config's training steps")
     swp.add_argument("--out", required=True, help="folder of the runs")
     _distributed(swp)
     swp.set_defaults(func=_sweep)
@@ -498,9 +614,9 @@ def build_parser() -> argparse.ArgumentParser:
     fal.add_argument("--model", help="a trained policy (for --controller learned)")
     fal.add_argument("--switching", choices=logics, help="the logic (default: the controller's)")
     fal.add_argument("--failure", choices=("collision", "safety"), default="collision")
-    fal.add_argument("--budget", type=int, default=20_000, help="episodes per method")
-    fal.add_argument("--generation", type=int, default=500, help="episodes per generation")
-    fal.add_argument("--seed", type=int, default=0)
+    fal.add_argument("--budget", type=at_least(1), default=20_000, help="episodes per method")
+    fal.add_argument("--generation", type=at_least(1), default=500, help="episodes per generation")
+    fal.add_argument("--seed", type=seed_value, default=0, help="seed of the search")
     fal.add_argument("--out", required=True, help="output folder")
     fal.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
     fal.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
@@ -522,10 +638,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="use the shipped policies (about a minute) instead of training all six first",
     )
     rep.add_argument("--out", default="out/report", help="report folder (default: out/report)")
-    rep.add_argument("--episodes", type=int, default=1000, help="random evaluation scenarios")
+    rep.add_argument(
+        "--episodes", type=at_least(1), default=1000, help="random evaluation scenarios"
+    )
     rep.add_argument(
         "--timesteps",
-        type=int,
+        type=at_least(1),
         help="PPO steps per policy without --quick (default: each config's 1.2 M); a "
         "configuration's warm start keeps its own size",
     )
@@ -540,7 +658,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a usage error (one line already printed) returns its code
+        if exc.code in (0, None):
+            raise
+        return int(exc.code) if isinstance(exc.code, int) else 2
     if args.command is None:
         parser.print_help()
         return 0

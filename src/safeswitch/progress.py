@@ -7,6 +7,22 @@ import time
 from typing import Any, TextIO
 
 
+def format_duration(seconds: float) -> str:
+    """A duration as a person reads it: ``42 s``, ``17 min``, ``5.2 h``, ``3.1 days``,
+    ``22.6 years``."""
+    if seconds != seconds or seconds == float("inf"):
+        return "unknown"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 2 * 3600:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    if seconds < 2 * 365.25 * 86400:
+        return f"{seconds / 86400:,.1f} days"
+    return f"{seconds / (365.25 * 86400):,.1f} years"
+
+
 class Progress:
     """Count of items done out of ``total``.
 
@@ -37,12 +53,20 @@ class Progress:
         self.enabled = enabled
         self.every = every
         self.done = 0
+        self.skipped = 0
         self._started = self._last = time.perf_counter()
         self._bar: Any = None
         if enabled and getattr(self.stream, "isatty", lambda: False)():
             from tqdm import tqdm
 
             self._bar = tqdm(total=total, desc=label, unit=f" {unit}", file=self.stream)
+
+    def skip(self, count: int) -> None:
+        """Items found already done (a resumed job): counted as done, not in the rate."""
+        self.skipped += count
+        self.done += count
+        if self._bar is not None:
+            self._bar.update(count)
 
     def update(self, count: int) -> None:
         self.done += count
@@ -56,9 +80,9 @@ class Progress:
 
     def _line(self, now: float) -> None:
         elapsed = max(now - self._started, 1e-9)
-        rate = self.done / elapsed
+        rate = (self.done - self.skipped) / elapsed
         left = (self.total - self.done) / rate if rate > 0 else float("inf")
-        eta = f", ETA {left:,.0f} s" if self.done < self.total else ""
+        eta = f", ETA {format_duration(left)}" if self.done < self.total else ""
         print(
             f"{self.label}: {self.done:,}/{self.total:,} {self.unit} ({rate:,.0f}/s{eta})",
             file=self.stream,

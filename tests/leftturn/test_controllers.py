@@ -8,8 +8,8 @@ import pytest
 from safeswitch.core.config import ConfigError
 from safeswitch.core.pid import PIDState, pid_step
 from safeswitch.leftturn.config import ControllerConfig, LeftTurnConfig
+from safeswitch.leftturn.statistics import SPEEDING_MARGIN
 from safeswitch.leftturn.task import LeftTurnTask
-from safeswitch.leftturn.vec_env import SPEEDING_MARGIN
 from safeswitch.sim.vehicle import VehicleState, vehicle_step
 
 

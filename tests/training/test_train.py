@@ -55,7 +55,8 @@ def test_cli_trains_end_to_end_and_writes_a_complete_run_directory(tmp_path, cap
     assert metrics["training"]["episodes"] > 0
     assert metrics["evaluation"]["episodes"] == 50
     assert load_config(run / "config.yaml").env.switching == "paper"
-    assert "collisions during training: 0" in capsys.readouterr().out
+    episodes = metrics["training"]["episodes"]
+    assert f"0 collisions in {episodes:,} training episodes" in capsys.readouterr().out
 
 
 def test_an_interrupted_run_is_incomplete_and_resumes_to_the_end(tmp_path, interrupted_training):

@@ -22,19 +22,23 @@ Folder::
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
+import sys
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from safeswitch.app.distributed import check_reachable, cluster
+from safeswitch.app.distributed import DistributedError, check_reachable, cluster
+from safeswitch.app.evaluate import LONG_PLAN_S, NOMINAL_RATE, PARALLEL_EFFICIENCY
 from safeswitch.io import write_json
-from safeswitch.progress import Progress
+from safeswitch.progress import Progress, format_duration
 
 #: Scenario parameters a grid may span, with their unit conversion to the task's SI values.
 GRID_PARAMETERS = {
@@ -200,15 +204,12 @@ class CampaignResult:
 def run_shard(shard: Shard, space: Space, folder: str) -> dict[str, Any]:
     """Evaluate one shard (in a worker): its episodes' rows and its accumulator, each written
     whole; returns the accumulator's state."""
-    import torch
-
     from safeswitch.app.evaluate import controller_setup
     from safeswitch.evaluation.evaluate import CHUNK, CSV_COLUMNS, episode_rows, run_controller
     from safeswitch.evaluation.metrics import SummaryAccumulator
     from safeswitch.leftturn.task import LeftTurnTask
 
-    torch.set_num_threads(1)
-    cell = shard.cell
+    cell = shard.cell  # a policy is loaded with one torch thread (load_policy)
     config, policy = controller_setup(cell.controller, cell.model, cell.switching)
     task = LeftTurnTask(config)
     accumulator = SummaryAccumulator()
@@ -248,14 +249,52 @@ def _write_rows(stem: Path, columns: tuple[str, ...], rows: list[list[Any]]) -> 
     os.replace(tmp, stem.with_suffix(".parquet"))
 
 
-def plan_shards(cells: list[Cell], space: Space, shard_size: int) -> list[Shard]:
-    if shard_size < 1:
-        raise CampaignError(f"--shard-size must be >= 1, got {shard_size}")
-    return [
-        Shard(cell, k, start, min(start + shard_size, space.episodes))
-        for cell in cells
-        for k, start in enumerate(range(0, space.episodes, shard_size))
+def shard_count(space: Space, shard_size: int) -> int:
+    """Shards per cell (the last one may be short)."""
+    return -(-space.episodes // shard_size)
+
+
+def cell_shards(cell: Cell, space: Space, shard_size: int) -> Iterator[Shard]:
+    """The cell's shards in order, generated one at a time (a campaign of any length holds
+    none of them in memory)."""
+    for k, start in enumerate(range(0, space.episodes, shard_size)):
+        yield Shard(cell, k, start, min(start + shard_size, space.episodes))
+
+
+def estimate_s(cells: list[Cell], space: Space, workers: int) -> float:
+    """The campaign's expected wall time on ``workers`` workers (at least one) [s]."""
+    one = sum(space.episodes / NOMINAL_RATE.get(c.controller, 1_000.0) for c in cells)
+    return one if workers <= 1 else one / (workers * PARALLEL_EFFICIENCY)
+
+
+def plan_lines(cells: list[Cell], space: Space, shard_size: int, workers: int | None) -> list[str]:
+    """What a campaign prints before it starts: its size and its estimated wall time, and a
+    warning if that runs past :data:`LONG_PLAN_S`."""
+    shards = shard_count(space, shard_size)
+    where = f"{workers} workers" if workers is not None else "the cluster's workers"
+    seconds = estimate_s(cells, space, workers if workers is not None else 1)
+    lines = [
+        f"campaign: {len(cells)} cell(s) × {shards:,} shard(s) of up to {shard_size:,} "
+        f"episodes = {len(cells) * space.episodes:,} episodes on {where}; estimated "
+        f"{format_duration(seconds)}"
     ]
+    if seconds > LONG_PLAN_S:
+        lines.append(
+            f"warning: this campaign would run for about {format_duration(seconds)}; Ctrl-C "
+            "stops it and --resume continues it, or ask for fewer --episodes"
+        )
+    return lines
+
+
+def _check_cells(cells: list[Cell]) -> None:
+    """Every cell's controller, policy and logic, as a shard will build them (raises before
+    anything is written)."""
+    from safeswitch.app.evaluate import controller_setup
+    from safeswitch.leftturn.task import LeftTurnTask
+
+    for cell in cells:
+        config, _ = controller_setup(cell.controller, cell.model, cell.switching)
+        LeftTurnTask(config)  # builds the logic: one that does not fit the left turn is named
 
 
 def campaign(
@@ -270,15 +309,26 @@ def campaign(
 ) -> CampaignResult:
     """Run (or resume) a campaign and write its folder (see the module docstring).
 
+    Everything is checked before the folder is touched: the cells (their policies and logics),
+    the shard size, the workers, the cluster's address and the folder itself. Then one plan
+    line (and a warning for a long plan) goes to standard error, unless ``progress`` is off.
+    Shards are generated, run and merged one at a time, so memory stays bounded whatever
+    ``space.episodes`` is.
+
     Raises:
-        CampaignError: The folder holds another campaign, or a new one without ``resume``.
-        DistributedError: Ray is missing or ``address`` is unreachable.
+        CampaignError: No cells, a shard size below 1, or the folder holds another campaign,
+            or a campaign without ``resume``.
+        DistributedError: Bad workers, Ray missing or ``address`` not a reachable Ray head.
     """
     from safeswitch.evaluation.metrics import SummaryAccumulator
 
     folder = Path(out)
     if not cells:
         raise CampaignError("a campaign needs at least one controller")
+    if shard_size < 1:
+        raise CampaignError(f"--shard-size must be >= 1, got {shard_size}")
+    if workers < 0:
+        raise DistributedError(f"--workers must be >= 0, got {workers}")
     asked = {
         "cells": [asdict(c) for c in cells],
         "space": {
@@ -299,64 +349,80 @@ def campaign(
             raise CampaignError(f"{folder} holds a different campaign; --resume must ask the same")
     elif folder.is_dir() and any(folder.iterdir()):
         raise CampaignError(f"--out {folder} is not empty and holds no campaign")
-    if address is not None:  # before anything is written: a typo leaves no campaign behind
+    if address is not None:  # a typo or a foreign service leaves no campaign behind
         check_reachable(address)
+    _check_cells(cells)
+    if progress:
+        for line in plan_lines(cells, space, shard_size, workers if address is None else None):
+            print(line, file=sys.stderr, flush=True)
     folder.mkdir(parents=True, exist_ok=True)
     write_json(record, asked)
 
-    shards = plan_shards(cells, space, shard_size)
-    done: dict[int, dict[str, Any]] = {}
-    for i, shard in enumerate(shards):
-        path = folder / "shards" / shard.cell.key / f"{shard.index:06d}.json"
-        if path.is_file():
-            done[i] = json.loads(path.read_text(encoding="utf-8"))
-    todo = [i for i in range(len(shards)) if i not in done]
+    accumulators = {cell.key: SummaryAccumulator() for cell in cells}
+    merged = dict.fromkeys(accumulators, 0)  # shards merged per cell
     failures: list[Failure] = []
-    bar = Progress(
-        sum(shards[i].stop - shards[i].start for i in todo), "campaign", enabled=progress
-    )
+    bar = Progress(len(cells) * space.episodes, "campaign", enabled=progress)
+    inflight: dict[int, Shard] = {}  # task index → its shard, while the cluster runs it
+    task_index = itertools.count()
+    ran_now = 0  # shards the cluster handed back
+
+    def todo() -> Iterator[tuple[Shard, Space, str]]:
+        """The shards still to run, in order; those already on disk are merged as they are
+        met. Consumed lazily by the cluster (task ``j`` is the ``j``-th shard yielded)."""
+        for cell in cells:
+            for shard in cell_shards(cell, space, shard_size):
+                path = folder / "shards" / cell.key / f"{shard.index:06d}.json"
+                if path.is_file():
+                    merge(shard, json.loads(path.read_text(encoding="utf-8")))
+                    bar.skip(shard.stop - shard.start)
+                    continue
+                inflight[next(task_index)] = shard
+                yield shard, space, str(folder)
+
+    def merge(shard: Shard, state: dict[str, Any]) -> None:
+        accumulators[shard.cell.key].merge(SummaryAccumulator.from_state(state))
+        merged[shard.cell.key] += 1
+
+    def shard_of(j: int) -> Shard:
+        nonlocal ran_now
+        ran_now += 1
+        return inflight.pop(j)
+
     began = time.perf_counter()
     with cluster(workers, address) as where:
 
         def finished(j: int, state: dict[str, Any]) -> None:
-            done[todo[j]] = state
-            bar.update(shards[todo[j]].stop - shards[todo[j]].start)
+            shard = shard_of(j)
+            merge(shard, state)
+            bar.update(shard.stop - shard.start)
 
         def failed(j: int, error: BaseException) -> None:
-            s = shards[todo[j]]
+            s = shard_of(j)
             failures.append(
                 Failure(s.cell.key, s.index, (s.start, s.stop), space.seed, _one_line(error))
             )
             bar.update(s.stop - s.start)
 
-        where.map(run_shard, [(shards[i], space, str(folder)) for i in todo], finished, failed)
+        where.map(run_shard, todo(), finished, failed)
         startup = where.startup_s
     bar.close()
     # in shard order, not in the order the workers happened to report them
     failures.sort(key=lambda f: (f.cell, f.shard))
     per_cell: dict[str, Any] = {}
+    shards = shard_count(space, shard_size)
     for cell in cells:
-        accumulator = SummaryAccumulator()
-        complete = True
-        for i, shard in enumerate(shards):
-            if shard.cell != cell:
-                continue
-            if i in done:
-                accumulator.merge(SummaryAccumulator.from_state(done[i]))
-            else:
-                complete = False
         per_cell[cell.key] = {
             **asdict(cell),
             "scenarios": space.kind,
             "seed": space.seed,
-            "complete": complete,
-            **accumulator.summary(),
+            "complete": merged[cell.key] == shards,
+            **accumulators[cell.key].summary(),
         }
     summary = {
         "cells": per_cell,
         "failures": [asdict(f) for f in failures],
-        "shards": len(shards),
-        "shards_run_now": len(todo),
+        "shards": shards * len(cells),
+        "shards_run_now": ran_now,
         "workers": workers if address is None else None,
         "address": address,
         "ray_startup_s": round(startup, 2),

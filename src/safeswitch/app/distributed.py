@@ -11,14 +11,14 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 T = TypeVar("T")
 
 #: How long joining an ``--address`` may take before it is reported unreachable [s].
-CONNECT_TIMEOUT_S = 10.0
+CONNECT_TIMEOUT_S = 5.0
 
 
 class DistributedError(RuntimeError):
@@ -35,22 +35,38 @@ def _import_ray() -> Any:
     return ray
 
 
+#: The client connection preface of HTTP/2 (RFC 9113, 3.4) followed by an empty SETTINGS
+#: frame: a Ray head's GCS is a gRPC server and answers it with a SETTINGS frame of its own.
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+#: Frame type of SETTINGS (the fourth byte of a frame header).
+_SETTINGS = 4
+
+
 def check_reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
-    """Raise :class:`DistributedError` unless a TCP connection to ``address`` (``host:port``)
-    opens within ``timeout`` seconds (``ray.init`` itself may wait much longer)."""
+    """Raise :class:`DistributedError` unless a Ray head answers at ``address``
+    (``host:port``) within ``timeout`` seconds: the TCP connection opens and the server
+    speaks gRPC (HTTP/2), as a Ray head's GCS does. ``ray.init`` itself would retry an
+    unreachable or foreign address for minutes, printing its client's log lines."""
     if address == "auto":
         return
     host, _, port = address.rpartition(":")
     if not host or not port.isdigit():
         raise DistributedError(f"--address {address!r} is not host:port (e.g. 10.0.0.5:6379)")
+    hint = "start one with `ray start --head` there, or leave out --address to run locally"
     try:
-        with socket.create_connection((host.removeprefix("ray://"), int(port)), timeout):
-            pass
+        with socket.create_connection((host.removeprefix("ray://"), int(port)), timeout) as conn:
+            conn.settimeout(timeout)
+            conn.sendall(_HTTP2_PREFACE)
+            answer = conn.recv(9)
     except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
         raise DistributedError(
-            f"cannot reach a Ray cluster at {address} within {timeout:.0f} s ({exc}); start one "
-            "with `ray start --head` there, or leave out --address to run locally"
+            f"cannot reach a Ray cluster at {address} within {timeout:.0f} s ({reason}); {hint}"
         ) from exc
+    if len(answer) < 4 or answer[3] != _SETTINGS:
+        raise DistributedError(
+            f"no Ray cluster answers at {address} (another service does); {hint}"
+        )
 
 
 @dataclass
@@ -70,12 +86,19 @@ class Cluster:
     def map(
         self,
         function: Callable[..., T],
-        arguments: Sequence[tuple[Any, ...]],
+        arguments: Iterable[tuple[Any, ...]],
         on_result: Callable[[int, T], None],
         on_error: Callable[[int, BaseException], None],
+        window: int | None = None,
     ) -> None:
-        """``function(*arguments[i])`` for every ``i``, in parallel on the cluster; results and
-        failures are handed over as they arrive (one failed task does not stop the others)."""
+        """``function(*args)`` for every ``args`` of ``arguments`` (the ``i``-th handed over as
+        ``i``), in parallel on the cluster; results and failures are handed over as they
+        arrive (one failed task does not stop the others).
+
+        ``arguments`` is consumed lazily: at most ``window`` tasks (default: twice the
+        cluster's CPUs) are submitted and not yet handed over at any time, so a campaign of
+        any length holds a bounded number of tasks in memory, here and on the cluster.
+        """
         if self.ray is None:
             for i, args in enumerate(arguments):
                 try:
@@ -87,7 +110,17 @@ class Cluster:
             return
         ray = self.ray
         remote = ray.remote(num_cpus=1, max_retries=0)(function)
-        pending = {remote.remote(*args): i for i, args in enumerate(arguments)}
+        limit = max(window if window is not None else 2 * self.cpus, 1)
+        queued = enumerate(arguments)
+        pending: dict[Any, int] = {}
+
+        def submit() -> None:
+            for i, args in queued:
+                pending[remote.remote(*args)] = i
+                if len(pending) >= limit:
+                    return
+
+        submit()
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:
@@ -98,6 +131,7 @@ class Cluster:
                     on_error(i, exc)
                 else:
                     on_result(i, result)
+            submit()
 
 
 @contextlib.contextmanager
@@ -125,8 +159,8 @@ def cluster(workers: int, address: str | None = None) -> Iterator[Cluster]:
                 logging_level="ERROR",
             )  # fmt: skip
         else:
-            ray.init(
-                num_cpus=workers, include_dashboard=False, log_to_driver=False,
+            ray.init(  # address="local": a new cluster, even where another one runs
+                address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False,
                 logging_level="ERROR", runtime_env=runtime_env,
                 _temp_dir=os.environ.get("SAFESWITCH_RAY_TMP"),
             )  # fmt: skip

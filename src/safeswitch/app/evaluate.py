@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -31,12 +32,22 @@ from safeswitch.leftturn.config import (
 )
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, build_task
-from safeswitch.progress import Progress
+from safeswitch.progress import Progress, format_duration
 from safeswitch.training.config import TrainConfig
-from safeswitch.training.policies import load_policy
 
 #: Every ``--sim``.
 SIMULATORS = ("embedded", "sumo")
+
+#: Episodes per second of each controller in the paper's scene, one process on this project's
+#: two-core reference machine (``safeswitch campaign --workers 0``, 20,000 episodes, the
+#: shipped policy for ``learned``): what the time estimates of a long evaluation or campaign
+#: assume.
+NOMINAL_RATE = {"rule": 1_800.0, "planner": 220.0, "oracle": 1_350.0, "learned": 1_150.0}
+#: Throughput of ``N`` workers as a share of ``N`` single processes (two workers on two cores
+#: ran a campaign of the rule at 2,154 episodes/s, against 1,800 for one process).
+PARALLEL_EFFICIENCY = 0.6
+#: A job estimated to run longer than this gets a warning before it starts [s].
+LONG_PLAN_S = 3600.0
 
 #: Every ``--controller``.
 CONTROLLERS: tuple[str, ...] = ("learned", *BASELINES)
@@ -53,6 +64,8 @@ def controller_setup(
     if controller == "learned":
         if model is None:
             raise ValueError("--controller learned needs --model (a run directory or 'shipped')")
+        from safeswitch.training.policies import load_policy  # torch: only for a policy
+
         trained = load_policy(model)
         if not isinstance(trained.config, TrainConfig):
             raise ValueError(
@@ -85,6 +98,8 @@ def traffic_setup(
     scene."""
     trained = None
     if controller == "learned" and model is not None:
+        from safeswitch.training.policies import load_policy
+
         config = load_policy(model).config
         if isinstance(config, TrainConfig) and config.traffic is not None:
             trained = config
@@ -113,6 +128,8 @@ def fit_observations(policy: Policy | None, model: str | None, task: LeftTurnTas
         return policy.bind(task)
     if policy is None or model is None:
         return policy
+    from safeswitch.training.policies import load_policy
+
     expected = int(np.prod(load_policy(model).model.observation_space.shape or (6,)))
     observed = int(task.observation_bounds[0].shape[0])
     if expected == observed:
@@ -171,6 +188,17 @@ def evaluate(
     accumulator = SummaryAccumulator()
     writer = EpisodeCSV(folder / "episodes.csv") if folder is not None else None
     bar = Progress(total, f"evaluate {controller}", enabled=progress)
+    if progress:
+        seconds = total / NOMINAL_RATE.get(controller, 1_000.0)
+        if sim == "sumo":
+            seconds *= 20.0  # one SUMO scene at a time
+        if seconds > LONG_PLAN_S:
+            print(
+                f"warning: {total:,} episodes would take about {format_duration(seconds)} on "
+                "one core; Ctrl-C stops the evaluation, or ask for fewer --episodes",
+                file=sys.stderr,
+                flush=True,
+            )
     sumo = {"sumo_collision_episodes": 0, "assumption_break_episodes": 0}
     try:
         for names, batch in chunks:

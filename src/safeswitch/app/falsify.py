@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from safeswitch.app.distributed import cluster
+from safeswitch.app.distributed import check_reachable, cluster
 from safeswitch.io import prepare_output_dir, write_json
 from safeswitch.progress import Progress
 
@@ -131,6 +131,8 @@ def falsify(
             f"--budget ({budget}) must hold at least one --generation ({generation} >= 20)"
         )
     _setup(target, 2, seed)  # fail early on a bad controller, model or adversary
+    if address is not None:
+        check_reachable(address)  # before the folder is written
     folder = prepare_output_dir(out, overwrite)
     rng = np.random.default_rng(seed)
     generations = budget // generation

@@ -26,7 +26,7 @@ from typing import Any
 
 import yaml
 
-from safeswitch.app.distributed import cluster
+from safeswitch.app.distributed import check_reachable, cluster
 from safeswitch.core.config import ConfigError, from_dict, to_dict
 from safeswitch.io import write_atomic, write_json
 from safeswitch.training.config import TrainConfig, load_config
@@ -126,6 +126,8 @@ def sweep(
     folder = Path(out)
     if folder.exists() and not folder.is_dir():
         raise ConfigError(f"--out {folder} is a file, not a folder")
+    if address is not None:
+        check_reachable(address)  # before the folder is written
     folder.mkdir(parents=True, exist_ok=True)
     asked = {"config": config_name, "seeds": seeds, "sets": sets, "timesteps": timesteps}
     record = folder / "sweep.json"

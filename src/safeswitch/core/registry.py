@@ -45,6 +45,17 @@ class LogicContextError(SwitchingError):
     """A registered logic was asked to supervise a plant it was not written for."""
 
 
+def context_name(context: Any) -> str:
+    """How a :class:`LogicContextError` names the plant a logic was offered: a Gymnasium
+    environment by its id (a wrapper's class name says nothing to its user), anything else by
+    its type."""
+    spec = getattr(context, "spec", None)
+    env_id = getattr(spec, "id", None)
+    if isinstance(env_id, str):
+        return env_id
+    return type(context).__name__
+
+
 class UnknownLogicError(SwitchingError, KeyError):
     """No logic is registered under a name."""
 

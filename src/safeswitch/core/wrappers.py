@@ -60,10 +60,36 @@ def _box(space: gym.Space[Any], what: str) -> spaces.Box:
     return space
 
 
-def _check_penalty(penalty: float) -> float:
-    if isinstance(penalty, bool) or not np.isfinite(penalty):
-        raise SwitchingError(f"penalty must be a finite number, got {penalty!r}")
+def check_penalty(penalty: Any) -> float:
+    """``penalty`` as a float, if it is a finite number ``<= 0``.
+
+    Raises:
+        SwitchingError: Not a number (a string, a bool, ``None``), not finite, or positive —
+            a bonus on every step the Safety controller acts would teach the policy to hand
+            over control, the opposite of ``R_ADAS``.
+    """
+    if isinstance(penalty, bool) or not isinstance(penalty, int | float | np.integer | np.floating):
+        raise SwitchingError(f"penalty must be a number <= 0, got {penalty!r}")
+    if not np.isfinite(penalty):
+        raise SwitchingError(f"penalty must be a finite number <= 0, got {penalty!r}")
+    if penalty > 0:
+        raise SwitchingError(
+            f"penalty must be <= 0, got {penalty!r}: it is added to the reward on every step the "
+            "Safety controller acts (R_ADAS), and a bonus there teaches the policy to need it"
+        )
     return float(penalty)
+
+
+def _normalized_inside(venv: VecEnv) -> bool:
+    """``venv`` is, or wraps, an SB3 ``VecNormalize`` that normalises observations."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    current: Any = venv
+    while current is not None:
+        if isinstance(current, VecNormalize) and current.norm_obs:
+            return True
+        current = getattr(current, "venv", None)
+    return False
 
 
 def _default_state(space: gym.Space[Any], what: str) -> None:
@@ -144,13 +170,13 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
         logic: A :class:`~safeswitch.core.switching.SwitchingLogic` or the name of a registered
             one (its factory gets ``env``).
         penalty: Added to the reward on every step the learned action was overridden
-            (``R_ADAS``, paper Eq. 4).
+            (``R_ADAS``, paper Eq. 4): a number ``<= 0``.
         state_fn: ``state_fn(env) -> state`` — what the Safety controller and the logic see;
             by default the last observation as a ``[1, obs_dim]`` float64 array.
 
     Raises:
-        SwitchingError: A non-Box action space, an unknown or malformed logic, a non-finite
-            penalty, or no ``state_fn`` for a non-Box observation space.
+        SwitchingError: A non-Box action space, an unknown or malformed logic, a penalty that
+            is not a finite number ``<= 0``, or no ``state_fn`` for a non-Box observation space.
     """
 
     def __init__(
@@ -167,7 +193,7 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
         if state_fn is None:
             _default_state(env.observation_space, "SafeSwitch")
         self.supervisor = _Supervisor(
-            space, safety_controller, resolve_logic(logic, env), _check_penalty(penalty)
+            space, safety_controller, resolve_logic(logic, env), check_penalty(penalty)
         )
         self.state_fn = state_fn
         self._observation: Any = None
@@ -214,10 +240,16 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         venv: The vectorised environment.
         safety_controller: ``safety_controller(state) -> actions [N, A]``.
         logic: A switching logic or the name of a registered one (its factory gets ``venv``).
-        penalty: Added to the reward of every environment whose learned action was overridden.
+        penalty: Added to the reward of every environment whose learned action was overridden
+            (a number ``<= 0``).
         state_fn: ``state_fn(venv) -> state`` for all ``N`` environments; by default the last
             observations as an ``[N, obs_dim]`` float64 array (after an automatic reset: the
             new episode's first observation, as SB3 returns it).
+
+    Stack it *inside* ``VecNormalize`` (``VecNormalize(SafeSwitchVecEnv(venv, …))``): the
+    Safety controller and the logic must see the plant's own observations, the policy the
+    normalised ones. A ``VecNormalize`` inside it is refused unless ``state_fn`` says where
+    the plant state comes from.
     """
 
     def __init__(
@@ -233,8 +265,14 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         space = _box(venv.action_space, "SafeSwitchVecEnv")
         if state_fn is None:
             _default_state(venv.observation_space, "SafeSwitchVecEnv")
+            if _normalized_inside(venv):
+                raise SwitchingError(
+                    "SafeSwitchVecEnv wraps a VecNormalize: the Safety controller and the logic "
+                    "would see normalised observations; put VecNormalize outside "
+                    "(VecNormalize(SafeSwitchVecEnv(venv, ...))) or pass state_fn"
+                )
         self.supervisor = _Supervisor(
-            space, safety_controller, resolve_logic(logic, venv), _check_penalty(penalty)
+            space, safety_controller, resolve_logic(logic, venv), check_penalty(penalty)
         )
         self.state_fn = state_fn
         self._observation: Any = None

@@ -41,8 +41,10 @@ Fields:
         or entering the turn faster than a point mass may (the plant's lateral acceleration
         lags the route's curvature; README, "Evaluation").
 
-Sums are taken per chunk with numpy and combined exactly (``math.fsum``), so a summary
-depends only on the episodes and the chunk size — not on how many processes ran the chunks.
+Sums are taken per chunk with numpy and combined exactly (:class:`ExactSum`), so a summary
+depends only on the episodes and the chunk size — not on how many processes ran the chunks, nor
+in which order they were combined — and an accumulator's size does not grow with the number of
+chunks (a campaign of any length merges into one).
 """
 
 from __future__ import annotations
@@ -59,6 +61,43 @@ from safeswitch.sim.geometry import FloatArray
 
 #: Speed below which the ego counts as stopped [m/s].
 STOP_SPEED = 0.1
+
+
+class ExactSum:
+    """The exact sum of floats added one by one, in memory that does not grow with their
+    number: non-overlapping partial sums whose exact total is the sum (Shewchuk's expansion
+    arithmetic, as in ``math.fsum``). :attr:`value` is the correctly rounded total, so it does
+    not depend on the order of the additions."""
+
+    __slots__ = ("partials",)
+
+    def __init__(self, values: list[float] | None = None) -> None:
+        self.partials: list[float] = []
+        for value in values or ():
+            self.add(value)
+
+    def add(self, value: float) -> None:
+        """Add one finite float."""
+        x, kept = float(value), 0
+        for y in self.partials:
+            if abs(x) < abs(y):
+                x, y = y, x
+            high = x + y
+            low = y - (high - x)  # the rounding error of high, exactly
+            if low:
+                self.partials[kept] = low
+                kept += 1
+            x = high
+        del self.partials[kept:]
+        self.partials.append(x)
+
+    def merge(self, other: ExactSum) -> None:
+        for value in other.partials:
+            self.add(value)
+
+    @property
+    def value(self) -> float:
+        return math.fsum(self.partials)
 
 
 class SummaryAccumulator:
@@ -91,8 +130,8 @@ class SummaryAccumulator:
 
     def __init__(self) -> None:
         self.counts = dict.fromkeys(self._COUNTS, 0)
-        self.sums: dict[str, list[float]] = {name: [] for name in self._SUMS}
-        self.term_sums: dict[str, list[float]] = {}
+        self.sums: dict[str, ExactSum] = {name: ExactSum() for name in self._SUMS}
+        self.term_sums: dict[str, ExactSum] = {}
         self.maxima = dict.fromkeys(self._MAXIMA, -math.inf)
         self.with_oracle = False
 
@@ -117,18 +156,18 @@ class SummaryAccumulator:
         c["cut_episodes"] += int((r.outcome == 1).sum())
         c["yield_episodes"] += int((r.outcome == 2).sum())
         c["ticks"] += int(r.ticks.sum())
-        s["time_to_clear"].append(float(r.time_to_clear[cleared].sum()))
-        s["return"].append(float(r.episode_return.sum()))
-        s["min_speed"].append(float(r.min_speed.sum()))
+        s["time_to_clear"].add(float(r.time_to_clear[cleared].sum()))
+        s["return"].add(float(r.episode_return.sum()))
+        s["min_speed"].add(float(r.min_speed.sum()))
         course, encroached = np.isfinite(r.min_ttc), np.isfinite(r.min_pet)
         c["collision_course_episodes"] += int(course.sum())
         c["ttc_conflict_episodes"] += int((r.min_ttc <= TTC_CONFLICT_S).sum())
         c["encroachment_episodes"] += int(encroached.sum())
         c["pet_below_1s_episodes"] += int((r.min_pet[encroached] < 1.0).sum())
-        s["min_ttc"].append(float(r.min_ttc[course].sum()))
-        s["min_pet"].append(float(r.min_pet[encroached].sum()))
+        s["min_ttc"].add(float(r.min_ttc[course].sum()))
+        s["min_pet"].add(float(r.min_pet[encroached].sum()))
         for name, values in r.terms.items():
-            self.term_sums.setdefault(name, []).append(float(values.sum()))
+            self.term_sums.setdefault(name, ExactSum()).add(float(values.sum()))
         if r.collision.size:
             for key, values in (
                 ("max_accel_lon", r.max_accel_lon),
@@ -143,21 +182,21 @@ class SummaryAccumulator:
             self.with_oracle = True
             known = np.isfinite(oracle_time)
             c["oracle_cleared"] += int(known.sum())
-            s["oracle_time"].append(float(oracle_time[known].sum()))
+            s["oracle_time"].add(float(oracle_time[known].sum()))
             ratio = efficiency(oracle_time, r.time_to_clear, horizon_s)
             finite = np.isfinite(ratio)
             c["efficiency_count"] += int(finite.sum())
             c["faster_than_oracle_episodes"] += int((ratio[finite] > 1.0 + 1e-9).sum())
-            s["efficiency"].append(float(ratio[finite].sum()))
+            s["efficiency"].add(float(ratio[finite].sum()))
 
     def merge(self, other: SummaryAccumulator) -> None:
         """Add another accumulator's episodes (chunks in order: ``self`` first)."""
         for key in self._COUNTS:
             self.counts[key] += other.counts[key]
         for key in self._SUMS:
-            self.sums[key] += other.sums[key]
+            self.sums[key].merge(other.sums[key])
         for name, parts in other.term_sums.items():
-            self.term_sums.setdefault(name, []).extend(parts)
+            self.term_sums.setdefault(name, ExactSum()).merge(parts)
         for key in self._MAXIMA:
             self.maxima[key] = max(self.maxima[key], other.maxima[key])
         self.with_oracle |= other.with_oracle
@@ -167,8 +206,8 @@ class SummaryAccumulator:
         restores it: a campaign's shards travel as this)."""
         return {
             "counts": dict(self.counts),
-            "sums": {k: list(v) for k, v in self.sums.items()},
-            "term_sums": {k: list(v) for k, v in self.term_sums.items()},
+            "sums": {k: list(v.partials) for k, v in self.sums.items()},
+            "term_sums": {k: list(v.partials) for k, v in self.term_sums.items()},
             "maxima": {k: (None if v == -math.inf else v) for k, v in self.maxima.items()},
             "with_oracle": self.with_oracle,
         }
@@ -177,8 +216,10 @@ class SummaryAccumulator:
     def from_state(cls, state: dict[str, Any]) -> SummaryAccumulator:
         accumulator = cls()
         accumulator.counts.update(state["counts"])
-        accumulator.sums.update({k: list(v) for k, v in state["sums"].items()})
-        accumulator.term_sums = {k: list(v) for k, v in state["term_sums"].items()}
+        # Lists of floats whose exact sum is the total: partials, or (a shard written before
+        # partials were kept) one sum per chunk.
+        accumulator.sums.update({k: ExactSum(v) for k, v in state["sums"].items()})
+        accumulator.term_sums = {k: ExactSum(v) for k, v in state["term_sums"].items()}
         accumulator.maxima.update(
             {k: (-math.inf if v is None else v) for k, v in state["maxima"].items()}
         )
@@ -190,7 +231,7 @@ class SummaryAccumulator:
         c, n = self.counts, self.counts["episodes"]
 
         def mean(key: str, count: int) -> float | None:
-            return math.fsum(self.sums[key]) / count if count else None
+            return self.sums[key].value / count if count else None
 
         def largest(key: str) -> float | None:
             return self.maxima[key] if n else None
@@ -211,9 +252,9 @@ class SummaryAccumulator:
             "yield_episodes": c["yield_episodes"],
             "mean_return": mean("return", n),
             "mean_terms": {
-                name: math.fsum(parts) / n if n else None for name, parts in self.term_sums.items()
+                name: parts.value / n if n else None for name, parts in self.term_sums.items()
             },
-            "mean_min_speed_kmh": None if not n else 3.6 * math.fsum(self.sums["min_speed"]) / n,
+            "mean_min_speed_kmh": None if not n else 3.6 * self.sums["min_speed"].value / n,
             "max_speed_kmh": None if not n else 3.6 * self.maxima["max_speed"],
             "max_accel_lon": largest("max_accel_lon"),
             "max_accel_lat": largest("max_accel_lat"),

@@ -40,8 +40,8 @@ from safeswitch.evaluation.rollout import RolloutResult
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_terms
 from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.statistics import SPEEDING_MARGIN
 from safeswitch.leftturn.task import ConflictArrays, LeftTurnTask
-from safeswitch.leftturn.vec_env import SPEEDING_MARGIN
 from safeswitch.sim.collision import rectangle_separation
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import (

@@ -11,8 +11,8 @@ from numpy.typing import NDArray
 from safeswitch.evaluation.surrogate import SurrogateTracker
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.statistics import EpisodeStatistics
 from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
-from safeswitch.leftturn.vec_env import EpisodeStatistics
 
 #: A controller for the rollouts: (observation ``[B, 6]``, task state, tick) → actions ``[B]``
 #: in [-1, 1]. Adversaries may read the task state; a learned policy uses the observation only.
@@ -30,7 +30,7 @@ class RolloutResult:
         min_speed: Lowest ego speed [m/s].
         max_speed: Highest ego speed [m/s].
         speeding_steps: Ticks faster than the tolerated speed (``R_v``'s best, 30 km/h by
-            default; :func:`~safeswitch.leftturn.vec_env.speeding`).
+            default; :func:`~safeswitch.leftturn.statistics.speeding`).
         time_to_clear: Time until the ego left its conflict zone [s] (NaN if it never did).
         outcome: Who crossed first: 0 undecided, 1 cut, 2 yield.
         comfort_violation_steps: Ticks beyond a comfort limit.

@@ -36,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 from safeswitch.core.arrays import clamp
-from safeswitch.core.registry import LogicContextError
+from safeswitch.core.registry import LogicContextError, context_name
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.core.wrappers import SafeSwitch
 
@@ -280,7 +280,7 @@ def ttc_logic(context: object) -> TimeToCollisionLogic:
     road = getattr(getattr(context, "unwrapped", None), "road", None)
     if road is None:
         raise LogicContextError(
-            f"the 'ttc' switching logic supervises highway-env plants, not {type(context).__name__}"
+            f"the 'ttc' switching logic supervises highway-env plants, not {context_name(context)}"
         )
     return TimeToCollisionLogic(_rules_for(context))
 

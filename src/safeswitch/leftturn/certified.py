@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import broadcast_flat, jit
-from safeswitch.core.registry import LogicContextError
+from safeswitch.core.registry import LogicContextError, context_name
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.leftturn.config import CertifiedConfig
 from safeswitch.leftturn.switching import ConflictState
@@ -689,7 +689,7 @@ def certified_logic(task: LeftTurnTask) -> CertifiedSwitching:
     if not isinstance(getattr(config, "certified", None), CertifiedConfig):
         raise LogicContextError(
             "the 'certified' switching logic supervises the left-turn task, not "
-            f"{type(task).__name__}"
+            f"{context_name(task)}"
         )
     c = task.config
     from safeswitch.leftturn.traffic import LeftTurnTrafficTask

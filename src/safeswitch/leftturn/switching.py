@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, NamedTuple, TypeVar
 import numpy as np
 
 from safeswitch.core.arrays import jit
-from safeswitch.core.registry import LogicContextError
+from safeswitch.core.registry import LogicContextError, context_name
 from safeswitch.core.switching import BoolArray, Decision, FloatArray, Guarded
 from safeswitch.leftturn.config import PaperSwitchingConfig
 
@@ -183,7 +183,7 @@ def paper_logic(task: LeftTurnTask) -> PaperSwitching:
     paper = getattr(config, "paper", None)
     if not isinstance(paper, PaperSwitchingConfig):
         raise LogicContextError(
-            f"the 'paper' switching logic supervises the left-turn task, not {type(task).__name__}"
+            f"the 'paper' switching logic supervises the left-turn task, not {context_name(task)}"
         )
     from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 

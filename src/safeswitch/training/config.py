@@ -438,6 +438,28 @@ class ConstraintsConfig:
         return {name: c for name, c in named.items() if c is not None}
 
 
+#: The configuration ``safeswitch train`` uses without ``--config``: the paper's recipe.
+DEFAULT_CONFIG = "paper_scratch"
+
+#: The largest seed (NumPy's legacy seeding, which SB3 uses, takes 32 bits).
+SEED_MAX = 2**32 - 1
+
+
+def check_run_shape(n_envs: int, ppo: PPOConfig, seed: int, eval_seed: int) -> None:
+    """What every training configuration must satisfy: seeds in ``[0, 2**32 - 1]``, and a
+    rollout (``n_envs`` × ``ppo.n_steps``) that splits into ``ppo.n_minibatches`` equal
+    minibatches (each value named)."""
+    for name, value in (("seed", seed), ("eval_seed", eval_seed)):
+        check(0 <= value <= SEED_MAX, "train", name, value, "must be in [0, 2**32 - 1]")
+    rollout = n_envs * ppo.n_steps
+    if rollout % ppo.n_minibatches:
+        raise ConfigError(
+            f"a rollout of n_envs ({n_envs}) × ppo.n_steps ({ppo.n_steps}) = {rollout} steps "
+            f"does not split into ppo.n_minibatches ({ppo.n_minibatches}) equal minibatches; "
+            "change one of the three"
+        )
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """One training run.
@@ -510,14 +532,7 @@ class TrainConfig:
             self.eval_seed,
             "must differ from the training seed",
         )
-        rollout = self.ppo.n_steps * self.n_envs
-        check(
-            rollout % self.ppo.n_minibatches == 0,
-            o,
-            "n_envs",
-            self.n_envs,
-            f"times ppo.n_steps ({self.ppo.n_steps}) must be divisible by ppo.n_minibatches",
-        )
+        check_run_shape(self.n_envs, self.ppo, self.seed, self.eval_seed)
         if self.warm_start.episodes and self.warm_start.teacher == "gap_planner":
             check(self.traffic is not None, "warm_start", "teacher", self.warm_start.teacher,
                   "needs traffic (the single-car scene has teacher: planner)")  # fmt: skip
@@ -637,8 +652,8 @@ def _read_yaml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path} is not valid YAML{where}: {problem}") from exc
     if data is None:
         raise ConfigError(
-            f"{path} is empty; a configuration must set at least one key (to train with every "
-            "default, use --config paper or no --config)"
+            f"{path} is empty; a configuration must set at least one key (to train with the "
+            f"default recipe, leave out --config: it is {DEFAULT_CONFIG})"
         )
     if not isinstance(data, dict):
         raise ConfigError(f"{path} must hold a mapping of keys, got {type(data).__name__}")
@@ -741,7 +756,9 @@ class EnvTrainConfig:
                 f"(known: {', '.join(logic_names())})"
             )
         if self.penalty is not None:
-            check(math.isfinite(self.penalty), o, "penalty", self.penalty, "must be finite")
+            check(math.isfinite(self.penalty) and self.penalty <= 0, o, "penalty", self.penalty,
+                  "must be a finite number <= 0 (a bonus for needing the Safety controller "
+                  "would teach the policy to need it)")  # fmt: skip
         check(self.ppo.progress_shaping == 0, "ppo", "progress_shaping",
               self.ppo.progress_shaping, "shapes the left turn's reward only: must be 0 for "
               f"env_id {self.env_id!r}")  # fmt: skip
@@ -754,14 +771,7 @@ class EnvTrainConfig:
         check(self.ppo.clear_time_penalty == 0, "ppo", "clear_time_penalty",
               self.ppo.clear_time_penalty, "is read from the left turn's records: must be 0 "
               f"for env_id {self.env_id!r}")  # fmt: skip
-        rollout = self.ppo.n_steps * self.n_envs
-        check(
-            rollout % self.ppo.n_minibatches == 0,
-            o,
-            "n_envs",
-            self.n_envs,
-            f"times ppo.n_steps ({self.ppo.n_steps}) must be divisible by ppo.n_minibatches",
-        )
+        check_run_shape(self.n_envs, self.ppo, self.seed, self.eval_seed)
 
     @property
     def batch_size(self) -> int:

@@ -29,7 +29,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 from safeswitch.core.config import ConfigError
-from safeswitch.core.registry import safety_controller_for
+from safeswitch.core.registry import LogicContextError, safety_controller_for
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.io import write_json
 from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
@@ -42,6 +42,7 @@ from safeswitch.training.run import (
     open_run,
     save_checkpoint,
     save_final,
+    start_run,
 )
 
 PROGRESS_FIELDS = (
@@ -74,7 +75,18 @@ def make_supervised_env(
 
     Raises:
         ConfigError: ``env_id`` takes no ``switching`` and has no registered Safety controller.
+        LogicContextError: The logic does not serve this plant (the message starts with
+            ``env_id``: the plant inside may be registered under another id).
     """
+    try:
+        return _make_supervised(env_id, switching, penalty, **kwargs)
+    except LogicContextError as exc:
+        raise LogicContextError(f"{env_id}: {exc}") from exc
+
+
+def _make_supervised(
+    env_id: str, switching: str | None, penalty: float | None, **kwargs: Any
+) -> gym.Env[Any, Any]:
     if _takes_switching(env_id):
         extra: dict[str, Any] = {} if switching is None else {"switching": switching}
         if penalty is not None:
@@ -239,11 +251,14 @@ def train_env(
     """Train (or resume) a run on ``config.env_id``; returns ``metrics.json``'s contents.
     ``callbacks``: further SB3 callbacks (e.g. a benchmark's own recording)."""
     run = Path(out)
-    torch.set_num_threads(config.torch_threads)
-    checkpoint = open_run(run, resume, dump_env_config(config))
+    checkpoint = open_run(run, resume)
     if checkpoint is not None:
         config = load_env_config(run / "config.yaml")
-    env = normalized(_make_vec(config), config, checkpoint)
+    torch.set_num_threads(config.torch_threads)
+    vec = _make_vec(config)  # a logic that does not fit the plant fails here, nothing written
+    if checkpoint is None:
+        start_run(run, dump_env_config(config))
+    env = normalized(vec, config, checkpoint)
     if checkpoint is not None:
         model = SwitchPPO.load(
             checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")

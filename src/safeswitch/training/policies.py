@@ -27,20 +27,9 @@ from safeswitch.evaluation.rollout import Policy
 from safeswitch.leftturn.task import TaskState
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_any_config
 from safeswitch.training.ppo import SwitchPPO
+from safeswitch.training.shipped import SHIPPED, SHIPPED_DIR
 
-#: Where the shipped policies live, one folder each.
-SHIPPED_DIR = Path(__file__).resolve().parent.parent / "policies"
-SHIPPED = {
-    "shipped": "paper",
-    "paper": "paper",
-    "paper-warm": "paper_warm",
-    "paper-scratch": "paper_scratch",
-    "no-adas": "no_adas",
-    "certified": "certified",
-    "none": "none",
-    "traffic-paper": "traffic_paper",
-    "traffic-certified": "traffic_certified",
-}
+__all__ = ["SHIPPED", "SHIPPED_DIR", "PolicyLoadError", "TrainedPolicy", "load_policy"]
 
 
 class PolicyLoadError(ValueError):
@@ -163,12 +152,17 @@ class _Spaces(VecEnv):
 
 
 def resolve_model_dir(model: str | Path) -> Path:
-    """The folder holding ``model.zip``: a shipped policy by name (``shipped``, ``paper``,
-    ``paper-scratch``, ``no-adas``, ``certified``, ``none``; in traffic ``traffic-paper``,
-    ``traffic-certified``), a run directory, one of its
-    checkpoints (``run/checkpoints/step_…``), or — for a run that was interrupted before it
-    finished — its latest complete checkpoint."""
+    """The folder holding ``model.zip``: a shipped policy by name (:data:`SHIPPED`), a run
+    directory or its ``model.zip``, one of its checkpoints (``run/checkpoints/step_…``), or —
+    for a run that was interrupted before it finished — its latest complete checkpoint."""
     path = SHIPPED_DIR / SHIPPED[str(model)] if str(model) in SHIPPED else Path(model)
+    if path.suffix == ".zip" and path.is_file():  # SB3 users pass the model file itself
+        if path.name != "model.zip":
+            raise FileNotFoundError(
+                f"{path}: a policy is loaded from its run directory, where it is model.zip "
+                "beside config.yaml and vecnormalize.pkl; pass that directory"
+            )
+        path = path.parent
     if (path / "model.zip").is_file():
         return path
     checkpoints = sorted(
@@ -191,6 +185,35 @@ def run_config_path(model_dir: Path) -> Path:
         if (folder / "config.yaml").is_file():
             return folder / "config.yaml"
     raise FileNotFoundError(f"no config.yaml for the policy in {model_dir} (nor in its run)")
+
+
+def trained_env_id(policy: TrainedPolicy) -> str:
+    """The Gymnasium id of the environment the policy was trained on."""
+    if isinstance(policy.config, EnvTrainConfig):
+        return policy.config.env_id
+    return "safeswitch/LeftTurnTraffic-v0" if policy.config.traffic else "safeswitch/LeftTurn-v0"
+
+
+def check_fits(
+    policy: TrainedPolicy,
+    env_id: str,
+    observation_space: spaces.Space[Any],
+    action_space: spaces.Space[Any],
+) -> None:
+    """Refuse, before the first step, a policy whose observation or action space is not the
+    environment's (one line naming both).
+
+    Raises:
+        PolicyLoadError: The shapes differ.
+    """
+    mine = (policy.model.observation_space.shape, policy.model.action_space.shape)
+    theirs = (observation_space.shape, action_space.shape)
+    if mine != theirs:
+        raise PolicyLoadError(
+            f"the policy in {policy.path} was trained on {trained_env_id(policy)} (observation "
+            f"{mine[0]}, action {mine[1]}); {env_id} has observation {theirs[0]}, action "
+            f"{theirs[1]}"
+        )
 
 
 def load_policy(model: str | Path) -> TrainedPolicy:

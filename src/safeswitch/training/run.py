@@ -188,6 +188,11 @@ def build_model(
     return model
 
 
+#: A file in a checkpoint saved on an interrupt: such a checkpoint is never pruned (the
+#: interrupt's message named it, and a user may evaluate it after resuming).
+INTERRUPTED = "interrupted"
+
+
 def complete_checkpoints(run: Path) -> list[Path]:
     """The run's checkpoints that were written whole, oldest first."""
     folder = run / "checkpoints"
@@ -215,8 +220,9 @@ def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[
     (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
     shutil.rmtree(final, ignore_errors=True)
     os.replace(tmp, final)
-    for old in complete_checkpoints(run)[:-2]:  # keep the last two
-        shutil.rmtree(old, ignore_errors=True)
+    for old in complete_checkpoints(run)[:-2]:  # keep the last two, and every interrupt's
+        if not (old / INTERRUPTED).is_file():
+            shutil.rmtree(old, ignore_errors=True)
     return final
 
 
@@ -236,10 +242,11 @@ def _save_checkpoint(
     return save_checkpoint(run, model, env, state)
 
 
-def open_run(run: Path, resume: bool, config_text: str) -> dict[str, Any] | None:
-    """Check ``run`` for a new run (empty or absent; the configuration is written) or for
-    ``--resume`` (an incomplete run with a checkpoint); returns the latest checkpoint's state
-    with its ``path`` when resuming, else ``None``.
+def open_run(run: Path, resume: bool) -> dict[str, Any] | None:
+    """Check ``run`` for a new run (empty or absent) or for ``--resume`` (an incomplete run
+    with a checkpoint), writing nothing; returns the latest checkpoint's state with its
+    ``path`` when resuming, else ``None``. A new run is started by :func:`start_run` once
+    everything else has been checked, so a run that cannot start leaves ``run`` as it was.
 
     Raises:
         RunDirectoryError: Saying what is wrong and what to do.
@@ -264,9 +271,14 @@ def open_run(run: Path, resume: bool, config_text: str) -> dict[str, Any] | None
         raise RunDirectoryError(
             f"{run} is not empty; choose another --out, or --resume an interrupted run"
         )
+    return None
+
+
+def start_run(run: Path, config_text: str) -> None:
+    """Create the new run directory with its resolved configuration (after
+    :func:`open_run` and every other check passed)."""
     run.mkdir(parents=True, exist_ok=True)
     write_atomic(run / "config.yaml", config_text)
-    return None
 
 
 def save_final(run: Path, model: SwitchPPO, env: VecNormalize) -> None:
@@ -305,6 +317,14 @@ def learn(
     interrupt goes on. ``progress_bar``: SB3's bar on a terminal, a plain line every 15 s
     otherwise (a log never stays silent for minutes). ``extra``: further callbacks."""
     remaining = timesteps - model.num_timesteps
+    rollout = model.n_steps * model.n_envs
+    if remaining > 0 and remaining % rollout:
+        total = model.num_timesteps + -(-remaining // rollout) * rollout
+        print(
+            f"note: PPO trains in whole rollouts of n_envs × n_steps = {model.n_envs} × "
+            f"{model.n_steps} = {rollout:,} steps: {timesteps:,} timesteps become {total:,}",
+            file=sys.stderr,
+        )
     terminal = sys.stderr.isatty()
     callbacks: list[BaseCallback] = [monitor, *(extra or [])]
     if progress_bar and not terminal:
@@ -321,6 +341,9 @@ def learn(
     except KeyboardInterrupt:
         monitor.totals["wall_time_s"] = monitor.wall_time_s
         path = save()
+        (path / INTERRUPTED).write_text(
+            f"saved on an interrupt at {model.num_timesteps} timesteps; kept\n", encoding="utf-8"
+        )
         print(
             f"\ninterrupted at {model.num_timesteps:,} timesteps; checkpoint {path}; "
             f"continue with: safeswitch train --resume --out {run}",
@@ -352,14 +375,18 @@ def train(
         KeyboardInterrupt: after saving a checkpoint, if interrupted.
     """
     run = Path(out)
-    torch.set_num_threads(config.torch_threads)
-    checkpoint = open_run(run, resume, dump_config(config))
+    checkpoint = open_run(run, resume)
     if checkpoint is not None:
         config = load_config(run / "config.yaml")
+    torch.set_num_threads(config.torch_threads)
+    # The environment first: it builds the switching logic for the task, so a logic that does
+    # not fit it is refused before the run directory is written.
     vec = LeftTurnVecEnv(
         config.n_envs, config=config.train_env, seed=config.seed, traffic=config.traffic_settings,
         stagger=config.stagger_starts,
     )  # fmt: skip
+    if checkpoint is None:
+        start_run(run, dump_config(config))
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
     learning = LearningEnv(vec, config.ppo, config.constraints, config.deploy_switching)

@@ -1,0 +1,165 @@
+"""Per-episode statistics of the left turn, tick by tick: what the VecEnv's ``episode``
+summaries, the rollouts of an evaluation and the training constraints' costs count (no
+Stable-Baselines3 here: a campaign's worker runs the batched task alone)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.rewards import REWARD_TERMS
+from safeswitch.leftturn.task import StepRecord
+
+#: Keys of the ``episode`` summary beyond SB3's ``r``, ``l`` and ``t``.
+EPISODE_KEYS: tuple[str, ...] = (
+    "collision",
+    "safety_steps",
+    "min_speed",
+    "max_speed",
+    "speeding_steps",
+    "comfort_violation_steps",
+    "outcome",
+    "time_to_clear",
+    "max_lateral_deviation",
+    *(f"term_{name}" for name in REWARD_TERMS),
+)
+
+
+def comfort_exceeded(record: StepRecord, config: LeftTurnConfig) -> NDArray[np.bool_]:
+    """Per environment ``[B]``: the tick exceeded a comfort limit (|a_lon| or |a_lat| above
+    the configuration's comfort limits; the evaluation's ``comfort_violation_steps``)."""
+    return (np.abs(record.accel_lon) > config.rewards.comfort_accel_lon) | (
+        np.abs(record.accel_lat) > config.rewards.comfort_accel_lat
+    )
+
+
+#: Speeding counts from this much above the tolerated speed [m/s] (0.1 km/h): a controller
+#: that holds the tolerated speed itself (the planner) overshoots it by rounding only.
+SPEEDING_MARGIN = 0.1 / 3.6
+
+
+def speeding(record: StepRecord, config: LeftTurnConfig) -> NDArray[np.bool_]:
+    """Per environment ``[B]``: the ego was faster than the tolerated speed, the highest at
+    which ``R_v`` is at its best (:attr:`~safeswitch.leftturn.config.RewardConfig.
+    tolerated_speed`; the oracle's ``v_max``, 30 km/h by default), by more than
+    :data:`SPEEDING_MARGIN`."""
+    return record.ego_speed > config.rewards.tolerated_speed + SPEEDING_MARGIN
+
+
+class TickCosts:
+    """Per environment, what the ticks of one step held (arrays ``[B]``, counts of ticks):
+    what the learning-only costs of :mod:`safeswitch.training.constraints` read.
+
+    Attributes:
+        ticks: Ticks the episode was live for in the step (fewer than the decision interval
+            at the step that ends it).
+        comfort: Of those, ticks that exceeded a comfort limit.
+        speeding: Of those, ticks faster than the tolerated speed (:func:`speeding`).
+        safety: Ticks on which the safety action was executed (any reason).
+        uncleared: Ticks that ended with the ego not yet clear of its conflict zone.
+    """
+
+    def __init__(self, batch: int) -> None:
+        self.ticks = np.zeros(batch, dtype=np.int64)
+        self.comfort = np.zeros(batch, dtype=np.int64)
+        self.speeding = np.zeros(batch, dtype=np.int64)
+        self.safety = np.zeros(batch, dtype=np.int64)
+        self.uncleared = np.zeros(batch, dtype=np.int64)
+
+    def clear(self) -> None:
+        for counts in (self.ticks, self.comfort, self.speeding, self.safety, self.uncleared):
+            counts[:] = 0
+
+    def add(self, record: StepRecord, stats: EpisodeStatistics, live: NDArray[np.bool_]) -> None:
+        """Add one tick of the episodes ``live`` selects (``stats`` just took the same tick:
+        its comfort and speeding flags are reused)."""
+        self.ticks += live
+        self.comfort += live & stats.tick_comfort
+        self.speeding += live & stats.tick_speeding
+        self.safety += live & record.safety_active
+        self.uncleared += live & ~record.ego_cleared
+
+
+class EpisodeStatistics:
+    """Running per-episode statistics of a batch of environments (arrays ``[B]``)."""
+
+    def __init__(self, batch: int) -> None:
+        self.ret = np.zeros(batch)
+        self.length = np.zeros(batch, dtype=np.int64)
+        self.collision = np.zeros(batch, dtype=bool)
+        self.safety_steps = np.zeros(batch, dtype=np.int64)
+        self.min_speed = np.full(batch, np.inf)
+        self.max_speed = np.zeros(batch)
+        self.speeding_steps = np.zeros(batch, dtype=np.int64)
+        #: The last tick's flags (every environment, live or not): over a comfort limit, and
+        #: faster than the tolerated speed.
+        self.tick_comfort = np.zeros(batch, dtype=bool)
+        self.tick_speeding = np.zeros(batch, dtype=bool)
+        self.comfort_violation_steps = np.zeros(batch, dtype=np.int64)
+        self.time_to_clear = np.full(batch, np.nan)
+        self.max_lateral = np.zeros(batch)
+        self.terms = {name: np.zeros(batch) for name in REWARD_TERMS}
+
+    def update(
+        self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_] | None = None
+    ) -> None:
+        """Add one tick; with ``live``, only the episodes it selects (the others have ended and
+        keep their figures)."""
+        r = record
+        on = np.ones(r.reward.shape[0], dtype=bool) if live is None else live
+        self.ret += np.where(on, r.reward, 0.0)
+        self.length += on
+        self.collision |= r.collision & on
+        self.safety_steps += r.safety_active & on
+        self.min_speed = np.where(on, np.minimum(self.min_speed, r.ego_speed), self.min_speed)
+        self.max_speed = np.where(on, np.maximum(self.max_speed, r.ego_speed), self.max_speed)
+        self.tick_speeding = speeding(r, config)
+        self.tick_comfort = comfort_exceeded(r, config)
+        self.speeding_steps += on & self.tick_speeding
+        self.comfort_violation_steps += on & self.tick_comfort
+        just_cleared = on & r.ego_cleared & np.isnan(self.time_to_clear)
+        self.time_to_clear[just_cleared] = self.length[just_cleared] * config.episode.dt
+        self.max_lateral = np.where(
+            on, np.maximum(self.max_lateral, np.abs(r.lateral)), self.max_lateral
+        )
+        for name in REWARD_TERMS:
+            self.terms[name] += np.where(on, r.terms[name], 0.0)
+
+    def summary(
+        self, index: NDArray[np.intp], record: StepRecord, elapsed: float
+    ) -> dict[str, NDArray[Any]]:
+        """Summaries of the episodes ``index`` (that just ended), arrays ``[len(index)]``."""
+        out: dict[str, NDArray[Any]] = {
+            "r": self.ret[index].copy(),
+            "l": self.length[index].copy(),
+            "t": np.full(len(index), round(elapsed, 6)),
+            "collision": self.collision[index].copy(),
+            "safety_steps": self.safety_steps[index].copy(),
+            "min_speed": self.min_speed[index].copy(),
+            "max_speed": self.max_speed[index].copy(),
+            "speeding_steps": self.speeding_steps[index].copy(),
+            "comfort_violation_steps": self.comfort_violation_steps[index].copy(),
+            "outcome": record.outcome[index].copy(),
+            "time_to_clear": self.time_to_clear[index].copy(),
+            "max_lateral_deviation": self.max_lateral[index].copy(),
+        }
+        for name in REWARD_TERMS:
+            out[f"term_{name}"] = self.terms[name][index].copy()
+        return out
+
+    def reset_at(self, index: NDArray[np.intp]) -> None:
+        self.ret[index] = 0.0
+        self.length[index] = 0
+        self.collision[index] = False
+        self.safety_steps[index] = 0
+        self.min_speed[index] = np.inf
+        self.max_speed[index] = 0.0
+        self.speeding_steps[index] = 0
+        self.comfort_violation_steps[index] = 0
+        self.time_to_clear[index] = np.nan
+        self.max_lateral[index] = 0.0
+        for name in REWARD_TERMS:
+            self.terms[name][index] = 0.0
