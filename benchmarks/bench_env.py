@@ -29,8 +29,24 @@ VEC_SIZES = (1, 64, 1024, 4096)
 ROOT = Path(__file__).resolve().parent.parent
 
 _MEASURE = """
-import json, sys
+import importlib, json, sys
 import safeswitch
+from safeswitch.core import registry
+# The installed entry points name this checkout's modules; a revision whose logics lived
+# elsewhere registers them from where they were (a run-time registration wins).
+HOMES = {
+    "paper": ("safeswitch.leftturn.logics.paper", "safeswitch.leftturn.switching"),
+    "guarded": ("safeswitch.leftturn.logics.paper", "safeswitch.leftturn.switching"),
+    "certified": ("safeswitch.leftturn.logics.certified", "safeswitch.leftturn.certified"),
+}
+for name, modules in HOMES.items():
+    for module in modules:
+        try:
+            factory = getattr(importlib.import_module(module), name + "_logic")
+        except ImportError:
+            continue
+        registry.register_logic(name, factory, replace=True)
+        break
 from safeswitch.bench import env_steps_per_s, vec_env_steps_per_s
 switching, seconds, sizes = sys.argv[1], float(sys.argv[2]), json.loads(sys.argv[3])
 out = {"single": env_steps_per_s(switching, seconds)}

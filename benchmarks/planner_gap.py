@@ -28,29 +28,18 @@ from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.logic_limit import PaperLogicLimit
 from safeswitch.evaluation.oracle import Oracle, efficiency
 from safeswitch.evaluation.planner import Planner, PlannerConfig
-from safeswitch.leftturn.switching import ConflictState
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
+from safeswitch.leftturn.views import north_view
 
 
 def rule_fires_on_plans(task: LeftTurnTask, oracle: Oracle, scenarios) -> np.ndarray:
     """``[B]``: the paper logic fires on some tick of the oracle's plan."""
     plan = oracle.plan(scenarios)
-    geo, dt = task.conflict, task.config.episode.dt
+    dt = task.config.episode.dt
     s, v, s_n = plan.progress[:, 1:], plan.speed[:, 1:], plan.north_progress[:, 1:]
     v_n = np.diff(plan.north_progress, axis=1) / dt
-    both = task.both_at_intersection(s, s_n)
-    state = ConflictState(
-        ego_to_conflict=(geo.s_point_a - s).ravel(),
-        ego_to_stop=(geo.zone_a[0] - s).ravel(),
-        ego_speed=v.ravel(),
-        north_to_conflict=(geo.s_point_b - s_n).ravel(),
-        north_speed=v_n.ravel(),
-        both_at_intersection=both.ravel(),
-        ego_progress=s.ravel(),
-        north_progress=s_n.ravel(),
-        ego_throttle=np.zeros(s.size),
-        ego_brake=np.zeros(s.size),
-    )
+    flat = [a.ravel() for a in (s, v, np.zeros(s.size), np.zeros(s.size), s_n, v_n)]
+    state = north_view(task.north_conflict, *flat, v_n.ravel())
     decision = task.switching.decide(state, np.zeros((s.size, 1)), np.zeros((s.size, 1)))
     return decision.use_safety.reshape(s.shape).any(axis=1), plan
 

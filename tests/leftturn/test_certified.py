@@ -10,8 +10,8 @@ from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.scenarios import scenario_grid
-from safeswitch.leftturn.switching import ConflictState
 from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.views import north_view
 from safeswitch.sim.vehicle import VehicleState, vehicle_step
 from safeswitch.training.policies import load_policy
 
@@ -116,32 +116,26 @@ def test_a_safe_learned_action_is_never_replaced(certified_task):
     assert np.concatenate(silent).all()
 
 
-def make_state(logic, e_progress, e_speed, e_throttle, e_brake, n_progress, n_speed):
+@pytest.fixture(scope="module")
+def north(certified_task):
+    """The geometry of the ego's conflict with the north car (the states below use it)."""
+    return certified_task.north_conflict
+
+
+def make_state(north, e_progress, e_speed, e_throttle, e_brake, n_progress, n_speed):
     arrays = [
         np.atleast_1d(np.asarray(v, dtype=float))
         for v in (e_progress, e_speed, e_throttle, e_brake, n_progress, n_speed)
     ]
-    zero = np.zeros_like(arrays[0])
-    return ConflictState(
-        ego_to_conflict=zero,
-        ego_to_stop=zero,
-        ego_speed=arrays[1],
-        north_to_conflict=zero,
-        north_speed=arrays[5],
-        both_at_intersection=zero.astype(bool),
-        ego_progress=arrays[0],
-        north_progress=arrays[4],
-        ego_throttle=arrays[2],
-        ego_brake=arrays[3],
-    )
+    arrays = list(np.broadcast_arrays(*arrays))
+    return north_view(north, *(np.ascontiguousarray(a) for a in arrays), arrays[5].copy())
 
 
 def is_safe(logic, s):
-    arrival = logic.north_arrival(s.north_progress, s.north_speed)
-    return logic.safe(s.ego_progress, s.ego_speed, s.ego_throttle, s.ego_brake, arrival)
+    return logic.safe(s)
 
 
-def advance(logic, s, pedals, north_accel, progress_ratio):
+def advance(logic, north, s, pedals, north_accel, progress_ratio):
     """One tick of the plant's longitudinal model for the ego, the north car anywhere within
     the assumptions, and the ego's progress per metre driven anywhere in the allowed band."""
     dt = logic.dt
@@ -153,7 +147,7 @@ def advance(logic, s, pedals, north_accel, progress_ratio):
     top = logic.config.north_max_speed_kmh / 3.6
     n_speed = np.clip(s.north_speed + north_accel * dt, 0.0, top)
     n_progress = s.north_progress + 0.5 * (s.north_speed + n_speed) * dt
-    return make_state(logic, progress, speed, th, br, n_progress, n_speed)
+    return make_state(north, progress, speed, th, br, n_progress, n_speed)
 
 
 @settings(max_examples=400, deadline=None)
@@ -171,6 +165,7 @@ def advance(logic, s, pedals, north_accel, progress_ratio):
 )
 def test_invariant_safe_states_stay_safe_under_any_learned_action(
     logic,
+    north,
     e_offset,
     e_speed,
     e_throttle,
@@ -183,19 +178,19 @@ def test_invariant_safe_states_stay_safe_under_any_learned_action(
     progress_ratio,
 ):
     state = make_state(
-        logic,
-        logic.ego_zone[0] + e_offset,
+        north,
+        north.ego_cert_zone[0] + e_offset,
         e_speed,
         e_throttle,
         e_brake,
-        logic.north_zone[0] + n_offset,
+        north.north_cert_zone[0] + n_offset,
         n_speed,
     )
     if not is_safe(logic, state)[0]:
         return
     learned = np.array([[throttle, brake]])
     sup = supervise(logic, state, learned, np.array([[0.0, 1.0]]), 0.0, 1.0)
-    after = advance(logic, state, sup.executed, north_accel, progress_ratio)
+    after = advance(logic, north, state, sup.executed, north_accel, progress_ratio)
     assert is_safe(logic, after)[0]
 
 
@@ -208,15 +203,15 @@ def test_invariant_safe_states_stay_safe_under_any_learned_action(
     throttle=st.one_of(st.floats(-5.0, 5.0), st.just(np.nan), st.just(np.inf)),
 )
 def test_executed_action_is_the_learned_one_or_a_backup_and_never_nan(
-    logic, e_offset, e_speed, n_offset, n_speed, throttle
+    logic, north, e_offset, e_speed, n_offset, n_speed, throttle
 ):
     state = make_state(
-        logic,
-        logic.ego_zone[0] + e_offset,
+        north,
+        north.ego_cert_zone[0] + e_offset,
         e_speed,
         0.2,
         0.0,
-        logic.north_zone[0] + n_offset,
+        north.north_cert_zone[0] + n_offset,
         n_speed,
     )
     pid_brake = np.array([[0.0, 0.7]])
@@ -242,7 +237,7 @@ def break_north(task, scenarios, new_speed_kmh, when_progress):
     }
 
     def hook(state, record, tick):
-        near = state.world.progress[:, 1] > task.switching.north_zone[0] - when_progress
+        near = state.world.progress[:, 1] > task.north_conflict.north_cert_zone[0] - when_progress
         change = near & ~triggered
         state.scenarios.north_speed[change] = new_speed_kmh / 3.6
         triggered[change] = True
@@ -273,48 +268,47 @@ def test_a_north_car_faster_than_assumed_is_flagged_whenever_it_causes_a_collisi
     assert flagged[result.collision].all()
 
 
-def random_states(logic, rng, n):
+def random_states(north, rng, n):
     """States around both conflict zones: the ego 40 m before to 15 m into its zone at up to
     54 km/h with any pedals, the north car 80 m before to 15 m into its zone."""
     return make_state(
-        logic,
-        logic.ego_zone[0] + rng.uniform(-40, 15, n),
+        north,
+        north.ego_cert_zone[0] + rng.uniform(-40, 15, n),
         rng.uniform(0, 15, n),
         rng.uniform(0, 1, n),
         rng.uniform(0, 1, n),
-        logic.north_zone[0] + rng.uniform(-80, 15, n),
+        north.north_cert_zone[0] + rng.uniform(-80, 15, n),
         rng.uniform(0, 13.8, n),
     )
 
 
-def test_invariant_on_200k_random_states_including_the_intervention_boundary(logic):
+def test_invariant_on_200k_random_states_including_the_intervention_boundary(logic, north):
     """Hypothesis explores shapes; this sweeps volume, so the rare states where the filter
     must intervene (about 0.15 % of safe ones) are hit hundreds of times."""
     rng = np.random.default_rng(0)
     n = 200_000
-    state = random_states(logic, rng, n)
+    state = random_states(north, rng, n)
     safe = is_safe(logic, state)
     learned = np.stack([rng.uniform(0, 1, n), rng.choice([0.0, 0.0, 1.0], n)], axis=1)
     sup = supervise(logic, state, learned, np.tile([0.0, 1.0], (n, 1)), 0.0, 1.0)
     after = advance(
-        logic, state, sup.executed, rng.uniform(-9, 2.5, n), rng.uniform(1 / 1.05, 1.05, n)
-    )
+        logic, north, state, sup.executed, rng.uniform(-9, 2.5, n),
+        rng.uniform(1 / 1.05, 1.05, n),
+    )  # fmt: skip
     assert (safe & sup.safety_active).sum() > 100
     assert not (safe & ~is_safe(logic, after)).any()
 
 
-def test_the_cheap_screen_only_passes_states_the_full_certificate_accepts(logic):
+def test_the_cheap_screen_only_passes_states_the_full_certificate_accepts(logic, north):
     """``settled`` skips the certificate; every state it passes must be one the certificate
     accepts after a tick of any pedals, including full throttle with no brake."""
     rng = np.random.default_rng(3)
     n = 200_000
-    state = random_states(logic, rng, n)
+    state = random_states(north, rng, n)
     settled = logic.settled(state)
     assert 0.2 < settled.mean() < 0.9  # the screen decides a real share, not all or nothing
-    arrival = logic.north_arrival(state.north_progress, state.north_speed) - logic.dt
     for pedals in ([1.0, 0.0], [0.0, 0.0], [0.5, 0.5]):
-        low, high, v, th, br = logic.predict(state, np.tile(pedals, (n, 1)))
-        accepted = logic._certify(low, high, v, th, br, arrival)
+        accepted = logic.accepts(state, np.tile(pedals, (n, 1)))
         assert accepted[settled].all()
 
 
@@ -357,12 +351,12 @@ def test_the_clear_time_bound_is_never_beaten_by_the_plant(logic):
     assert (bound - reached).mean() < 0.5  # a useful bound, not a vacuous one
 
 
-def test_the_filter_predicts_the_learned_tick_exactly_as_the_plant_drives_it(logic):
+def test_the_filter_predicts_the_learned_tick_exactly_as_the_plant_drives_it(logic, north):
     """The one-tick prediction runs the plant's own longitudinal model: speed and pedal positions
     agree bit for bit, and the true progress lies within the predicted bounds."""
     rng = np.random.default_rng(8)
     n = 50_000
-    state = random_states(logic, rng, n)
+    state = random_states(north, rng, n)
     pedals = np.stack([rng.uniform(0, 1, n), rng.choice([0.0, 0.3, 1.0], n)], axis=1)
     low, high, speed, throttle, brake = logic.predict(state, pedals)
     plant = VehicleState.at(0.0, 0.0, 0.0, state.ego_speed, state.ego_throttle)

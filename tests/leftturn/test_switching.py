@@ -6,13 +6,13 @@ import pytest
 from safeswitch.core.registry import logic_names
 from safeswitch.core.switching import INVALID_LEARNED_ACTION, NeverSwitch, reason_names, supervise
 from safeswitch.leftturn.config import PaperSwitchingConfig
-from safeswitch.leftturn.scenarios import named_scenarios
-from safeswitch.leftturn.switching import (
-    ConflictState,
+from safeswitch.leftturn.logics.paper import (
     PaperSwitching,
     braking_distance,
     time_to_reach,
 )
+from safeswitch.leftturn.scenarios import named_scenarios
+from safeswitch.leftturn.views import NorthConflict, north_view
 
 CFG = PaperSwitchingConfig()
 DECEL = 6.0
@@ -27,7 +27,7 @@ def test_ttr_uses_the_path_distance_along_the_curve(task):
     theta = math.acos((-g.lane_width / 2 + g.box_half_size) / radius)
     state = task.initial(named_scenarios("cut", 1))
     state.world.progress[0, 0] = g.approach_length  # the stop line
-    conflict = task.conflict_state(state)
+    conflict = task.view(state)
     assert conflict.ego_to_conflict[0] == pytest.approx(radius * theta, abs=0.01)
     straight_line = np.linalg.norm(
         task.conflict.point - np.array([g.lane_width / 2, -g.box_half_size])
@@ -43,21 +43,24 @@ def test_ttr_guards_zero_speed_and_braking_distance_is_eq3():
 
 
 def make_state(ego_to_stop, ego_speed=7.0, gap=0.0, at=True):
-    """A state whose ``TTR_n - TTR_e`` is ``CFG.ttr_threshold_s + gap``."""
+    """A state whose ``TTR_n - TTR_e`` is ``CFG.ttr_threshold_s + gap`` (one conflict, measured
+    from the ego at 0 and the north car at 0)."""
     ego_to_conflict = ego_to_stop + 5.0
     ttr_e = ego_to_conflict / ego_speed
     north_speed = 8.0
     north_to_conflict = (ttr_e + CFG.ttr_threshold_s + gap) * north_speed
+    geometry = NorthConflict(
+        ego_point=ego_to_conflict, ego_zone=(ego_to_stop, ego_to_conflict + 5.0),
+        ego_cert_zone=(ego_to_stop, ego_to_conflict + 5.0), north_point=north_to_conflict,
+        north_zone=(north_to_conflict - 5.0, north_to_conflict + 5.0),
+        north_cert_zone=(north_to_conflict - 5.0, north_to_conflict + 5.0),
+        approach_distance=30.0,
+    )  # fmt: skip
     zero = np.zeros(1)
-    values = (ego_to_conflict, ego_to_stop, ego_speed, north_to_conflict, north_speed)
-    return ConflictState(
-        *(np.array([v]) for v in values),
-        both_at_intersection=np.array([at]),
-        ego_progress=zero,
-        north_progress=zero,
-        ego_throttle=zero,
-        ego_brake=zero,
-    )
+    view = north_view(geometry, zero, np.array([ego_speed]), zero, zero, zero,
+                      np.array([north_speed]), np.array([north_speed]), np.array([at]))  # fmt: skip
+    assert view.ego_to_stop[0] == ego_to_stop and view.both_at_intersection[0] == at
+    return view
 
 
 def decide(state):
@@ -123,7 +126,7 @@ def test_the_task_switches_exactly_as_supervise_with_the_registered_logic(switch
         action = rng.uniform(-1.3, 1.3, n)
         action[rng.random(n) < 0.03] = np.nan
         action[rng.random(n) < 0.01] = np.inf
-        conflict = task.conflict_state(state)
+        conflict = task.view(state)
         rule, _ = pid_step(
             ctrl.throttle_pid, state.pid_throttle, ctrl.speed_limit - conflict.ego_speed, dt
         )

@@ -12,8 +12,8 @@ from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
-from safeswitch.leftturn.certified import certified_logic
 from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, traffic_config
+from safeswitch.leftturn.logics.certified import certified_logic
 from safeswitch.leftturn.task import LeftTurnTask, build_task
 from safeswitch.leftturn.traffic import (
     CONFLICT_FEATURES,
@@ -21,6 +21,7 @@ from safeswitch.leftturn.traffic import (
     OBSERVED_FEATURES,
     LeftTurnTrafficTask,
 )
+from safeswitch.leftturn.views import Phantoms
 from safeswitch.sim.idm import IDMParams, idm_accel
 from safeswitch.sim.network import RoadNetwork, priority_rank
 
@@ -266,7 +267,7 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
         if tick % 40 == 0:
             obs = task.observe(state)
             assert np.all((obs >= low) & (obs <= high))
-            v = task.logic_view(state, task.conflict_state(state))
+            v = task.view(state)
             for b in range(16):
                 s_e = v.ego_progress[b]
                 rows = []
@@ -362,8 +363,8 @@ def test_certified_accounts_for_vehicles_not_yet_in_the_scene():
     the ego waits into a conflict zone: the certificate needs them."""
     task = traffic_task("medium", "certified", horizon_s=12.0)
     logic = task.switching
-    logic.phantom_zones = logic.phantom_zones[:0]
-    logic.phantom_arrivals = logic.phantom_arrivals[:0]
+    assert logic.phantoms.entry.size > 0
+    logic.phantoms = Phantoms.none()
     batch = scenes(task, 1024)
     result = rollout(task, batch, catalogue(task, 1024, 3)["noisy_cruise"]())
     assert result.collision.sum() > 0

@@ -19,8 +19,49 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def jit(fn: F) -> F:
-    """Compile ``fn`` with numba (nopython, machine code cached on disk); typed as ``fn``."""
+    """Compile ``fn`` with numba (nopython, machine code cached on disk); typed as ``fn``.
+
+    A kernel that takes a ``NamedTuple`` of arrays takes its arrays out once, before its loop:
+    read through the tuple inside the loop (or handed to a helper per element), each array is
+    fetched and reference-counted on every access, about ten times slower."""
     return cast(F, numba.njit(cache=True, nogil=True)(fn))
+
+
+@jit
+def _each1(fn: Any, k: Any, a: Any, out: Any) -> None:
+    for i in range(out.shape[0]):
+        out[i] = fn(a[i], k)
+
+
+@jit
+def _each2(fn: Any, k: Any, a: Any, b: Any, out: Any) -> None:
+    for i in range(out.shape[0]):
+        out[i] = fn(a[i], b[i], k)
+
+
+@jit
+def _each3(fn: Any, k: Any, a: Any, b: Any, c: Any, out: Any) -> None:
+    for i in range(out.shape[0]):
+        out[i] = fn(a[i], b[i], c[i], k)
+
+
+@jit
+def _each4(fn: Any, k: Any, a: Any, b: Any, c: Any, d: Any, out: Any) -> None:
+    for i in range(out.shape[0]):
+        out[i] = fn(a[i], b[i], c[i], d[i], k)
+
+
+_EACH: dict[int, Callable[..., None]] = {1: _each1, 2: _each2, 3: _each3, 4: _each4}
+
+
+def each(fn: Callable[..., float], constants: Any, *values: ArrayLike) -> NDArray[np.float64]:
+    """``fn(v1[i], …, vn[i], constants)`` for every element of the ``values`` broadcast
+    together (one to four of them), ``fn`` a compiled scalar function (:func:`jit`): the
+    numpy-facing form of the kernels' scalar code, in one compiled loop."""
+    shape, flats = broadcast_flat(*values)
+    out = np.empty(math.prod(shape))
+    _EACH[len(flats)](fn, constants, *flats, out)
+    return out.reshape(shape)
 
 
 def clamp(x: NDArray[A], low: ArrayLike, high: ArrayLike) -> NDArray[A]:

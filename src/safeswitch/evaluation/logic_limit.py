@@ -18,8 +18,8 @@ every speed the acceleration limits allow, and removes the positions at which
   ``d_stop ≤ d_safe + v·latency + margin`` (the task's own constants).
 
 In traffic (:class:`~safeswitch.leftturn.traffic.LeftTurnTrafficTask`) the same holds against
-every conflict at once, as the generalised paper logic sees them
-(:mod:`~safeswitch.leftturn.traffic_logics`): the ego is out of each conflict zone while its
+every conflict at once, as the paper logic sees them (:mod:`~safeswitch.leftturn.logics.paper`,
+written over any number of conflicts): the ego is out of each conflict zone while its
 vehicle is in its own (the union of the occupied intervals), and no conflict's Algorithm 1 fires.
 Like the multi-conflict oracle it plans against the others' world *without* the ego
 (:meth:`~safeswitch.leftturn.traffic.LeftTurnTrafficTask.conflict_timeline`): in the episode
@@ -55,13 +55,13 @@ from numpy.typing import NDArray
 from safeswitch.core.arrays import jit
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
-from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.switching import (
+from safeswitch.leftturn.logics.paper import (
     PaperConstants,
     PaperSwitching,
     firing_distance,
     time_to_reach,
 )
+from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import closed_throttle_drag, driving_resistance

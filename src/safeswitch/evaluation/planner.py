@@ -39,8 +39,8 @@ from numpy.typing import NDArray
 
 from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
+from safeswitch.leftturn.logics.paper import PaperSwitching, firing_distance
 from safeswitch.leftturn.spaces import speed_tracking_action
-from safeswitch.leftturn.switching import PaperSwitching, firing_distance
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 
 FloatArray = NDArray[np.float64]

@@ -125,7 +125,7 @@ class GapPlanner:
         self._drive = FastDrive(
             task, c.top_speed_kmh, c.accel_lat, c.curve_decel, c.preview_s, c.speed_gain
         )
-        zones, _ = task.crossing_zones()
+        zones = task.phantoms().ego_zone
         #: Where the first crossing movement's zone begins and the last one ends on the ego's
         #: route [m].
         self.first_entry = float(zones[:, 0].min())

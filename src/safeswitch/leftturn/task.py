@@ -52,7 +52,7 @@ from safeswitch.leftturn.scenarios import (
     sample_scenarios,
     scenario_uniforms,
 )
-from safeswitch.leftturn.switching import ConflictState
+from safeswitch.leftturn.views import ConflictView, NorthConflict, Phantoms, north_view
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
 from safeswitch.sim.geometry import FloatArray, IntArray, preview
 from safeswitch.sim.road import Intersection
@@ -263,8 +263,17 @@ class LeftTurnTask:
             footprint,
             margin=config.episode.conflict_margin_m,
         )
+        cert = conflict_geometry(
+            self.world.routes[0], self.world.routes[1], footprint, footprint,
+            margin=config.certified.zone_margin_m,
+        )  # fmt: skip
+        #: The geometry of the ego's conflict with the north car (both margins).
+        self.north_conflict = NorthConflict(
+            self.conflict.s_point_a, self.conflict.zone_a, cert.zone_a, self.conflict.s_point_b,
+            self.conflict.zone_b, cert.zone_b, config.episode.approach_distance_m,
+        )  # fmt: skip
         #: The switching logic: the registered logic named by ``config.switching``.
-        self.switching: SwitchingLogic[ConflictState] = make_logic(config.switching, self)
+        self.switching: SwitchingLogic[ConflictView] = make_logic(config.switching, self)
         #: Reason names of :attr:`StepRecord.reason`: the logic's, ``invalid_learned_action``,
         #: then :data:`RULE_IN_CHARGE` (the logic accepted ``PID_th``'s proposal because the
         #: learned controller was not in charge; ``"learned"`` always means the learned action
@@ -396,39 +405,28 @@ class LeftTurnTask:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
         return at_intersection(ego_progress, north_progress, self._layout)
 
-    def conflict_state(self, state: TaskState) -> ConflictState:
-        """Distances and speeds relative to the conflict point, for the switching logics."""
-        geo = self.conflict
-        s_e, s_n = state.world.progress[:, 0], state.world.progress[:, 1]
-        ego_to_conflict = geo.s_point_a - s_e
-        north_to_conflict = geo.s_point_b - s_n
-        v = state.world.vehicles
-        return ConflictState(
-            ego_to_conflict=ego_to_conflict,
-            ego_to_stop=geo.zone_a[0] - s_e,
-            ego_speed=v.speed[:, 0],
-            north_to_conflict=north_to_conflict,
-            north_speed=v.speed[:, 1],
-            both_at_intersection=self.both_at_intersection(s_e, s_n),
-            ego_progress=s_e,
-            north_progress=s_n,
-            ego_throttle=v.throttle[:, 0],
-            ego_brake=v.brake[:, 0],
-        )
+    def view(self, state: TaskState, window: BoolArray | None = None) -> ConflictView:
+        """What the switching logics see of ``state``: the ego and its conflicts (here one, the
+        north car's). ``window``: Algorithm 1's While condition if already known."""
+        v, progress = state.world.vehicles, state.world.progress
+        return north_view(
+            self.north_conflict, progress[:, 0], v.speed[:, 0], v.throttle[:, 0], v.brake[:, 0],
+            progress[:, 1], v.speed[:, 1], state.scenarios.north_speed, window,
+        )  # fmt: skip
+
+    def phantoms(self) -> Phantoms:
+        """The vehicles still to come that the certificate must beat: none in the paper's
+        scene."""
+        return Phantoms.none()
 
     def conflicts(self, state: TaskState) -> ConflictArrays:
-        """The ego's conflict with every other vehicle: here the north car's (one column)."""
-        batch, geo = state.batch_size, self.conflict
-        v = state.world.vehicles
+        """The ego's conflict with every other vehicle, for measures taken at them."""
+        v = self.view(state)
         return ConflictArrays(
-            ego_progress=state.world.progress[:, 0].copy(),
-            ego_speed=v.speed[:, 0].copy(),
-            present=np.ones((batch, 1), dtype=np.bool_),
-            ego_zone=np.broadcast_to(np.asarray(geo.zone_a, dtype=np.float64), (batch, 1, 2)),
-            other_progress=state.world.progress[:, 1:2].copy(),
-            other_speed=v.speed[:, 1:2].copy(),
-            other_zone=np.broadcast_to(np.asarray(geo.zone_b, dtype=np.float64), (batch, 1, 2)),
-        )
+            ego_progress=v.ego_progress.copy(), ego_speed=v.ego_speed.copy(),
+            present=v.present, ego_zone=v.ego_zone, other_progress=v.other_progress.copy(),
+            other_speed=v.other_speed.copy(), other_zone=v.other_zone,
+        )  # fmt: skip
 
     def hold(
         self,
@@ -462,10 +460,6 @@ class LeftTurnTask:
         return state, merged
 
     # -- hooks of a task with more traffic (LeftTurnTrafficTask overrides them) ----------------
-
-    def logic_view(self, state: TaskState, conflict: ConflictState) -> Any:
-        """What the switching logic sees: here the north car's conflict."""
-        return conflict
 
     def advance_others(
         self, state: TaskState, new_world: WorldState, separation: FloatArray
@@ -521,7 +515,6 @@ class LeftTurnTask:
         pid_throttle, pid_brake, pid_north = (
             PIDState(*one[4 + 3 * j : 7 + 3 * j]) for j in range(3)
         )
-        ego_to_conflict, ego_to_stop, north_to_conflict = one[13:16]
         steer = two[0]
         pid_lane = PIDState(*two[1:4])
         proposed, safe, fallback = two[4:7]
@@ -541,19 +534,7 @@ class LeftTurnTask:
         # instead, wherever the car is, stopped it in the north car's path: 266 collisions in
         # 2,500 random episodes with 30 % NaN ticks under the paper logic; holding, 1 — as many
         # as without the NaN ticks).
-        conflict = ConflictState(
-            ego_to_conflict=ego_to_conflict,
-            ego_to_stop=ego_to_stop,
-            ego_speed=v.speed[:, 0],
-            north_to_conflict=north_to_conflict,
-            north_speed=v.speed[:, 1],
-            both_at_intersection=both,
-            ego_progress=world.progress[:, 0],
-            north_progress=world.progress[:, 1],
-            ego_throttle=v.throttle[:, 0],
-            ego_brake=v.brake[:, 0],
-        )
-        view = self.logic_view(state, conflict)
+        view = self.view(state, both)
         sup = supervise(self.switching, view, proposed, safe, 0.0, 1.0, fallback)
         throttle, brake = sup.executed[:, 0], sup.executed[:, 1]
 

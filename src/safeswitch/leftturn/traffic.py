@@ -6,8 +6,9 @@ car stays as it is (plant, autopilot, never yields; its arrival set by the scena
 vehicles follow the traffic rules and their own car-following, and
 
 * the switching logic sees every vehicle whose route conflicts with the ego's
-  (:class:`TrafficConflictState`; the ``paper`` and ``certified`` logics generalised in
-  :mod:`safeswitch.leftturn.traffic_logics`);
+  (:class:`~safeswitch.leftturn.views.ConflictView` with one column per vehicle; the
+  ``paper`` and ``certified`` logics are written over any number of conflicts), and the
+  certificate beats the vehicles still to come (:meth:`LeftTurnTrafficTask.phantoms`);
 * a collision with any vehicle ends the episode; collisions among the others are counted
   (:attr:`TrafficTaskState.npc_collisions`; they must stay 0);
 * the observation is the paper's six values followed by the ``K`` nearest other vehicles
@@ -33,10 +34,10 @@ from numpy.typing import NDArray
 from safeswitch.core.arrays import jit
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
+from safeswitch.leftturn.logics.certified import CertifiedSwitching
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
-from safeswitch.leftturn.switching import ConflictState
-from safeswitch.leftturn.task import ConflictArrays, ConflictTimeline, LeftTurnTask, TaskState
-from safeswitch.leftturn.traffic_logics import CertifiedTrafficSwitching
+from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState
+from safeswitch.leftturn.views import ConflictView, Phantoms
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.idm import IDMParams
 from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
@@ -110,36 +111,6 @@ class TrafficTaskState(TaskState):
     npc_collisions: NDArray[np.int64]
 
 
-@dataclass
-class TrafficConflictState(ConflictState):
-    """:class:`ConflictState` (the north car's conflict) plus every conflict with the ego,
-    arrays ``[B, C]`` (column 0 the north car, then the other vehicles' slots).
-
-    Attributes:
-        present: The vehicle exists and its route conflicts with the ego's.
-        ego_point: The conflict point on the ego's route [m] (the zone's middle for the others).
-        ego_zone: ``[B, C, 2]`` the ego's conflict zone (paper margin) [m].
-        ego_cert_zone: ``[B, C, 2]`` the same with the certified logic's margin [m].
-        other_progress: The vehicle's arc length [m].
-        other_point: Its conflict point [m].
-        other_zone: ``[B, C, 2]`` its conflict zone (paper margin) [m].
-        other_cert_zone: ``[B, C, 2]`` with the certified margin [m].
-        other_speed: Its speed [m/s].
-        other_top: Its top speed [m/s] (the scenario's; the certificate assumes more).
-    """
-
-    present: BoolArray
-    ego_point: FloatArray
-    ego_zone: FloatArray
-    ego_cert_zone: FloatArray
-    other_progress: FloatArray
-    other_point: FloatArray
-    other_zone: FloatArray
-    other_cert_zone: FloatArray
-    other_speed: FloatArray
-    other_top: FloatArray
-
-
 class LeftTurnTrafficTask(LeftTurnTask):
     """The left-turn task in traffic (see the module docstring).
 
@@ -194,13 +165,10 @@ class LeftTurnTrafficTask(LeftTurnTask):
             low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
         #: The certified filter whose reckoning ``observe: margins`` shows, whatever logic the
         #: task runs (the observation belongs to the policy).
-        self._margins: CertifiedTrafficSwitching | None = None
+        self._margins: CertifiedSwitching | None = None
         if traffic.observe == "margins":
-            from safeswitch.leftturn.certified import certified_logic
-
-            logic = certified_logic(self)
-            assert isinstance(logic, CertifiedTrafficSwitching)
-            self._margins = logic
+            c = self.config
+            self._margins = CertifiedSwitching(c.certified, c.vehicle, c.episode.dt)
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
         self._observed_high = np.tile(np.array(high, dtype=np.float32), traffic.observed)
 
@@ -352,38 +320,35 @@ class LeftTurnTrafficTask(LeftTurnTask):
 
     # -- the hooks ------------------------------------------------------------------------------
 
-    def logic_view(self, state: TaskState, conflict: ConflictState) -> TrafficConflictState:
+    def view(self, state: TaskState, window: BoolArray | None = None) -> ConflictView:
+        """Every conflict of the ego: column 0 the north car, then every slot (``present``
+        false where the slot is empty or its route does not cross the ego's)."""
         assert isinstance(state, TrafficTaskState)
         tr = state.traffic
         batch, slots = tr.route.shape
         c = slots + 1
         present = np.empty((batch, c), dtype=bool)
+        inside = np.empty((batch, c), dtype=bool)
         zones = np.empty((4, batch, c, 2))  # ego's, ego's certified, other's, other's certified
         points = np.empty((2, batch, c))  # ego's, other's
         other = np.empty((3, batch, c))  # progress, speed, top speed
-        geo, cgeo = self.conflict, self.switching_zones()
-        north_zones = np.array([geo.zone_a, cgeo[0], geo.zone_b, cgeo[1]])
+        n = self.north_conflict
+        north_zones = np.array([n.ego_zone, n.ego_cert_zone, n.north_zone, n.north_cert_zone])
+        v, progress = state.world.vehicles, state.world.progress
         _conflict_view(
             self.ego_route, self._pair_zones, self._point, north_zones,
-            np.array([geo.s_point_a, geo.s_point_b]), tr.route, tr.active, tr.progress,
-            tr.speed, tr.desired, conflict.north_progress, conflict.north_speed,
-            state.scenarios.north_speed, present, zones, points, other,
+            np.array([n.ego_point, n.north_point]), tr.route, tr.active, tr.progress,
+            tr.speed, tr.desired, np.ascontiguousarray(progress[:, 0]),
+            np.ascontiguousarray(progress[:, 1]), np.ascontiguousarray(v.speed[:, 1]),
+            state.scenarios.north_speed, n.approach_distance, present, inside, zones, points,
+            other,
         )  # fmt: skip
-        fields = {f: getattr(conflict, f) for f in conflict.__dataclass_fields__}
-        return TrafficConflictState(
-            **fields, present=present, ego_point=points[0], ego_zone=zones[0],
-            ego_cert_zone=zones[1], other_progress=other[0], other_point=points[1],
-            other_zone=zones[2], other_cert_zone=zones[3], other_speed=other[1],
-            other_top=other[2],
-        )  # fmt: skip
-
-    def conflicts(self, state: TaskState) -> ConflictArrays:
-        """The ego's conflicts with the north car and with every other vehicle."""
-        view = self.logic_view(state, self.conflict_state(state))
-        return ConflictArrays(
-            ego_progress=view.ego_progress.copy(), ego_speed=view.ego_speed.copy(),
-            present=view.present, ego_zone=view.ego_zone, other_progress=view.other_progress,
-            other_speed=view.other_speed, other_zone=view.other_zone,
+        return ConflictView(
+            ego_progress=progress[:, 0], ego_speed=v.speed[:, 0], ego_throttle=v.throttle[:, 0],
+            ego_brake=v.brake[:, 0], present=present, window=inside, ego_point=points[0],
+            ego_zone=zones[0], ego_cert_zone=zones[1], other_progress=other[0],
+            other_point=points[1], other_zone=zones[2], other_cert_zone=zones[3],
+            other_speed=other[1], other_top=other[2],
         )  # fmt: skip
 
     def _without_ego(self, scenarios: Scenarios) -> Iterator[TrafficTaskState]:
@@ -431,7 +396,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
             if not tick:
                 start[:, 0] = state.world.progress[:, 0]
                 start[:, 1] = state.world.vehicles.speed[:, 0]
-            view = self.logic_view(state, self.conflict_state(state))
+            view = self.view(state)
             distance = view.other_point - view.other_progress
             present[:, tick] = view.present
             inside[:, tick] = (view.other_progress >= view.other_zone[..., 0]) & (
@@ -449,27 +414,13 @@ class LeftTurnTrafficTask(LeftTurnTask):
             start, present, floats[0], floats[1], floats[2], floats[3], inside, window, floats[4]
         )
 
-    def switching_zones(self) -> tuple[tuple[float, float], tuple[float, float]]:
-        """The north car's conflict zones with the certified margin (ego's, north car's)."""
-        from safeswitch.sim.conflict import conflict_geometry
-
-        if not hasattr(self, "_cert_north"):
-            c = self.config
-            footprint = (c.vehicle.length, c.vehicle.width)
-            zones = conflict_geometry(
-                self.world.routes[0], self.world.routes[1], footprint, footprint,
-                margin=c.certified.zone_margin_m,
-            )  # fmt: skip
-            self._cert_north = (zones.zone_a, zones.zone_b)
-        return self._cert_north
-
-    def crossing_zones(self) -> tuple[FloatArray, FloatArray]:
+    def phantoms(self) -> Phantoms:
         """Every movement whose route crosses the ego's, with the certified margin: the ego's
-        zone with it ``[P, 2]`` and the entry of its own zone [m] ``[P]`` (the phantoms of
-        :class:`~safeswitch.leftturn.traffic_logics.CertifiedTrafficSwitching`)."""
+        zone with it ``[P, 2]`` and the entry of its own zone, from the start of its approach
+        [m] ``[P]`` (a vehicle not yet in the scene can appear there at any moment)."""
         cert = self.cert_network.conflicts
         crossing = np.flatnonzero(np.isfinite(cert[self.ego_route, :, 0]))
-        return cert[self.ego_route, crossing], cert[crossing, self.ego_route, 0]
+        return Phantoms(cert[self.ego_route, crossing], cert[crossing, self.ego_route, 0])
 
     def advance_others(
         self, state: TaskState, new_world: WorldState, separation: FloatArray
@@ -537,7 +488,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
         out = np.zeros((observation.shape[0], 6 + width * k), dtype=np.float32)
         out[:, :6] = observation
         if observe in ("conflicts", "margins"):
-            v = self.logic_view(state, self.conflict_state(state))
+            v = self.view(state)
             extra = np.zeros((*v.present.shape, width - len(CONFLICT_FEATURES)))
             if self._margins is not None:
                 arrival, slack = self._margins.margins(v)
@@ -662,12 +613,15 @@ def _soonest_conflicts(
 def _conflict_view(
     ego_route: int, pair_zones: FloatArray, point: FloatArray, north_zones: FloatArray,
     north_points: FloatArray, route: NDArray[np.int64], active: BoolArray, progress: FloatArray,
-    speed: FloatArray, desired: FloatArray, north_progress: FloatArray, north_speed: FloatArray,
-    north_top: FloatArray, present: BoolArray, zones: FloatArray, points: FloatArray,
-    other: FloatArray,
+    speed: FloatArray, desired: FloatArray, ego_progress: FloatArray,
+    north_progress: FloatArray, north_speed: FloatArray, north_top: FloatArray,
+    approach: float, present: BoolArray, window: BoolArray, zones: FloatArray,
+    points: FloatArray, other: FloatArray,
 ) -> None:  # fmt: skip
-    """Fill the arrays of :class:`TrafficConflictState`: column 0 the north car, then every
-    slot (``present`` false where the slot is empty or its route does not cross the ego's)."""
+    """Fill the arrays of a :class:`~safeswitch.leftturn.views.ConflictView`: column 0 the
+    north car, then every slot (``present`` false where the slot is empty or its route does not
+    cross the ego's); ``window``: Algorithm 1's While condition of each pair (both within
+    ``approach`` of their conflict point, neither past its zone)."""
     for b in range(route.shape[0]):
         present[b, 0] = True
         for m in range(4):
@@ -688,6 +642,15 @@ def _conflict_view(
                 progress[b, i],
                 speed[b, i],
                 desired[b, i],
+            )
+        s_e = ego_progress[b]
+        for k in range(present.shape[1]):
+            s_k = other[0, b, k]
+            window[b, k] = present[b, k] and (
+                points[0, b, k] - s_e <= approach
+                and s_e <= zones[0, b, k, 1]
+                and points[1, b, k] - s_k <= approach
+                and s_k <= zones[2, b, k, 1]
             )
 
 

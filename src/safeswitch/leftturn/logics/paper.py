@@ -19,6 +19,13 @@ to the conflict one"; for cars with extent that is the first waypoint at which t
 footprint could touch the north car's: the entry of the ego's conflict zone, computed from the
 geometry (:func:`safeswitch.sim.conflict.conflict_geometry`).
 
+In traffic (ours where the paper is silent: it has one other car) the rule is applied to each
+vehicle whose route conflicts with the ego's, with that pair's conflict point and zones: the
+safety action is executed if it fires for *any* of them. For the other vehicles the conflict
+point is the middle of the pair's conflict zone (they may cross or merge; the north car keeps
+its centre-line crossing). One kernel serves both scenes: the paper's is the case of one
+conflict (:class:`~safeswitch.leftturn.views.ConflictView`).
+
 This rule is a heuristic: a learned controller that passes the braking point while the gap looks
 large and then slows down inside the conflict zone is not kept out of it (braking there cannot
 stop it before the zone). The ``certified`` logic closes that gap.
@@ -26,49 +33,16 @@ stop it before the zone). The ``certified`` logic closes that gap.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple, TypeVar
+from typing import NamedTuple, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from safeswitch.core.arrays import jit
 from safeswitch.core.registry import LogicContextError, context_name
-from safeswitch.core.switching import BoolArray, Decision, FloatArray, Guarded
+from safeswitch.core.switching import Decision, FloatArray, Guarded
 from safeswitch.leftturn.config import PaperSwitchingConfig
-
-if TYPE_CHECKING:
-    from safeswitch.leftturn.task import LeftTurnTask
-
-
-@dataclass
-class ConflictState:
-    """What a left-turn switching logic sees of the plant, each field ``[B]``.
-
-    Attributes:
-        ego_to_conflict: Ego's path distance to the conflict point ``d_c^e`` [m] (negative past).
-        ego_to_stop: Ego's path distance to its stopping point (conflict-zone entry) [m].
-        ego_speed: ``v_e`` [m/s].
-        north_to_conflict: North car's path distance to the conflict point ``d_c^n`` [m].
-        north_speed: ``v_n`` [m/s].
-        both_at_intersection: Algorithm 1's While condition: both cars are at the
-            intersection and neither has left its conflict zone.
-        ego_progress: Ego's arc length along its route [m].
-        north_progress: North car's arc length along its route [m].
-        ego_throttle: Ego's actual throttle position (after the actuator lag).
-        ego_brake: Ego's actual brake position.
-    """
-
-    ego_to_conflict: FloatArray
-    ego_to_stop: FloatArray
-    ego_speed: FloatArray
-    north_to_conflict: FloatArray
-    north_speed: FloatArray
-    both_at_intersection: BoolArray
-    ego_progress: FloatArray
-    north_progress: FloatArray
-    ego_throttle: FloatArray
-    ego_brake: FloatArray
-
+from safeswitch.leftturn.views import ConflictView, LogicScene
 
 #: Arrays or scalars: the Eq. 2 and Eq. 3 helpers serve the numpy code and the compiled loops.
 Values = TypeVar("Values", FloatArray, float)
@@ -114,42 +88,36 @@ def firing_distance(speed: Values, c: PaperConstants) -> Values:
 
 
 @jit
-def paper_switches(
-    ego_to_conflict: float,
-    ego_to_stop: float,
-    ego_speed: float,
-    north_to_conflict: float,
-    north_speed: float,
-    both_at_intersection: bool,
-    c: PaperConstants,
-) -> bool:
-    """Algorithm 1 for one episode: both cars at the intersection, ``TTR_n − TTR_e <
-    threshold`` (no gap to cut in front) and ``d_stop ≤ d_safe + v·latency + margin`` (the last
-    moment to stop before the zone)."""
-    if not both_at_intersection:
-        return False
-    ttr_e = time_to_reach(max(ego_to_conflict, 0.0), ego_speed, c.min_speed)
-    ttr_n = time_to_reach(north_to_conflict, north_speed, c.min_speed)
-    if not ttr_n - ttr_e < c.ttr_threshold_s:
-        return False
-    return ego_to_stop <= firing_distance(ego_speed, c)
-
-
-@jit
-def _map_paper_switches(
-    ego_to_conflict: FloatArray, ego_to_stop: FloatArray, ego_speed: FloatArray,
-    north_to_conflict: FloatArray, north_speed: FloatArray, both: BoolArray, c: PaperConstants,
-    out: BoolArray,
-) -> None:  # fmt: skip
-    for i in range(out.shape[0]):
-        out[i] = paper_switches(
-            ego_to_conflict[i], ego_to_stop[i], ego_speed[i], north_to_conflict[i],
-            north_speed[i], both[i], c,
-        )  # fmt: skip
+def _decide(v: ConflictView, c: PaperConstants, out: NDArray[np.bool_]) -> None:
+    """Algorithm 1 for every episode of a view: the safety action fires if, for some conflict,
+    both vehicles are at the intersection, ``TTR_k − TTR_e < threshold`` (no gap to cut in
+    front) and ``d_stop ≤ d_safe + v·latency + margin`` (the last moment to stop before the
+    pair's zone)."""
+    # The view's arrays are taken out of the tuple once: numba would otherwise fetch each
+    # array, and count a reference to it, on every access inside the loop (10 times slower).
+    ego_progress, ego_speed, present, window = v.ego_progress, v.ego_speed, v.present, v.window
+    ego_point, ego_zone = v.ego_point, v.ego_zone
+    other_progress, other_point, other_speed = v.other_progress, v.other_point, v.other_speed
+    for b in range(out.shape[0]):
+        s_e, v_e = ego_progress[b], ego_speed[b]
+        fire = False
+        for k in range(present.shape[1]):
+            if not (present[b, k] and window[b, k]):
+                continue
+            ttr_e = time_to_reach(max(ego_point[b, k] - s_e, 0.0), v_e, c.min_speed)
+            ttr_k = time_to_reach(other_point[b, k] - other_progress[b, k], other_speed[b, k],
+                                  c.min_speed)  # fmt: skip
+            if ttr_k - ttr_e < c.ttr_threshold_s and (
+                ego_zone[b, k, 0] - s_e <= firing_distance(v_e, c)
+            ):
+                fire = True
+                break
+        out[b] = fire
 
 
 class PaperSwitching:
-    """Algorithm 1 as its text describes it (see the module docstring).
+    """Algorithm 1 as its text describes it, against every conflict of the view (see the
+    module docstring).
 
     Args:
         config: Threshold, margins and speed guard.
@@ -162,48 +130,34 @@ class PaperSwitching:
         self.config = config
         self.emergency_decel = emergency_decel
         c = config
-        #: What :func:`paper_switches` reads.
+        #: What :func:`fires` reads.
         self.constants = PaperConstants(
             c.ttr_threshold_s, c.min_speed, emergency_decel, c.latency_s, c.stop_margin_m
         )
 
-    def decide(self, state: ConflictState, learned: FloatArray, safe: FloatArray) -> Decision:
-        s = state
+    def decide(self, state: ConflictView, learned: FloatArray, safe: FloatArray) -> Decision:
         use = np.empty(learned.shape[0], dtype=np.bool_)
-        _map_paper_switches(
-            s.ego_to_conflict, s.ego_to_stop, s.ego_speed, s.north_to_conflict, s.north_speed,
-            np.asarray(s.both_at_intersection, dtype=np.bool_), self.constants, use,
-        )  # fmt: skip
+        _decide(state, self.constants, use)
         return Decision(use, use.astype(np.int8), safe)
 
 
-def paper_logic(task: LeftTurnTask) -> PaperSwitching:
-    """Factory of the ``paper`` logic (registered under that name) for a left-turn task."""
-    config = getattr(task, "config", None)
-    paper = getattr(config, "paper", None)
-    if not isinstance(paper, PaperSwitchingConfig):
+def paper_logic(scene: LogicScene) -> PaperSwitching:
+    """Factory of the ``paper`` logic (registered under that name) for a left-turn scene."""
+    if not isinstance(scene, LogicScene):
         raise LogicContextError(
-            f"the 'paper' switching logic supervises the left-turn task, not {context_name(task)}"
+            f"the 'paper' switching logic supervises the left-turn task, not {context_name(scene)}"
         )
-    from safeswitch.leftturn.traffic import LeftTurnTrafficTask
-
-    if isinstance(task, LeftTurnTrafficTask):  # in traffic: every conflicting vehicle
-        from safeswitch.leftturn.traffic_logics import PaperTrafficSwitching
-
-        return PaperTrafficSwitching(
-            paper, task.config.controllers.emergency_decel, task.config.episode.approach_distance_m
-        )
-    return PaperSwitching(paper, task.config.controllers.emergency_decel)
+    c = scene.config
+    return PaperSwitching(c.paper, c.controllers.emergency_decel)
 
 
-def guarded_logic(task: LeftTurnTask) -> Guarded:
+def guarded_logic(scene: LogicScene) -> Guarded:
     """Factory of the ``guarded`` logic (registered under that name; ours): the paper's
     Algorithm 1 in the loop, the ``certified`` filter beneath it judging what it lets through
     (:class:`~safeswitch.core.switching.Guarded`). The certificate's guarantee — no collision
     for any proposed action sequence — covers the pair, so a policy can explore under the
     paper's logic, and be charged ``R_ADAS`` for both, without the paper logic's known gap
-    (a car stopped inside the conflict zone) costing a collision. In traffic, both logics'
-    traffic versions."""
-    from safeswitch.leftturn.certified import certified_logic
+    (a car stopped inside the conflict zone) costing a collision."""
+    from safeswitch.leftturn.logics.certified import certified_logic
 
-    return Guarded(paper_logic(task), certified_logic(task))
+    return Guarded(paper_logic(scene), certified_logic(scene))
