@@ -1,9 +1,14 @@
 """Per-tick decisions of the left-turn task on the README's scenarios, digested per episode.
 
-``python tests/leftturn/golden.py`` writes ``tests/data/leftturn_golden.npz``. The file in the
-repository was written by commit 01d647c (before the task ran its switching through
-``safeswitch.core``); ``test_golden.py`` replays the same runs on the current code and requires
-every digest to be equal bit for bit: the redesign must not change a single decision.
+``python tests/leftturn/golden.py`` writes ``tests/data/leftturn_golden.npz``; ``test_golden.py``
+replays the same runs on the current code and requires every digest to be equal bit for bit: a
+refactoring must not change a single decision.
+
+Two records: ``leftturn_golden_pre_friction.npz`` was written by commit 01d647c (before the task
+ran its switching through ``safeswitch.core``) and gated every change up to the friction circle
+(issue #37); ``leftturn_golden.npz`` was written after it. The older record still gates the
+one-kernel logics: with the curve certificate switched off, every decision is what 01d647c
+made, except in the episodes where the ego's tyres slid (``test_golden.py``).
 
 Each run is a controller and a switching logic on 300 random scenarios (seed 1000003, the
 README's evaluation seed). Per episode and tick the executed throttle and brake, the safety
@@ -24,6 +29,7 @@ from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.training.policies import load_policy
 
 PATH = Path(__file__).resolve().parent.parent / "data" / "leftturn_golden.npz"
+PRE_FRICTION = PATH.with_name("leftturn_golden_pre_friction.npz")
 EPISODES = 300
 SEED = 1_000_003
 COLUMNS = ("throttle", "brake", "safety_active", "reason", "reward", "ego_speed", "separation")
@@ -61,25 +67,32 @@ def runs():
     ]  # fmt: skip
 
 
-def digest(config, make_policy) -> np.ndarray:
+def digest(config, make_policy, task=None) -> np.ndarray:
     """``[EPISODES, len(COLUMNS)]`` tick-weighted sums of the recorded columns (episodes are
     not reset: every episode runs the whole horizon, as a rollout's batch does)."""
-    task = LeftTurnTask(config)
+    return digest_and_slides(config, make_policy, task)[0]
+
+
+def digest_and_slides(config, make_policy, task=None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`digest`, and per episode whether the ego's tyres slid on some tick."""
+    task = task or LeftTurnTask(config)
     n = EPISODES
     state = task.initial(task.draw_scenarios(SEED, np.arange(n), np.zeros(n, dtype=np.int64)))
     policy = make_policy()
     out = np.zeros((n, len(COLUMNS)))
+    slid = np.zeros(n, dtype=bool)
     observation = task.observe(state)
     rule = task.reasons.index("rule_in_charge") if "rule_in_charge" in task.reasons else -1
     for tick in range(config.episode.horizon_ticks):
         state, record = task.step(state, policy(observation, state, tick))
         observation = record.observation
+        slid |= record.grip_demand > 1.0
         for j, name in enumerate(COLUMNS):
             value = np.asarray(getattr(record, name), dtype=np.float64)
             if name == "reason":  # 01d647c said "learned" where the rule's proposal ran
                 value = np.where(value == rule, 0.0, value)
             out[:, j] += (tick + 1) * value
-    return out
+    return out, slid
 
 
 def main() -> int:

@@ -281,8 +281,9 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
                                     ego[0] - s_e, ego[1] - s_e]  # fmt: skip
                         if observe == "margins":
                             arrive = _earliest_entry(s_j, v.other_speed[b, j], *zone, accel, top)
+                            jump = filter_.bounds.c.progress_jump
                             clear = filter_.clear_time(
-                                np.array([factor * max(ego[1] - s_e, 0.0)]),
+                                np.array([factor * max(ego[1] - s_e + jump, 0.0)]),
                                 v.ego_speed[b : b + 1], v.ego_throttle[b : b + 1],
                                 v.ego_brake[b : b + 1],
                             )[0]  # fmt: skip

@@ -180,6 +180,11 @@ def reference_step(p, s, throttle_cmd, brake_cmd, steer_cmd, dt):
     delta = steer * p.max_steer_angle
     slip = np.arctan(p.cg_to_rear_axle / p.wheelbase * np.tan(delta))
     yaw_rate = mean * np.cos(slip) * np.tan(delta) / p.wheelbase
+    # the friction circle: the turn gets what the pedals leave of μ·g
+    accel, circle = (speed - s.speed) / dt, p.friction_coefficient * g
+    left = np.sqrt(np.maximum(circle**2 - accel**2, 0.0))
+    wanted = np.abs(mean * yaw_rate)
+    yaw_rate = np.where(wanted > left, yaw_rate * left / np.maximum(wanted, 1e-300), yaw_rate)
     yaw = np.arctan2(s.sin_yaw, s.cos_yaw)
     course = yaw + 0.5 * yaw_rate * dt + slip
     x = s.x + mean * dt * np.cos(course)
@@ -215,3 +220,45 @@ def test_the_compiled_tick_follows_the_model_equations_on_random_states():
     )
     np.testing.assert_allclose(out.accel_lat, accel_lat, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(out.accel_lon, (new.speed - state.speed) / DT, rtol=1e-12)
+    slid = out.grip_demand > 1.0
+    assert 0.05 < slid.mean() < 0.95  # random states reach beyond the circle and stay within it
+
+
+def test_no_pedals_and_steering_take_the_car_beyond_the_friction_circle():
+    """Whatever is asked of it, the car's combined acceleration stays within μ·g; asked for
+    more cornering than the circle leaves, the tyres give only that (the car runs wide)."""
+    rng = np.random.default_rng(12)
+    n = 50_000
+    p = VehicleParams()
+    state = VehicleState.at(0.0, 0.0, rng.uniform(-3, 3, n), rng.uniform(0, 30, n))
+    state.throttle[:], state.brake[:] = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    state.steer[:] = rng.uniform(-1, 1, n)
+    circle = p.friction_coefficient * 9.81
+    for _ in range(50):
+        cmds = rng.uniform(-0.2, 1.2, (3, n))
+        state, out = vehicle_step(p, state, cmds[0], cmds[1], 2 * cmds[2] - 1, DT)
+        assert (np.hypot(out.accel_lon, out.accel_lat) <= circle * (1 + 1e-9)).all()
+        slid = out.grip_demand > 1.0
+        assert slid.any() and (np.hypot(out.accel_lon, out.accel_lat)[slid] > 0.99 * circle).all()
+
+
+def test_too_fast_into_a_curve_the_car_runs_wide_of_it():
+    """A constant steering angle that holds a 20 m circle at 10 m/s (5 m/s²) cannot hold it
+    at 20 m/s (20 m/s² > μ·g): the car's path is wider, and its lateral acceleration μ·g."""
+    p = VehicleParams()
+    radius = 20.0
+    tan_delta = p.wheelbase / radius / np.cos(np.arctan(p.cg_to_rear_axle / radius))
+    steer = np.arctan(tan_delta) / p.max_steer_angle
+    ends = []
+    for speed in (10.0, 20.0):
+        state = VehicleState.at(np.zeros(1), 0.0, 0.0, speed)
+        state.steer[:] = steer
+        state.throttle[:] = 0.3
+        for _ in range(50):  # hold the speed with the throttle the car needs, roughly
+            state, out = vehicle_step(p, state, state.throttle, 0.0, steer, DT)
+            state.speed[:] = speed  # a constant-speed test of the lateral limit
+        ends.append((float(np.abs(out.accel_lat[0])), float(np.abs(out.yaw_rate[0]))))
+    circle = p.friction_coefficient * 9.81
+    assert abs(ends[0][0] - 10.0**2 / radius) < 0.3  # within the circle: the kinematic turn
+    assert circle - 0.05 < ends[1][0] <= circle  # beyond it: only what the tyres give
+    assert ends[1][1] * 20.0 < 20.0**2 / radius  # the path's curvature falls: it runs wide

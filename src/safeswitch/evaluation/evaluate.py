@@ -25,7 +25,7 @@ from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.leftturn.config import SCENARIO_NAMES, LearnedScope, LeftTurnConfig
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
-from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask, StepRecord, TaskState
+from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
 from safeswitch.sim.geometry import FloatArray
 
 #: Scenarios simulated at once by a streaming evaluation (memory stays bounded whatever the
@@ -147,6 +147,10 @@ def scenario_chunks(
         yield [f"random-{i}" for i in ids], scenarios
 
 
+#: An episode's outcome in ``episodes.csv``, by the task's outcome code at its end: the ego
+#: never cleared its conflict zone, cleared it before the north car left its own, or after.
+EPISODE_OUTCOMES: tuple[str, ...] = ("never_cleared", "cut", "yield")
+
 #: Columns of ``episodes.csv`` (a never-cleared episode has an empty ``time_to_clear_s``).
 CSV_COLUMNS = (
     "episode",
@@ -155,6 +159,7 @@ CSV_COLUMNS = (
     "north_speed_kmh",
     "arrival_offset_s",
     "collision",
+    "lost_control",
     "safety_steps",
     "min_speed_kmh",
     "max_speed_kmh",
@@ -189,12 +194,13 @@ def episode_rows(
             _number(s.north_speed[i] * 3.6),
             _number(s.arrival_offset[i]),
             int(r.collision[i]),
+            int(r.lost_control[i]),
             int(r.safety_steps[i]),
             _number(r.min_speed[i] * 3.6),
             _number(r.max_speed[i] * 3.6),
             int(r.speeding_steps[i]),
             _number(r.time_to_clear[i]),
-            OUTCOMES[int(r.outcome[i])],
+            EPISODE_OUTCOMES[int(r.outcome[i])],
             int(r.comfort_violation_steps[i]),
             _number(r.max_accel_lon[i]),
             _number(r.max_accel_lat[i]),

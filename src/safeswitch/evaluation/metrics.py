@@ -3,10 +3,14 @@ accumulated chunk by chunk so that any number of episodes fits in constant memor
 
 Fields:
     episodes: Episodes evaluated.
+    failures: Episodes that ended in a failure: a collision or a loss of control.
     collisions: Episodes that ended in a collision.
+    lost_control_episodes: Episodes that ended with the ego off its lane (its tyres slid:
+        faster into a curve, or braking harder in one, than the friction circle allows).
     safety_activation_episodes: Episodes in which a safety action was executed at least once.
     safety_activation_steps: Ticks, over all episodes, on which a safety action was executed.
-    cleared_episodes: Episodes in which the ego left its conflict zone.
+    cleared_episodes: Episodes in which the ego left its conflict zone (with the north car).
+    never_cleared_episodes: The others (``episodes − cleared_episodes``).
     mean_time_to_clear_s: Mean time until the ego left its conflict zone [s], over the cleared
         episodes (``null`` if none cleared).
     comfort_violation_steps: Ticks beyond a comfort limit (|a_lon| > 5 or |a_lat| > 3 m/s²).
@@ -17,7 +21,8 @@ Fields:
         oracle's ``v_max``). An episode that clears sooner than the oracle broke this or
         another of the oracle's limits.
     speeding_steps: Ticks, over all episodes, faster than the tolerated speed.
-    cut_episodes / yield_episodes: Episodes in which the ego crossed before / after the north car.
+    cut_episodes / yield_episodes: Cleared episodes in which the ego left its conflict zone
+        before / after the north car left its own (cut + yield = cleared).
     mean_return: Mean episode return.
     mean_terms: Each reward term of Eq. 5, summed per episode, mean over episodes.
     mean_min_speed_kmh: Mean over episodes of the lowest ego speed [km/h].
@@ -106,6 +111,8 @@ class SummaryAccumulator:
     _COUNTS = (
         "episodes",
         "collisions",
+        "lost_control_episodes",
+        "failures",
         "safety_activation_episodes",
         "safety_activation_steps",
         "cleared_episodes",
@@ -146,6 +153,8 @@ class SummaryAccumulator:
         cleared = np.isfinite(r.time_to_clear)
         c["episodes"] += int(r.collision.size)
         c["collisions"] += int(r.collision.sum())
+        c["lost_control_episodes"] += int(r.lost_control.sum())
+        c["failures"] += int((r.collision | r.lost_control).sum())
         c["safety_activation_episodes"] += int((r.safety_steps > 0).sum())
         c["safety_activation_steps"] += int(r.safety_steps.sum())
         c["cleared_episodes"] += int(cleared.sum())
@@ -238,10 +247,13 @@ class SummaryAccumulator:
 
         out: dict[str, Any] = {
             "episodes": n,
+            "failures": c["failures"],
             "collisions": c["collisions"],
+            "lost_control_episodes": c["lost_control_episodes"],
             "safety_activation_episodes": c["safety_activation_episodes"],
             "safety_activation_steps": c["safety_activation_steps"],
             "cleared_episodes": c["cleared_episodes"],
+            "never_cleared_episodes": n - c["cleared_episodes"],
             "mean_time_to_clear_s": mean("time_to_clear", c["cleared_episodes"]),
             "comfort_violation_steps": c["comfort_violation_steps"],
             "comfort_violation_fraction": c["comfort_violation_steps"] / max(c["ticks"], 1),

@@ -380,6 +380,7 @@ class Oracle:
         min_ttc, min_pet = self.surrogate(plan)
         return RolloutResult(
             collision=np.any(plan.separation <= 0.0, axis=1),
+            lost_control=np.zeros(batch, dtype=np.bool_),  # a point mass within the limits
             safety_steps=np.zeros(batch, dtype=np.int64),
             invalid_steps=np.zeros(batch, dtype=np.int64),
             min_speed=plan.speed.min(axis=1),

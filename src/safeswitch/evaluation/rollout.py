@@ -25,6 +25,7 @@ class RolloutResult:
 
     Attributes:
         collision: The episode ended in a collision.
+        lost_control: The episode ended with the ego off its lane (its tyres slid).
         safety_steps: Ticks on which a safety action was executed.
         invalid_steps: Ticks on which the learned action was NaN or infinite.
         min_speed: Lowest ego speed [m/s].
@@ -32,7 +33,8 @@ class RolloutResult:
         speeding_steps: Ticks faster than the tolerated speed (``R_v``'s best, 30 km/h by
             default; :func:`~safeswitch.leftturn.statistics.speeding`).
         time_to_clear: Time until the ego left its conflict zone [s] (NaN if it never did).
-        outcome: Who crossed first: 0 undecided, 1 cut, 2 yield.
+        outcome: Who crossed first: 0 never cleared, 1 cut (cleared before the north car left its
+            zone), 2 yield (after).
         comfort_violation_steps: Ticks beyond a comfort limit.
         ticks: Episode length in ticks.
         episode_return: Sum of rewards.
@@ -47,6 +49,7 @@ class RolloutResult:
     """
 
     collision: NDArray[np.bool_]
+    lost_control: NDArray[np.bool_]
     safety_steps: NDArray[np.int64]
     invalid_steps: NDArray[np.int64]
     min_speed: NDArray[np.float64]
@@ -117,6 +120,7 @@ def rollout(
             break
     return RolloutResult(
         collision=stats.collision,
+        lost_control=stats.lost_control,
         safety_steps=stats.safety_steps,
         invalid_steps=invalid,
         min_speed=stats.min_speed,

@@ -171,8 +171,10 @@ class CertifiedConfig:
             (a brisk but ordinary urban acceleration; its autopilot holds its speed).
         north_max_speed_kmh: Assumption: the north car never drives faster [km/h] (20 km/h
             over the 30 km/h zone its scenarios use).
-        ego_max_lateral_m: Assumption: the ego stays this close to its route [m]. ``PID_lka``
-            keeps it within 0.51 m even at full throttle through the turn (18 m/s).
+        ego_max_lateral_m: Assumption: the ego stays this close to its route [m]. It holds
+            because the filter keeps the ego within ``curve_lateral_accel`` (below): there
+            ``PID_lka`` tracks the route within 0.45 m, braking included
+            (``tests/leftturn/test_certified.py``).
         zone_margin_m: Clearance added to both footprints when the certified conflict zones are
             computed [m]; at least ``2 · ego_max_lateral_m``.
         progress_factor: Bound on the ratio between the ego's progress along the route and the
@@ -183,6 +185,13 @@ class CertifiedConfig:
         lag_ticks: Ticks of the actuator lags simulated exactly in the backups' bounds; beyond
             them the weakest remaining deceleration (or acceleration) is assumed.
         clear_speed_cap: Speed up to which the clearing bound's acceleration is valid [m/s].
+        curve_lateral_accel: The cornering the filter allows the ego, ``v² |κ|`` along its
+            route [m/s²] (ours): it accepts a learned action only if full braking from the
+            next tick still keeps the ego within it at every curve ahead, so the tyres never
+            slide (the friction circle, :mod:`safeswitch.sim.vehicle`) and the ego never loses
+            control. 5 m/s² takes the 11.75 m turn at up to 27.6 km/h (above the speed limit
+            and the paper's 3 m/s² comfort limit, so a comfortable driver never meets it) and
+            leaves the tyres ``√((μ·g)² − 5²)`` = 7.3 m/s² for braking in it.
     """
 
     north_max_accel: float = 2.5
@@ -193,6 +202,7 @@ class CertifiedConfig:
     time_margin_s: float = 0.1
     lag_ticks: int = 10
     clear_speed_cap: float = 20.0
+    curve_lateral_accel: float = 5.0
 
     def __post_init__(self) -> None:
         o = "certified"
@@ -245,6 +255,13 @@ class CertifiedConfig:
             "clear_speed_cap",
             self.clear_speed_cap,
             "must be in [5, 60] m/s",
+        )
+        check(
+            0 < self.curve_lateral_accel <= 10,
+            o,
+            "curve_lateral_accel",
+            self.curve_lateral_accel,
+            "must be in (0, 10] m/s² (and below the tyres' μ·g)",
         )
 
 

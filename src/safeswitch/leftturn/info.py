@@ -35,7 +35,8 @@ def scenario_info(scenarios: Scenarios, i: int) -> dict[str, float]:
 def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str, Any]:
     """The ``info`` of environment ``i`` for one tick.
 
-    Keys: ``collision``, ``safety_active`` (the safety action was executed), ``reward_terms``
+    Keys: ``collision``, ``lost_control`` (the ego left its lane: a failure, like a
+    collision), ``safety_active`` (the safety action was executed), ``reward_terms``
     (the five terms of Eq. 5), ``reason`` (why the switching logic chose as it did),
     ``controller`` (``learned``, ``rule`` or ``safety``: who proposed the executed action),
     ``learned_throttle`` (what the learned action asked for), ``action_clipped`` (it was outside
@@ -47,6 +48,7 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
     r = record
     return {
         "collision": bool(r.collision[i]),
+        "lost_control": bool(r.lost_control[i]),
         "safety_active": bool(r.safety_active[i]),
         "reward_terms": {name: float(r.terms[name][i]) for name in REWARD_TERMS},
         "reason": reasons[int(r.reason[i])],

@@ -16,6 +16,7 @@ from safeswitch.leftturn.task import StepRecord
 #: Keys of the ``episode`` summary beyond SB3's ``r``, ``l`` and ``t``.
 EPISODE_KEYS: tuple[str, ...] = (
     "collision",
+    "lost_control",
     "safety_steps",
     "min_speed",
     "max_speed",
@@ -84,12 +85,15 @@ class TickCosts:
 
 
 class EpisodeStatistics:
-    """Running per-episode statistics of a batch of environments (arrays ``[B]``)."""
+    """Running per-episode statistics of a batch of environments (arrays ``[B]``).
+
+    A *failure* is a collision or a loss of control (:attr:`failed`)."""
 
     def __init__(self, batch: int) -> None:
         self.ret = np.zeros(batch)
         self.length = np.zeros(batch, dtype=np.int64)
         self.collision = np.zeros(batch, dtype=bool)
+        self.lost_control = np.zeros(batch, dtype=bool)
         self.safety_steps = np.zeros(batch, dtype=np.int64)
         self.min_speed = np.full(batch, np.inf)
         self.max_speed = np.zeros(batch)
@@ -103,6 +107,11 @@ class EpisodeStatistics:
         self.max_lateral = np.zeros(batch)
         self.terms = {name: np.zeros(batch) for name in REWARD_TERMS}
 
+    @property
+    def failed(self) -> NDArray[np.bool_]:
+        """Per episode: it ended in a collision or a loss of control."""
+        return self.collision | self.lost_control
+
     def update(
         self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_] | None = None
     ) -> None:
@@ -113,6 +122,7 @@ class EpisodeStatistics:
         self.ret += np.where(on, r.reward, 0.0)
         self.length += on
         self.collision |= r.collision & on
+        self.lost_control |= r.lost_control & on
         self.safety_steps += r.safety_active & on
         self.min_speed = np.where(on, np.minimum(self.min_speed, r.ego_speed), self.min_speed)
         self.max_speed = np.where(on, np.maximum(self.max_speed, r.ego_speed), self.max_speed)
@@ -137,6 +147,7 @@ class EpisodeStatistics:
             "l": self.length[index].copy(),
             "t": np.full(len(index), round(elapsed, 6)),
             "collision": self.collision[index].copy(),
+            "lost_control": self.lost_control[index].copy(),
             "safety_steps": self.safety_steps[index].copy(),
             "min_speed": self.min_speed[index].copy(),
             "max_speed": self.max_speed[index].copy(),
@@ -154,6 +165,7 @@ class EpisodeStatistics:
         self.ret[index] = 0.0
         self.length[index] = 0
         self.collision[index] = False
+        self.lost_control[index] = False
         self.safety_steps[index] = 0
         self.min_speed[index] = np.inf
         self.max_speed[index] = 0.0

@@ -67,7 +67,10 @@ CONTROLLERS: tuple[str, ...] = ("learned", "rule", "safety")
 #: Reason of a tick on which ``PID_th`` proposed (outside the learned controller's scope) and
 #: the switching logic accepted it.
 RULE_IN_CHARGE = "rule_in_charge"
-#: Codes of :attr:`TaskState.outcome`.
+#: Codes of :attr:`TaskState.outcome`: decided on the tick the ego clears its conflict zone
+#: with the north car — ``cut`` if the north car has not yet left its own zone then, ``yield``
+#: if it has; ``undecided`` until then (at an episode's end: the ego never cleared), so that
+#: cut + yield = cleared in every count.
 OUTCOMES: tuple[str, ...] = ("undecided", "cut", "yield")
 
 #: (vehicle field, slot) of each observation column: (x_e, y_e, v_e, x_n, y_n, v_n).
@@ -191,9 +194,11 @@ class StepRecord:
         observation: The state after the tick (x_e, y_e, v_e, x_n, y_n, v_n), float32.
         reward: Sum of the reward terms (plus the collision penalty, if configured).
         terms: The five reward terms of Eq. 5, keyed by :data:`REWARD_TERMS`.
-        terminated: The episode ended in a collision.
+        terminated: The episode ended in a failure: a collision or a loss of control.
         truncated: The episode hit its time horizon or the end of the ego's route.
         collision: The cars' footprints touch or overlap.
+        lost_control: The ego left its lane: more than half a lane width off its route (its
+            tyres slid, :mod:`safeswitch.sim.vehicle`).
         safety_active: The safety action was executed (the paper's ``s*``).
         reason: Reason code of the switching decision, into :attr:`LeftTurnTask.reasons`.
         controller: Who proposed the executed action, a code of :data:`CONTROLLERS`.
@@ -208,7 +213,9 @@ class StepRecord:
         ego_speed: Ego speed after the tick [m/s].
         north_speed: North car speed after the tick [m/s].
         accel_lon: Ego longitudinal acceleration over the tick [m/s²].
-        accel_lat: Ego lateral acceleration [m/s²].
+        accel_lat: Ego lateral acceleration [m/s²] (what its tyres gave).
+        grip_demand: The combined acceleration the ego's pedals and steering asked for, as a
+            share of the tyres' ``μ·g`` (above 1: they slid this tick).
         lateral: Ego lateral deviation from its route [m].
         separation: Gap between the two footprints [m] (``<= 0``: collision).
         outcome: Who crossed first so far, a code of :data:`OUTCOMES`.
@@ -221,6 +228,7 @@ class StepRecord:
     terminated: BoolArray
     truncated: BoolArray
     collision: BoolArray
+    lost_control: BoolArray
     safety_active: BoolArray
     reason: NDArray[np.int8]
     controller: NDArray[np.int8]
@@ -234,6 +242,7 @@ class StepRecord:
     north_speed: FloatArray
     accel_lon: FloatArray
     accel_lat: FloatArray
+    grip_demand: FloatArray
     lateral: FloatArray
     separation: FloatArray
     outcome: NDArray[np.int8]
@@ -309,8 +318,9 @@ class LeftTurnTask:
             ep.approach_distance_m,
         )  # fmt: skip
         self._limits = EpisodeLimits(
-            ep.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1]
-        )
+            ep.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1],
+            config.geometry.lane_width / 2.0,
+        )  # fmt: skip
         #: The learned controller's speed limiter (``None`` if off): its speed [m/s], the
         #: throttle that holds that speed and the gain (see ControllerConfig).
         self._limiter: tuple[float, float, float] | None = None
@@ -418,6 +428,12 @@ class LeftTurnTask:
         """The vehicles still to come that the certificate must beat: none in the paper's
         scene."""
         return Phantoms.none()
+
+    def ego_curvature(self) -> tuple[float, FloatArray]:
+        """The ego's route: its waypoint spacing [m] and ``|κ|`` at each waypoint [1/m] (what
+        the certified logic keeps the ego's cornering within)."""
+        route = self.world.routes[0]
+        return route.spacing, np.abs(route.curvature)
 
     def conflicts(self, state: TaskState) -> ConflictArrays:
         """The ego's conflict with every other vehicle, for measures taken at them."""
@@ -546,7 +562,7 @@ class LeftTurnTask:
         speed = new_world.vehicles.speed
         terms_out = tuple(np.empty(batch) for _ in REWARD_TERMS)
         reward, tick = np.empty(batch), np.empty(batch, dtype=np.int64)
-        ends = tuple(np.empty(batch, dtype=np.bool_) for _ in range(4))
+        ends = tuple(np.empty(batch, dtype=np.bool_) for _ in range(5))
         outcome, controller = np.empty(batch, dtype=np.int8), np.empty(batch, dtype=np.int8)
         reason = np.empty(batch, dtype=np.int8)
         observation = np.empty((batch, 6), dtype=np.float32)
@@ -560,7 +576,7 @@ class LeftTurnTask:
             terms_out, reward, tick, ends, outcome, controller, reason, observation,
         )  # fmt: skip
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
-        collision, terminated, truncated, ego_cleared = ends
+        collision, terminated, truncated, ego_cleared, lost_control = ends
         if self._ends_episode is not None:
             ended = sup.safety_active & self._ends_episode[reason]
             terminated, truncated = terminated | ended, truncated & ~ended
@@ -586,6 +602,7 @@ class LeftTurnTask:
             terminated=terminated,
             truncated=truncated,
             collision=collision,
+            lost_control=lost_control,
             safety_active=sup.safety_active,
             reason=reason,
             controller=controller,
@@ -599,6 +616,7 @@ class LeftTurnTask:
             north_speed=speed[:, 1],
             accel_lon=outputs.accel_lon[:, 0],
             accel_lat=outputs.accel_lat[:, 0],
+            grip_demand=outputs.grip_demand[:, 0],
             lateral=new_world.lateral[:, 0],
             separation=separation,
             outcome=outcome,
@@ -610,7 +628,7 @@ class LeftTurnTask:
 #: How :meth:`LeftTurnTask.hold` merges the records of the ticks of one decision: summed over
 #: the episode's ticks, true if on any of them; every other field is the last tick's.
 _SUMMED = ("reward",)
-_ANY = ("collision", "safety_active", "action_clipped")
+_ANY = ("collision", "lost_control", "safety_active", "action_clipped")
 
 
 def merge_tick(merged: StepRecord, record: StepRecord, live: BoolArray) -> None:
@@ -717,12 +735,15 @@ class EpisodeLimits(NamedTuple):
         ego_route_end: Progress at which the ego's route ends [m].
         ego_zone_exit: Exit of the ego's conflict zone [m].
         north_zone_exit: Exit of the north car's conflict zone [m].
+        lost_control_m: The ego has lost control this far off its route [m] (half a lane
+            width: its centre at the lane's edge).
     """
 
     horizon_ticks: int
     ego_route_end: float
     ego_zone_exit: float
     north_zone_exit: float
+    lost_control_m: float
 
 
 #: Values of ``EpisodeConfig.learned_scope``, in the order of the compiled tick's codes.
@@ -815,10 +836,12 @@ def _after_plant(
     """Step 4's bookkeeping for every episode, from the new plant state: the five reward terms
     (Eq. 5, in :data:`REWARD_TERMS` order) and their sum, collision, termination, truncation
     (horizon or end of route), the ego leaving its zone, who crossed first, and the observation.
-    ``flags`` = (collision, terminated, truncated, ego_cleared); ``controller`` = who proposed
-    the executed pedals (:data:`CONTROLLERS`: the safety side where the logic chose its safety
-    action, the learned controller where it was in charge with a valid action, else the rule);
-    ``new_reason`` = the supervision's reason, ``rule_code`` where the rule's proposal ran.
+    ``flags`` = (collision, terminated, truncated, ego_cleared, lost_control); ``controller`` =
+    who proposed the executed pedals (:data:`CONTROLLERS`: the safety side where the logic
+    chose its safety action, the learned controller where it was in charge with a valid action,
+    else the rule); ``new_reason`` = the supervision's reason, ``rule_code`` where the rule's
+    proposal ran. A failure — a collision or a loss of control — ends the episode and gets
+    ``collision_penalty``.
     """
     for b in range(x.shape[0]):
         adas, lka, v, lon, lat = tick_terms(
@@ -827,25 +850,26 @@ def _after_plant(
         )  # fmt: skip
         terms[0][b], terms[1][b], terms[2][b], terms[3][b], terms[4][b] = adas, lka, v, lon, lat
         collision = separation[b] <= 0.0
+        lost = abs(lateral[b, 0]) > limits.lost_control_m
+        failed = collision or lost
         total = adas + lka + v + lon + lat
         if collision_penalty != 0.0:
-            total = total + (collision_penalty if collision else 0.0)
+            total = total + (collision_penalty if failed else 0.0)
         reward[b] = total
         t = tick[b] + 1
         new_tick[b] = t
         flags[0][b] = collision
-        flags[1][b] = collision
-        flags[2][b] = (not collision) and (
+        flags[1][b] = failed
+        flags[2][b] = (not failed) and (
             t >= limits.horizon_ticks or progress[b, 0] >= limits.ego_route_end
         )
         cleared = progress[b, 0] > limits.ego_zone_exit
         flags[3][b] = cleared
+        flags[4][b] = lost
         if outcome[b] != 0:
             new_outcome[b] = outcome[b]
-        elif cleared:
-            new_outcome[b] = 1
-        elif progress[b, 1] > limits.north_zone_exit:
-            new_outcome[b] = 2
+        elif cleared:  # decided as the ego clears: before the north car left its zone, or after
+            new_outcome[b] = 2 if progress[b, 1] > limits.north_zone_exit else 1
         else:
             new_outcome[b] = 0
         new_reason[b] = reason[b]

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from safeswitch.core.arrays import jit
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
-from safeswitch.leftturn.logics.certified import CertifiedSwitching
+from safeswitch.leftturn.logics.certified import CertifiedSwitching, certified_logic
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
 from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState
 from safeswitch.leftturn.views import ConflictView, Phantoms
@@ -52,6 +52,7 @@ from safeswitch.sim.streams import (
     spawn,
     traffic_tick,
 )
+from safeswitch.sim.vehicle import GRAVITY
 from safeswitch.sim.world import WorldState
 
 BoolArray = NDArray[np.bool_]
@@ -125,7 +126,10 @@ class LeftTurnTrafficTask(LeftTurnTask):
         #: The movements with the paper logic's conflict margin, and with the certified one's.
         self.network = RoadNetwork(config.geometry, footprint, config.episode.conflict_margin_m)
         self.cert_network = RoadNetwork(config.geometry, footprint, config.certified.zone_margin_m)
-        self.tables = network_tables(self.network)
+        self.tables = network_tables(
+            self.network, config.vehicle.friction_coefficient * GRAVITY,
+            IDMParams().comfortable_decel,
+        )  # fmt: skip
         self.ego_route = self.network.index("south", "west")
         self.north_route = self.network.index("north", "south")
         self.idm = IDMParams()
@@ -167,8 +171,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
         #: task runs (the observation belongs to the policy).
         self._margins: CertifiedSwitching | None = None
         if traffic.observe == "margins":
-            c = self.config
-            self._margins = CertifiedSwitching(c.certified, c.vehicle, c.episode.dt)
+            self._margins = certified_logic(self)
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
         self._observed_high = np.tile(np.array(high, dtype=np.float32), traffic.observed)
 

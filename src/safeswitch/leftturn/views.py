@@ -251,3 +251,7 @@ class LogicScene(Protocol):
     def phantoms(self) -> Phantoms:
         """The vehicles still to come that the certificate must beat (certified margin)."""
         ...
+
+    def ego_curvature(self) -> tuple[float, FloatArray]:
+        """The ego's route: its waypoint spacing [m] and ``|κ|`` at each waypoint [1/m]."""
+        ...

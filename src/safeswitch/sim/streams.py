@@ -20,6 +20,11 @@ drivers react, they do not re-plan every 20 ms. A decision is:
 3. **Occupied zones** — nobody enters a conflict zone while a conflicting vehicle is inside its
    own (however late that vehicle has become): the last line against collisions among them.
 
+4. **Curves** — a driver takes a turn within :data:`TURN_LATERAL_ACCEL` (``v² |κ|``): its
+   desired speed is capped by the speeds from which braking at the IDM's comfortable
+   deceleration keeps to it at every curve ahead (:func:`curve_envelope`), and the tyres give
+   its pedals no more than the friction circle leaves (:func:`grip_room`), as for the ego.
+
 A driver who *yields* follows 2 and 3 towards the ego too (the ego, turning left from the main
 road, has the right of way over the minor road); a *non-yielding* driver ignores the ego there
 — the paper's north car — but still keeps its distance when following it. A yielding driver
@@ -104,10 +109,46 @@ class NetworkTables(NamedTuple):
     spacing: float
     k_max: int
     size: int
+    curvature: FloatArray  # [R, size]: |κ| at each waypoint (padding straight)
+    curve_speed_sq: FloatArray  # [R, size]: the drivers' squared speed envelope at each waypoint
+    grip: float  # μ·g [m/s²]
 
 
-def network_tables(network: RoadNetwork) -> NetworkTables:
+#: What an ordinary driver takes a turn at: ``v² |κ| ≤`` this [m/s²] (urban turning speeds of
+#: 3 m/s² and less are typical; the paper's own comfort limit for the ego is the same).
+TURN_LATERAL_ACCEL = 3.0
+
+
+#: A driver faster than its curve envelope slows towards it with this time constant [s].
+CURVE_RESPONSE_S = 0.5
+
+
+def curve_envelope(
+    curvature: FloatArray, spacing: float, lateral_accel: float, decel: float
+) -> FloatArray:
+    """At each waypoint (rows: routes), the largest squared speed from which braking at
+    ``decel`` keeps ``v² |κ| ≤ lateral_accel`` at every later waypoint [m²/s²]."""
+    curve = np.where(curvature > 0, lateral_accel / np.maximum(curvature, 1e-12), np.inf)
+    out = np.empty_like(curve)
+    out[..., -1] = curve[..., -1]
+    for i in range(curve.shape[-1] - 2, -1, -1):
+        out[..., i] = np.minimum(curve[..., i], out[..., i + 1] + 2.0 * decel * spacing)
+    return out
+
+
+def network_tables(
+    network: RoadNetwork, grip: float, decel: float, lateral_accel: float = TURN_LATERAL_ACCEL
+) -> NetworkTables:
+    """The network as the compiled traffic reads it; the drivers brake for curves at ``decel``
+    [m/s²] to take them within ``lateral_accel``, and the tyres give at most ``grip`` (``μ·g``)
+    [m/s²] in all."""
     routes = network.routes
+    kappa = np.zeros((len(routes.routes), routes.size))
+    for r, route in enumerate(routes.routes):
+        kappa[r, : len(route.points)] = np.abs(route.curvature)
+    # a waypoint's segments on both sides: the sharper one counts, so that the value read at the
+    # waypoint before a vehicle bounds the curvature up to the next one
+    kappa[:, :-1] = np.maximum(kappa[:, :-1], kappa[:, 1:])
     return NetworkTables(
         np.ascontiguousarray(network.shared),
         np.ascontiguousarray((network.shared[..., 0] <= network.shared[..., 1]).any(axis=-1)),
@@ -115,7 +156,23 @@ def network_tables(network: RoadNetwork) -> NetworkTables:
         network.ranks, network.lengths, network.box_exits,
         np.nanmin(network.conflicts[..., 0], axis=1), np.nanmax(network.conflicts[..., 1], axis=1),
         routes.tables, heading_axes(routes.tables), routes.spacing, routes.size - 2, routes.size,
+        kappa, curve_envelope(kappa, routes.spacing, lateral_accel, decel), float(grip),
     )  # fmt: skip
+
+
+@jit
+def _at(table: FloatArray, route: int, progress: float, spacing: float) -> float:
+    """A per-waypoint table's value at the waypoint at or before ``progress``."""
+    k = min(max(int(progress // spacing), 0), table.shape[1] - 1)
+    return table[route, k]
+
+
+@jit
+def grip_room(route: int, progress: float, speed: float, t: NetworkTables) -> float:
+    """What the tyres leave for the pedals at ``speed`` on ``route`` at ``progress``:
+    ``√((μ·g)² − (v² κ)²)`` [m/s²] (0 where cornering alone takes all of it)."""
+    lateral = speed * speed * _at(t.curvature, route, progress, t.spacing)
+    return math.sqrt(max(t.grip * t.grip - lateral * lateral, 0.0))
 
 
 @dataclass
@@ -366,7 +423,19 @@ def traffic_tick(
                 # a virtual stopped vehicle whose rear is at stop_at (the real leader stays the
                 # one to follow when it is nearer: it may wait beyond that point)
                 gap, lead_v = stop_at - si, 0.0
-            a = idm_accel(vi, desired[b, i], gap if gap < 1e8 else math.inf, lead_v, idm)
+            # The driver slows for curves ahead (its desired speed capped by the envelope),
+            # and the tyres give the pedals only what cornering leaves them.
+            # (read here and where the driver will be after its response time: it slows in
+            # time, and speeds up only once out of the curve)
+            curve = math.sqrt(min(_at(t.curve_speed_sq, ri, si, t.spacing),
+                                  _at(t.curve_speed_sq, ri, si + vi * CURVE_RESPONSE_S,
+                                      t.spacing)))  # fmt: skip
+            a = idm_accel(vi, min(desired[b, i], curve), gap if gap < 1e8 else math.inf, lead_v,
+                          idm)  # fmt: skip
+            if vi > curve:  # late for a curve (IDM's free term brakes gently): catch up
+                a = min(a, (curve - vi) / CURVE_RESPONSE_S)
+            room = grip_room(ri, si, vi, t)
+            a = min(max(a, -room), room)
             _advance(b, i, ri, si, vi, a, dt, t, rules, waited, new_progress, new_speed, new_waited,
                      accel_out)  # fmt: skip
 

@@ -6,8 +6,13 @@ The model is the smallest one that reproduces what the paper's controllers act o
 * a drive force limited by the engine's peak force, its power and the driven axle's traction;
 * brake force, rolling resistance, aerodynamic drag and engine braking (a closed or nearly
   closed throttle slows the car, as the paper notes for CARLA's vehicle);
-* kinematic bicycle motion with a steering limit (the speeds here stay below 10 m/s, where tyre
-  slip is small and a kinematic model is accurate);
+* kinematic bicycle motion with a steering limit (below the tyres' limit slip is small at these
+  speeds and a kinematic model is accurate);
+* a friction circle: the combined acceleration never exceeds ``μ·g``. The pedals' force comes
+  first (at most ``μ·m·g``, as ABS and traction control keep it), cornering gets what the
+  tyres have left, ``√((μ·g)² − a_lon²)``. Asked for more — too fast into a curve, or braking
+  hard in one — the front tyres slide: the car turns no tighter than the grip allows and runs
+  wide of its path (understeer), as a real car does;
 * no reversing: the car stops at zero speed.
 
 All functions take arrays of any shape ``[...]`` (one element per vehicle). The longitudinal
@@ -51,7 +56,9 @@ class VehicleParams:
         max_steer_angle: Road-wheel angle at full steering command [rad] (35°).
         max_drive_force: Largest drive force at the wheels, in low gear [N].
         max_power: Peak engine power [W]; limits the drive force to ``power / speed``.
-        friction_coefficient: Tyre–road friction coefficient (dry asphalt).
+        friction_coefficient: Tyre–road friction coefficient ``μ``: the combined acceleration
+            stays within ``μ·g`` (dry asphalt: peak coefficients of 0.8–0.9, Wong, *Theory
+            of Ground Vehicles*, 4th ed., Table 1.3; 0.9 for a modern passenger-car tyre).
         driven_axle_load_fraction: Share of the weight on the driven (front) axle.
         max_brake_force: Brake force at full brake command [N] (about the tyre limit).
         rolling_resistance: Rolling resistance coefficient.
@@ -197,13 +204,17 @@ class VehicleOutputs:
 
     Attributes:
         accel_lon: Longitudinal acceleration over the tick [m/s²] (negative when slowing).
-        accel_lat: Lateral (centripetal) acceleration [m/s²], positive to the left.
+        accel_lat: Lateral (centripetal) acceleration [m/s²], positive to the left: what the
+            tyres gave, at most what the friction circle leaves.
         yaw_rate: Yaw rate [rad/s].
+        grip_demand: The combined acceleration the pedals and the steering asked for, as a
+            share of ``μ·g`` (above 1: the tyres slid this tick).
     """
 
     accel_lon: FloatArray
     accel_lat: FloatArray
     yaw_rate: FloatArray
+    grip_demand: FloatArray
 
 
 def lag_factor(time_constant: float, dt: float) -> float:
@@ -230,6 +241,7 @@ class VehicleConstants(NamedTuple):
         rolling: Rolling resistance ``c_rr·m·g`` [N].
         aero: ``½·ρ·Cd·A`` [kg/m].
         grip: Tyre grip ``μ·m·g`` [N].
+        grip_accel: The friction circle's radius ``μ·g`` [m/s²].
         alpha_steer: Fraction of the steering command's gap closed per tick.
         max_steer: Road-wheel angle at full steering [rad].
         rear_ratio: ``l_r / L``.
@@ -250,6 +262,7 @@ class VehicleConstants(NamedTuple):
     rolling: float
     aero: float
     grip: float
+    grip_accel: float
     alpha_steer: float
     max_steer: float
     rear_ratio: float
@@ -276,6 +289,7 @@ def vehicle_constants(params: VehicleParams, dt: float) -> VehicleConstants:
         rolling=p.rolling_resistance * p.mass * GRAVITY,
         aero=0.5 * AIR_DENSITY * p.drag_area,
         grip=p.friction_coefficient * p.mass * GRAVITY,
+        grip_accel=p.friction_coefficient * GRAVITY,
         alpha_steer=lag_factor(p.steer_time_constant, dt),
         max_steer=p.max_steer_angle,
         rear_ratio=p.cg_to_rear_axle / p.wheelbase,
@@ -363,7 +377,8 @@ def vehicle_tick(
     k: VehicleConstants,
 ) -> tuple[float, ...]:  # fmt: skip
     """One tick of one vehicle: its :class:`VehicleState` fields in, the new ones followed by
-    its :class:`VehicleOutputs` (``accel_lon``, ``accel_lat``, ``yaw_rate``) out."""
+    its :class:`VehicleOutputs` (``accel_lon``, ``accel_lat``, ``yaw_rate``, ``grip_demand``)
+    out."""
     dt = k.dt
     throttle, brake, speed = longitudinal_tick(speed0, throttle, brake, throttle_cmd, brake_cmd, k)
     steer += k.alpha_steer * (min(max(steer_cmd, -1.0), 1.0) - steer)
@@ -374,6 +389,16 @@ def vehicle_tick(
     cos_slip = 1.0 / math.sqrt(1.0 + tan_slip * tan_slip)
     sin_slip = tan_slip * cos_slip
     yaw_rate = mean_speed * cos_slip * tan_delta / k.wheelbase
+    # The friction circle: the pedals' acceleration first (bounded by the grip already), the
+    # turn gets what is left; asked for more, the tyres slide and the car turns less tightly.
+    accel = (speed - speed0) / dt
+    lateral = mean_speed * yaw_rate
+    grip = k.grip_accel
+    demand = math.sqrt(accel * accel + lateral * lateral) / grip
+    if demand > 1.0:
+        left = math.sqrt(max(grip * grip - accel * accel, 0.0))
+        if abs(lateral) > left:  # (not a rounding of an acceleration at the grip itself)
+            yaw_rate *= left / abs(lateral)
     # Midpoint heading over the tick, then the course ψ + β, by rotating the heading vector.
     cos_mid, sin_mid = _rotate(cos_yaw, sin_yaw, 0.5 * yaw_rate * dt)
     step = mean_speed * dt
@@ -384,7 +409,7 @@ def vehicle_tick(
     norm = 1.5 - 0.5 * (cos_yaw * cos_yaw + sin_yaw * sin_yaw)  # a Newton step of 1/sqrt
     return (
         x_new, y_new, cos_yaw * norm, sin_yaw * norm, speed, throttle, brake, steer,
-        (speed - speed0) / dt, mean_speed * yaw_rate, yaw_rate,
+        accel, mean_speed * yaw_rate, yaw_rate, demand,
     )  # fmt: skip
 
 
@@ -414,7 +439,7 @@ def store_tick(
     the measured outputs into ``outputs``."""
     out[0][i], out[1][i], out[2][i], out[3][i] = r[0], r[1], r[2], r[3]
     out[4][i], out[5][i], out[6][i], out[7][i] = r[4], r[5], r[6], r[7]
-    outputs[0][i], outputs[1][i], outputs[2][i] = r[8], r[9], r[10]
+    outputs[0][i], outputs[1][i], outputs[2][i], outputs[3][i] = r[8], r[9], r[10], r[11]
 
 
 @jit
@@ -530,7 +555,7 @@ def vehicle_step(
     shape = state.speed.shape
     n = state.speed.size
     out = tuple(np.empty(n) for _ in range(8))
-    outputs = (np.empty(n), np.empty(n), np.empty(n))
+    outputs = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
     map_vehicle_tick(
         tuple(flat(getattr(state, f.name), shape) for f in fields(VehicleState)),
         flat(throttle_cmd, shape),

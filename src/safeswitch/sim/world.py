@@ -109,7 +109,7 @@ class World:
         shape = state.progress.shape
         n = state.progress.size
         out = tuple(np.empty(n) for _ in range(8))
-        outputs = (np.empty(n), np.empty(n), np.empty(n))
+        outputs = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
         progress, lateral, gap = np.empty(n), np.empty(n), np.empty(shape[0])
         routes, p, v = self.route_set, self.params, state.vehicles
         _world_tick(

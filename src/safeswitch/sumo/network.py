@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 from safeswitch.sim.road import LEG_DIRECTIONS, IntersectionGeometry
+from safeswitch.sim.streams import TURN_LATERAL_ACCEL
 
 #: Speed limit on every edge [m/s] (50 km/h; the vehicles' own top speeds are lower).
 EDGE_SPEED = 50.0 / 3.6
@@ -97,7 +98,12 @@ def network_file(geometry: IntersectionGeometry | None = None) -> Path:
     geometry = geometry or IntersectionGeometry()
     nodes, edges = plain_description(geometry)
     version = sumo_home().name + str(binary("netconvert").stat().st_size)
-    key = hashlib.sha256((nodes + edges + version).encode()).hexdigest()[:16]
+    # Turning speeds inside the junction: SUMO limits each internal lane's speed so that
+    # v²|κ| stays within the embedded drivers' turning limit (SUMO's default is 5.5 m/s²); with
+    # SUMO's emergency deceleration of 8 m/s² (plant.py) every vehicle then stays within the
+    # tyres' friction circle, √(8² + 3²) = 8.5 < μ·g = 8.8 m/s².
+    options = ["--junctions.limit-turn-speed", str(TURN_LATERAL_ACCEL)]
+    key = hashlib.sha256((nodes + edges + version + " ".join(options)).encode()).hexdigest()[:16]
     target = cache_folder() / key / "intersection.net.xml"
     if target.is_file():
         return target
@@ -116,6 +122,7 @@ def network_file(geometry: IntersectionGeometry | None = None) -> Path:
                 "--offset.disable-normalization", "true",
                 "--no-turnarounds", "true",
                 "--no-warnings", "true",
+                *options,
             ],
             capture_output=True, text=True, check=False,
         )  # fmt: skip

@@ -65,6 +65,8 @@ class TrainingMonitor(BaseCallback):
         self.totals: dict[str, float] = {
             "collisions": 0,
             "collision_episodes": 0,
+            "lost_control": 0,
+            "failures": 0,
             "safety_steps": 0,
             "safety_episodes": 0,
             "episodes": 0,
@@ -97,12 +99,14 @@ class TrainingMonitor(BaseCallback):
         self._safety_ticks += int(record.safety_active.sum())
         self.totals["ticks"] += n
         self.totals["collisions"] += int(record.collision.sum())
+        self.totals["lost_control"] += int(record.lost_control.sum())
         self.totals["safety_steps"] += int(record.safety_active.sum())
         for i in np.flatnonzero(self.locals["dones"]):
             episode = infos[int(i)]["episode"]
             self._episodes.append(episode)
             self.totals["episodes"] += 1
             self.totals["collision_episodes"] += int(episode["collision"])
+            self.totals["failures"] += int(episode["collision"] or episode["lost_control"])
             self.totals["safety_episodes"] += int(episode["safety_steps"] > 0)
         if self.num_timesteps >= self._next_checkpoint:
             self.totals["wall_time_s"] = self.wall_time_s

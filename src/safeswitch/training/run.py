@@ -453,6 +453,8 @@ def train(
         "training": {
             "collisions": int(t["collisions"]),
             "collision_episodes": int(t["collision_episodes"]),
+            "lost_control_episodes": int(t["lost_control"]),
+            "failures": int(t["failures"]),
             "safety_activation_steps": int(t["safety_steps"]),
             "safety_activation_episodes": int(t["safety_episodes"]),
             "episodes": int(t["episodes"]),

@@ -7,9 +7,11 @@
   lags exactly (throttle decaying, brake building up; drive force at its maximum, every
   resistance ignored), after which the weakest remaining deceleration is assumed. Full brake
   rather than ``PID_b``: the bound must be provable, and only the intervention ticks pay in comfort.
-* *clear* — full throttle until the ego has left its conflict zone. Its time to cover a distance
-  is bounded the same way from below on the acceleration (drive force at the clearing speed cap,
-  full engine braking, resistances at the cap).
+* *clear* — leave the conflict zone at the sharpest curve's speed: full throttle up to a
+  holding speed, full brake while well above it (:func:`clear_pedals`). Its time to cover a
+  distance is bounded the same way from below on the acceleration (drive force at the clearing
+  speed bound, full engine braking, resistances there), and from below on the speed once it has
+  reached the holding speed.
 
 **Certificate.** Against every conflict of the view at once (the paper's scene has one, the
 north car; in traffic every vehicle whose route crosses the ego's): a state is *safe* when the
@@ -28,6 +30,19 @@ monotone along their own trajectories) while the north car, within the assumptio
 arrive earlier than its bound said. Safe states never collide: the zones are computed from the
 footprints with a margin covering the ego's lateral deviation. So no learned action sequence —
 random, adversarial, NaN — leads to a collision while the assumptions hold.
+
+**Curves.** The tyres hold the ego within a friction circle (:mod:`safeswitch.sim.vehicle`):
+too fast into a curve they slide and the ego leaves its lane. A second certificate keeps that
+from ever happening: a state is *stable* when full braking (the stop backup's bound: the lag
+phase at up to the plant's largest acceleration, then the weakest deceleration) keeps the
+ego's cornering ``v² |κ(s)|`` within ``curve_lateral_accel`` at every point of its route
+ahead. The braking envelope behind every curve is computed once per scene
+(:class:`CurveEnvelope`). Both backups keep a stable state stable — the stop backup by
+construction, the clear backup because it brakes as the stop backup does down to a speed within
+every curve's and never exceeds it after — and a learned action is accepted only if the state
+after it is stable too; where only stability fails, the filter brakes
+(``backup_brake_for_curve``). The envelope is a lower bound on what the tyres allow (5 m/s² of
+cornering against μ·g = 8.8 m/s²): braking in the curve still leaves them some grip to turn.
 
 **Vehicles still to come** (a scene in traffic: streams keep bringing vehicles). For every
 movement that crosses the ego's, a *phantom* vehicle that could appear at the start of its
@@ -79,7 +94,7 @@ from safeswitch.sim.vehicle import (
 )
 
 #: Reason codes of the backups (indices into ``CertifiedSwitching.reasons``).
-STOP, CLEAR, NO_BACKUP_BRAKE, NO_BACKUP_CLEAR = 1, 2, 3, 4
+STOP, CLEAR, NO_BACKUP_BRAKE, NO_BACKUP_CLEAR, CURVE = 1, 2, 3, 4, 5
 
 
 class CertifiedConstants(NamedTuple):
@@ -93,13 +108,26 @@ class CertifiedConstants(NamedTuple):
         drive_at_cap: Drive force at the clearing speed cap [N].
         resist_at_cap: Driving resistance at the cap [N].
         engine_brake_max: Largest closed-throttle drag [N].
-        cap: Clearing speed cap [m/s].
+        cap: Clearing speed bound [m/s]: the clear backup's speed, once it has reached it,
+            never falls below it (``clear_speed_cap``, or :attr:`clear_hold` less what the
+            backup loses with its throttle closed over the lag phase).
         lag_time: Length of the lag phase the bounds follow tick by tick [s].
         accel_max: Largest acceleration the plant can give [m/s²].
         decel_tail_worst: Weakest deceleration after the lag phase from the worst pedals [m/s²].
         other_accel: Assumed largest acceleration of every other vehicle [m/s²].
         other_top: Assumed top speed of every other vehicle [m/s].
+        curve_decel: The stop backup's weakest deceleration after the lag phase per metre
+            of progress along the route [m/s²] (what the curve envelope assumes).
+        clear_hold: The speed the clear backup throttles up to, or brakes down to, and holds
+            [m/s] (:func:`clear_pedals`): what it can keep to in the ego route's sharpest
+            curve, lags included.
+        lag_gain_worst: The most the speed rises in the stop backup's lag phase from the
+            worst pedals (full throttle, no brake) [m/s].
         progress_factor: Bound on progress along the route per distance driven.
+        progress_jump: How far the progress measured on the route's polyline can jump at a
+            waypoint [m]: ``ego_max_lateral_m · tan(spacing · κ_max)`` (a point off the
+            polyline changes segment with a step; 0 on a straight route). Added to each
+            bound once, on top of ``progress_factor`` (which covers the jumps on average).
         time_margin: Margin between the ego leaving a zone and its vehicle entering its own [s].
         lag_ticks: Ticks of the lag phase (a float: it enters the closed forms).
         sum_k: ``Σ k`` over the lag phase.
@@ -122,7 +150,11 @@ class CertifiedConstants(NamedTuple):
     decel_tail_worst: float
     other_accel: float
     other_top: float
+    curve_decel: float
+    clear_hold: float
+    lag_gain_worst: float
     progress_factor: float
+    progress_jump: float
     time_margin: float
     lag_ticks: float
     sum_k: float
@@ -144,6 +176,108 @@ class Bounds(NamedTuple):
     c: CertifiedConstants
     rho_t: FloatArray
     rho_b: FloatArray
+
+
+class CurveEnvelope(NamedTuple):
+    """The ego's route as the curve certificate reads it (arc lengths on the route [m]).
+
+    Attributes:
+        spacing: Waypoint spacing of the ego's route [m].
+        decel: The stop backup's weakest deceleration per metre of progress [m/s²].
+        curve: Per segment between two waypoints, the largest squared speed at which the ego
+            keeps within ``curve_lateral_accel`` on it (the sharper of its two waypoints'
+            curvatures) [m²/s²] ``[N − 1]`` (``inf`` where straight).
+        node: At each waypoint, a lower bound on the largest squared speed from which braking
+            at ``decel`` meets every later segment's curve speed [m²/s²] ``[N]``.
+    """
+
+    spacing: float
+    decel: float
+    curve: FloatArray
+    node: FloatArray
+
+    @classmethod
+    def of_route(
+        cls, spacing: float, curvature: FloatArray, lateral_accel: float, decel: float
+    ) -> CurveEnvelope:
+        """The envelope of a route with ``|κ|`` at its waypoints, a cornering limit [m/s²] and a
+        deceleration per metre of progress along the route [m/s²]."""
+        sharpest = np.maximum(curvature[:-1], curvature[1:])
+        curve = np.where(sharpest > 0, lateral_accel / np.maximum(sharpest, 1e-12), np.inf)
+        # Backwards: each segment counted whole from its start (a lower bound).
+        node = np.full(len(curvature), np.inf)
+        for i in range(len(curve) - 1, -1, -1):
+            node[i] = min(curve[i], node[i + 1] + 2.0 * decel * spacing)
+        return cls(float(spacing), float(decel), curve, node)
+
+
+@jit
+def _segment(progress: float, spacing: float, segments: int) -> int:
+    """The route segment at ``progress`` (0 before the route, ``segments`` past its end)."""
+    return min(max(int(progress // spacing), 0), segments)
+
+
+@jit
+def _envelope_window(
+    low: float, high: float, spacing: float, decel: float, curve: FloatArray, node: FloatArray
+) -> tuple[float, float]:
+    """Over the stretch ``[low, high]`` of the route: the smallest curve speed and the smallest
+    braking envelope, both squared [m²/s²]. The envelope at ``x`` in segment ``i`` is
+    ``min(curve_i, node_{i+1} + 2·decel·(x_{i+1} − x))``, a lower bound on the largest squared
+    speed from which braking meets every curve from ``x`` on; it falls by at most ``2·decel``
+    per metre (what makes the certificate hold along the stop backup's own path)."""
+    segments = curve.shape[0]
+    lowest_curve, lowest = math.inf, math.inf
+    for i in range(_segment(low, spacing, segments), _segment(high, spacing, segments) + 1):
+        if i >= segments:
+            break
+        end = (i + 1) * spacing
+        lowest_curve = min(lowest_curve, curve[i])
+        lowest = min(lowest, curve[i], node[i + 1] + 2.0 * decel * max(end - high, 0.0))
+    return lowest_curve, lowest
+
+
+@jit
+def _stable_quick(progress: float, peak: float, c: CertifiedConstants, e: CurveEnvelope) -> bool:
+    """A sufficient condition for :func:`_stable` at no cost: with every speed of the stop's
+    lag phase at most ``peak`` and every position within the stretch it can cover, the
+    envelope where the stretch begins leaves room for the whole stretch."""
+    low = progress - c.progress_jump
+    reach = progress + c.progress_jump + c.progress_factor * c.lag_time * peak
+    _, lowest = _envelope_window(low, low, e.spacing, e.decel, e.curve, e.node)
+    return peak * peak + 2.0 * e.decel * (reach - low) <= lowest
+
+
+@jit
+def _stable(
+    progress: float, speed: float, throttle: float, brake: float, t: Bounds, e: CurveEnvelope
+) -> bool:
+    """Full braking from ``progress`` at ``speed`` (with the pedals at ``throttle`` and
+    ``brake``) keeps the ego's cornering within ``curve_lateral_accel``: tick by tick through
+    the lag phase (the speed bound and the reach of :func:`_stop_distance`'s deceleration
+    bounds), the speed within every curve the ego can be on, and at its end within the
+    braking envelope everywhere the ego can be."""
+    c, rho_t, rho_b = t
+    a = c.brake_max / c.mass
+    b = a * (1.0 - brake)
+    cc = c.drive_max / c.mass * throttle
+    f, dt = c.progress_factor, c.dt
+    low, high, v = progress - c.progress_jump, progress + c.progress_jump, speed
+    for k in range(rho_t.shape[0]):
+        v_next = max(v - dt * (a - b * rho_b[k] - cc * rho_t[k]), 0.0)
+        high += f * dt * 0.5 * (v + v_next)
+        top = max(v, v_next)
+        lowest_curve, _ = _envelope_window(low, high, e.spacing, e.decel, e.curve, e.node)
+        if top * top > lowest_curve:
+            return False
+        v = v_next
+    # At its end: the speed within every curve up to a tick further on, and within the braking
+    # envelope wherever the ego can be, with the room of a tick's braking besides — what the
+    # same check, made again a tick later, asks of that tick (so the certificate holds along
+    # the stop backup's own path).
+    _, lowest = _envelope_window(low, high, e.spacing, e.decel, e.curve, e.node)
+    further, _ = _envelope_window(low, high + f * dt * v, e.spacing, e.decel, e.curve, e.node)
+    return v * v <= further and v * v + 2.0 * e.decel * f * dt * v <= lowest
 
 
 @jit
@@ -254,14 +388,16 @@ def _predict(
 ) -> tuple[float, float, float, float, float]:
     """The ego one tick ahead under the given pedals, on the plant's own longitudinal model
     (:func:`~safeswitch.sim.vehicle.longitudinal_tick`): progress bounds (low, high) — the path
-    length over the tick is known within ``progress_factor`` of the speed-integrated step —,
+    length over the tick is known within ``progress_factor`` of the speed-integrated step, and
+    the progress measured on the route's polyline may jump by ``progress_jump`` at a waypoint —,
     speed, throttle and brake."""
     next_throttle, next_brake, next_speed = longitudinal_tick(
         speed, throttle, brake, throttle_cmd, brake_cmd, k
     )
     step = 0.5 * (speed + next_speed) * c.dt
-    f = c.progress_factor
-    return progress + step / f, progress + step * f, next_speed, next_throttle, next_brake
+    f, jump = c.progress_factor, c.progress_jump
+    low, high = progress + step / f - jump, progress + step * f + jump
+    return low, high, next_speed, next_throttle, next_brake
 
 
 @jit
@@ -289,7 +425,7 @@ def _clear_slack(
     """The clear backup's time to spare against a vehicle that can enter its zone ``arrive``
     seconds from now [s]: that time less the margin and the backup's time for the ego at
     ``progress`` to leave its own zone at ``leave`` (negative: the backup fails)."""
-    distance = t.c.progress_factor * max(leave - progress, 0.0)
+    distance = t.c.progress_factor * max(leave - progress + t.c.progress_jump, 0.0)
     return arrive - t.c.time_margin - _clear_time(distance, speed, throttle, brake, t)
 
 
@@ -333,7 +469,7 @@ def _settled(progress: float, speed: float, first: float, c: CertifiedConstants)
         return True
     dt, f = c.dt, c.progress_factor
     top = speed + c.accel_max * dt
-    room = (first - (progress + top * dt * f)) / f
+    room = (first - (progress + top * dt * f + 2.0 * c.progress_jump)) / f
     return _quick_stop_distance(top, c) <= room
 
 
@@ -368,7 +504,7 @@ def _safe(
             clear_ok = False
     if not relevant:
         return True, True
-    room = (first_entry - high) / t.c.progress_factor
+    room = (first_entry - high - t.c.progress_jump) / t.c.progress_factor
     stop_ok = room >= 0.0 and (
         _quick_stop_distance(speed, t.c) <= room
         or _stop_distance(speed, throttle, brake, t) <= room
@@ -377,12 +513,30 @@ def _safe(
 
 
 @jit
+def clear_pedals(speed: float, throttle: float, c: CertifiedConstants) -> tuple[float, float]:
+    """The clear backup's pedals (throttle, brake) at ``speed`` with the throttle actually at
+    ``throttle``: full throttle up to :attr:`CertifiedConstants.clear_hold`; above it the
+    throttle closed, and full braking while ``v + a·t·throttle`` — the speed with what the
+    throttle still open can add over a lag phase — exceeds ``clear_hold + a·t``. So the ego
+    brakes for the curves as the stop backup does, never exceeds ``clear_hold + a·t`` after
+    (within every curve's speed), and never drops below the speed its time bound counts on."""
+    lag = c.accel_max * c.lag_time
+    if speed + c.accel_max * c.dt <= c.clear_hold:
+        return 1.0, 0.0
+    if speed + lag * throttle > c.clear_hold + lag:
+        return 0.0, 1.0
+    return 0.0, 0.0
+
+
+@jit
 def _decide(
-    v: ConflictView, phantoms: Phantoms, learned: FloatArray, t: Bounds, k: VehicleConstants,
-    use: BoolArray, reason: NDArray[np.int8], pedals: FloatArray,
+    v: ConflictView, phantoms: Phantoms, envelope: CurveEnvelope, learned: FloatArray,
+    t: Bounds, k: VehicleConstants, use: BoolArray, reason: NDArray[np.int8],
+    pedals: FloatArray,
 ) -> None:  # fmt: skip
     """The filter, episode by episode: a state the screen settles keeps the learned pedals;
-    else the certificate of the state after one learned tick, and where it fails a backup."""
+    else the certificates (conflicts and curves) of the state after one learned tick, and
+    where either fails a backup."""
     # The tuples' arrays are taken out once: numba would otherwise fetch each array, and count
     # a reference to it, on every access inside the loop.
     ego_progress, ego_speed, ego_throttle, ego_brake = (
@@ -392,6 +546,7 @@ def _decide(
     other_progress, other_speed, other_zones = v.other_progress, v.other_speed, v.other_cert_zone
     phantom_zones, phantom_entry = phantoms.ego_zone, phantoms.entry
     c = t.c
+    step = c.dt * c.progress_factor
     conflicts = present.shape[1]
     arrivals = np.empty(conflicts)
     for b in range(present.shape[0]):
@@ -410,7 +565,10 @@ def _decide(
         for p in range(phantom_zones.shape[0]):
             if s <= phantom_zones[p, 1]:
                 first = min(first, phantom_zones[p, 0])
-        if _settled(s, speed, first, c):
+        top = speed + c.accel_max * c.dt  # after a tick of the hardest acceleration
+        if _settled(s, speed, first, c) and _stable_quick(
+            s + top * step + c.progress_jump, top + c.lag_gain_worst, c, envelope
+        ):
             continue
         low, high, v1, th1, br1 = _predict(
             s, speed, throttle, brake, learned[b, 0], learned[b, 1], c, k
@@ -418,21 +576,25 @@ def _decide(
         # The vehicles may arrive one tick sooner after the learned tick.
         stop1, clear1 = _safe(low, high, v1, th1, br1, present, zones, arrivals, b, c.dt,
                               phantom_zones, phantom_entry, t)  # fmt: skip
-        if stop1 or clear1:
+        if (stop1 or clear1) and _stable(high, v1, th1, br1, t, envelope):
             continue
         stop0, clear0 = _safe(s, s, speed, throttle, brake, present, zones, arrivals, b, 0.0,
                               phantom_zones, phantom_entry, t)  # fmt: skip
         use[b] = True
-        # Stop where it can; else clear; else best effort: brake before the first zone, go
-        # inside it.
-        if stop0:
+        # No conflict ahead: only the curve failed, brake for it. Else stop where it can;
+        # else clear; else best effort: brake before the first zone, go inside it.
+        if math.isinf(first):
+            reason[b], pedals[b, 0], pedals[b, 1] = CURVE, 0.0, 1.0
+        elif stop0:
             reason[b], pedals[b, 0], pedals[b, 1] = STOP, 0.0, 1.0
         elif clear0:
-            reason[b], pedals[b, 0], pedals[b, 1] = CLEAR, 1.0, 0.0
+            pedals[b, 0], pedals[b, 1] = clear_pedals(speed, throttle, c)
+            reason[b] = CLEAR
         elif s < first:
             reason[b], pedals[b, 0], pedals[b, 1] = NO_BACKUP_BRAKE, 0.0, 1.0
         else:
-            reason[b], pedals[b, 0], pedals[b, 1] = NO_BACKUP_CLEAR, 1.0, 0.0
+            pedals[b, 0], pedals[b, 1] = clear_pedals(speed, throttle, c)
+            reason[b] = NO_BACKUP_CLEAR
 
 
 @jit
@@ -454,23 +616,31 @@ def _margins(v: ConflictView, t: Bounds, arrival: FloatArray, slack: FloatArray)
 
 
 @jit
-def _screen(v: ConflictView, phantoms: Phantoms, c: CertifiedConstants, out: BoolArray) -> None:
+def _screen(
+    v: ConflictView, phantoms: Phantoms, envelope: CurveEnvelope, c: CertifiedConstants,
+    out: BoolArray,
+) -> None:  # fmt: skip
     present, zones = v.present, v.ego_cert_zone
     arrivals = np.empty(present.shape[1])
     for b in range(present.shape[0]):
         _arrivals(present, v.other_progress, v.other_speed, v.other_cert_zone, b, c, arrivals)
-        s = v.ego_progress[b]
+        s, speed = v.ego_progress[b], v.ego_speed[b]
         first = _first_entry(s, present, zones, arrivals, b, phantoms.ego_zone)
-        out[b] = _settled(s, v.ego_speed[b], first, c)
+        top = speed + c.accel_max * c.dt
+        out[b] = _settled(s, speed, first, c) and _stable_quick(
+            s + top * c.dt * c.progress_factor + c.progress_jump, top + c.lag_gain_worst, c,
+            envelope,
+        )  # fmt: skip
 
 
 @jit
 def _certificate(
-    v: ConflictView, phantoms: Phantoms, pedals: FloatArray, t: Bounds, k: VehicleConstants,
-    out: BoolArray,
+    v: ConflictView, phantoms: Phantoms, envelope: CurveEnvelope, pedals: FloatArray,
+    t: Bounds, k: VehicleConstants, out: BoolArray,
 ) -> None:  # fmt: skip
-    """Per episode: the certificate holds at the view's state (``pedals`` empty) or after one
-    tick of ``pedals`` ``[B, 2]`` (the vehicles a tick closer, as :func:`_decide` judges)."""
+    """Per episode: both certificates hold at the view's state (``pedals`` empty) or after
+    one tick of ``pedals`` ``[B, 2]`` (the vehicles a tick closer, as :func:`_decide`
+    judges)."""
     present, zones = v.present, v.ego_cert_zone
     arrivals = np.empty(present.shape[1])
     for b in range(present.shape[0]):
@@ -485,7 +655,7 @@ def _certificate(
             shift = t.c.dt
         stop, clear = _safe(low, high, speed, throttle, brake, present, zones, arrivals, b,
                             shift, phantoms.ego_zone, phantoms.entry, t)  # fmt: skip
-        out[b] = stop or clear
+        out[b] = (stop or clear) and _stable(high, speed, throttle, brake, t, envelope)
 
 
 @jit
@@ -506,6 +676,8 @@ class CertifiedSwitching:
         vehicle: Ego vehicle parameters (the plant model the bounds are computed on).
         dt: Tick length [s].
         phantoms: The vehicles still to come (none in the paper's scene).
+        curvature: The ego's route: its waypoint spacing [m] and ``|κ|`` at its waypoints
+            [1/m] (``None``: a straight road, no curve to keep within).
     """
 
     reasons: tuple[str, ...] = (
@@ -514,8 +686,9 @@ class CertifiedSwitching:
         "backup_clear",
         "no_certified_backup_brake",
         "no_certified_backup_clear",
+        "backup_brake_for_curve",
     )
-    assert reasons.index("no_certified_backup_clear") == NO_BACKUP_CLEAR
+    assert reasons.index("backup_brake_for_curve") == CURVE
 
     def __init__(
         self,
@@ -523,7 +696,13 @@ class CertifiedSwitching:
         vehicle: VehicleParams,
         dt: float,
         phantoms: Phantoms | None = None,
+        curvature: tuple[float, FloatArray] | None = None,
     ) -> None:
+        if config.curve_lateral_accel >= vehicle.friction_coefficient * GRAVITY:
+            raise ValueError(
+                f"certified.curve_lateral_accel={config.curve_lateral_accel!r} must be below "
+                f"the tyres' μ·g = {vehicle.friction_coefficient * GRAVITY:.2f} m/s²"
+            )
         self.config = config
         self.vehicle = vehicle
         self.dt = dt
@@ -541,7 +720,6 @@ class CertifiedSwitching:
         # Forces that bound the backups [N].
         drive_max = min(p.max_drive_force, grip * p.driven_axle_load_fraction)
         brake_max = min(p.max_brake_force, grip)
-        cap = config.clear_speed_cap
         # A cheap, looser stop bound for the easy cases (far from the zone): from the worst
         # pedal positions (throttle 1, brake 0), accelerate at the largest drive force for the
         # whole lag phase, then brake at the lag phase's last (weakest) deceleration.
@@ -553,6 +731,26 @@ class CertifiedSwitching:
                 f"certified.lag_ticks={config.lag_ticks} is too short: after it the brake "
                 "cannot yet overcome a fully open throttle; increase it"
             )
+        # The lower bounds on the stop backup's deceleration tick by tick from the worst pedals
+        # (full throttle, no brake), as _stop_distance has them.
+        worst = (brake_max * (1.0 - brake_decay) - drive_max * throttle_decay) / p.mass
+        lag_gain_worst = float(np.max(np.concatenate([[0.0], np.cumsum(-worst * dt)])))
+        curve_decel = decel_tail_worst / config.progress_factor
+        spacing, kappa = curvature if curvature is not None else (1.0, np.zeros(2))
+        #: The speeds along the ego's route from which braking keeps its cornering within
+        #: ``curve_lateral_accel``.
+        self.envelope = CurveEnvelope.of_route(
+            spacing, np.asarray(kappa, dtype=np.float64), config.curve_lateral_accel,
+            curve_decel,
+        )  # fmt: skip
+        # The clear backup: to a speed whose peak — the throttle's lag after it closes, then a
+        # stop's lag — stays within the sharpest curve's; once there, it never falls below the
+        # speed it loses over a lag phase with the throttle closed.
+        accel_max, lag_time = drive_max / p.mass, config.lag_ticks * dt
+        sharpest = float(np.sqrt(np.min(self.envelope.curve)))
+        hold = sharpest - lag_gain_worst - accel_max * lag_time
+        coast = (p.max_engine_brake_force + resistance(max(hold, 0.0), plant)) / p.mass
+        cap = min(config.clear_speed_cap, max(hold - coast * lag_time, 0.5))
         # Sums for the closed forms: Σk, and the last value and sum of the partial sums of ρ^k.
         kk = config.lag_ticks
         gt, gb = np.cumsum(throttle_decay), np.cumsum(brake_decay)
@@ -570,7 +768,11 @@ class CertifiedSwitching:
             decel_tail_worst=decel_tail_worst,
             other_accel=config.north_max_accel,
             other_top=config.north_max_speed_kmh / 3.6,
+            curve_decel=curve_decel,
+            clear_hold=min(hold, config.clear_speed_cap),
+            lag_gain_worst=lag_gain_worst,
             progress_factor=config.progress_factor,
+            progress_jump=float(config.ego_max_lateral_m * np.tan(spacing * np.max(np.abs(kappa)))),
             time_margin=config.time_margin_s,
             lag_ticks=float(kk),
             sum_k=kk * (kk + 1) / 2.0,
@@ -618,14 +820,16 @@ class CertifiedSwitching:
         brake (loose bound) still stops before the first zone ahead. :meth:`decide`
         certifies only the rest."""
         out = np.empty(view.batch_size, dtype=np.bool_)
-        _screen(view, self.phantoms, self._c, out)
+        _screen(view, self.phantoms, self.envelope, self._c, out)
         return out
 
     def safe(self, view: ConflictView) -> BoolArray:
-        """The certificate at the view's state: some backup still avoids sharing a zone with
-        any vehicle."""
+        """The certificates at the view's state: some backup still avoids sharing a zone with
+        any vehicle, and the state is within the curve envelope."""
         out = np.empty(view.batch_size, dtype=np.bool_)
-        _certificate(view, self.phantoms, np.empty((0, 2)), self.bounds, self._plant, out)
+        _certificate(
+            view, self.phantoms, self.envelope, np.empty((0, 2)), self.bounds, self._plant, out
+        )
         return out
 
     def accepts(self, view: ConflictView, pedals: FloatArray) -> BoolArray:
@@ -634,7 +838,7 @@ class CertifiedSwitching:
         screen does not settle."""
         out = np.empty(view.batch_size, dtype=np.bool_)
         pedals = np.ascontiguousarray(pedals, dtype=np.float64)
-        _certificate(view, self.phantoms, pedals, self.bounds, self._plant, out)
+        _certificate(view, self.phantoms, self.envelope, pedals, self.bounds, self._plant, out)
         return out
 
     def predict(
@@ -662,7 +866,10 @@ class CertifiedSwitching:
         use = np.zeros(batch, dtype=np.bool_)
         reason = np.zeros(batch, dtype=np.int8)
         action = np.zeros((batch, 2))
-        _decide(state, self.phantoms, learned, self.bounds, self._plant, use, reason, action)
+        _decide(
+            state, self.phantoms, self.envelope, learned, self.bounds, self._plant, use, reason,
+            action,
+        )  # fmt: skip
         return Decision(use, reason, action)
 
 
@@ -675,4 +882,6 @@ def certified_logic(scene: LogicScene) -> CertifiedSwitching:
             f"{context_name(scene)}"
         )
     c = scene.config
-    return CertifiedSwitching(c.certified, c.vehicle, c.episode.dt, scene.phantoms())
+    return CertifiedSwitching(
+        c.certified, c.vehicle, c.episode.dt, scene.phantoms(), scene.ego_curvature()
+    )
