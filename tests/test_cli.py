@@ -210,6 +210,8 @@ def test_human_readable_output_is_rounded_without_python_reprs(capsys):
     out = capsys.readouterr().out
     assert "{" not in out and "'" not in out
     for line in out.splitlines():
+        if ":" not in line:
+            continue  # the blank line between the headline and the details
         value = line.split(":", 1)[1].strip()
         if value.replace(".", "").replace(",", "").isdigit() and "." in value:
             significant = value.replace(",", "").replace(".", "").lstrip("0")

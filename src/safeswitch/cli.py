@@ -165,13 +165,11 @@ def _train(args: argparse.Namespace) -> int:
         f"({metrics['steps_per_s']:,.0f} steps/s); " + _training_counts(t)
     )
     if e.get("episodes"):
-        clear = e["mean_time_to_clear_s"]
-        print(
-            f"evaluation on {e['episodes']} unseen scenarios: collisions {e['collisions']}, "
-            f"safety activated in {e['safety_activation_episodes']} episodes, "
-            f"full stops {e['stops']}, mean time to clear "
-            + (f"{clear:.2f} s" if clear is not None else "– (never cleared)")
-        )
+        from safeswitch.evaluation.verdict import headline
+
+        print(f"evaluation on {e['episodes']:,} unseen scenarios (full stops {e['stops']:,}):")
+        for line in headline(e):
+            print(f"  {line}")
     print(f"run directory: {args.out}")
     return 0
 
@@ -265,8 +263,20 @@ def _evaluate(args: argparse.Namespace) -> int:
 
         sys.stdout.write(to_json(summary))
     else:
-        print_summary(summary)
+        print_left_turn_summary(summary)
     return 0
+
+
+def print_left_turn_summary(summary: dict[str, Any]) -> None:
+    """A left-turn summary for a person: the headline (failures, safety action, speeding,
+    comfort, efficiency, cut + yield = cleared, each marked ✔/✘) and then every field."""
+    if "speeding_episodes" in summary and summary.get("episodes"):
+        from safeswitch.evaluation.verdict import headline
+
+        for line in headline(summary):
+            print(line)
+        print()
+    print_summary(summary)
 
 
 def _evaluate_env(args: argparse.Namespace) -> dict[str, Any]:
@@ -400,7 +410,9 @@ def _campaign(args: argparse.Namespace) -> int:
     else:
         for key, cell in result.summary["cells"].items():
             print(f"{key}:")
-            print_summary({k: v for k, v in cell.items() if k not in ("controller", "model")})
+            print_left_turn_summary(
+                {k: v for k, v in cell.items() if k not in ("controller", "model")}
+            )
     for failure in result.failures:
         print(
             f"safeswitch campaign: shard {failure.shard} of {failure.cell} (episodes "

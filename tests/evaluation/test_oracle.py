@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from safeswitch.evaluation.evaluate import scenario_set
-from safeswitch.evaluation.metrics import summarize
+from safeswitch.evaluation.metrics import FASTER_MARGIN_S, summarize
 from safeswitch.evaluation.oracle import Oracle, efficiency
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import rollout
@@ -202,10 +202,25 @@ def test_the_summary_counts_speeding_and_every_episode_faster_than_the_oracle(or
     assert summary["speeding_episodes"] == int((result.speeding_steps > 0).sum()) > EPISODES // 2
     assert summary["speeding_steps"] == int(result.speeding_steps.sum())
     assert summary["max_speed_kmh"] == pytest.approx(3.6 * result.max_speed.max())
-    faster = efficiency(plan.time_to_clear, result.time_to_clear, horizon) > 1.0 + 1e-9
+    faster = result.time_to_clear < plan.time_to_clear - FASTER_MARGIN_S
     assert summary["faster_than_oracle_episodes"] == int(faster.sum()) > 0
     broke = (result.speeding_steps > 0) | (result.comfort_violation_steps > 0)
     assert broke[faster].all()
     own = summarize(oracle.as_rollout(plan), plan.time_to_clear, horizon)
     assert own["speeding_episodes"] == own["faster_than_oracle_episodes"] == 0
     assert own["max_speed_kmh"] <= 30.0 + 1e-6
+
+
+def test_faster_than_the_oracle_means_by_more_than_two_ticks(oracle, random_plan):
+    """Clearing times are read in whole ticks: the oracle's own episodes two ticks sooner are
+    within the margin a controller keeping every limit can reach, three ticks sooner are not."""
+    _, plan = random_plan
+    own = oracle.as_rollout(plan)
+    horizon = oracle.task.config.episode.horizon_s
+    dt = oracle.task.config.episode.dt
+    assert 2 * dt < FASTER_MARGIN_S < 3 * dt
+    cleared = int(np.isfinite(plan.time_to_clear).sum())
+    for ticks, counted in ((0, 0), (2, 0), (3, cleared)):
+        sooner = replace(own, time_to_clear=plan.time_to_clear - ticks * dt)
+        summary = summarize(sooner, plan.time_to_clear, horizon)
+        assert summary["faster_than_oracle_episodes"] == counted, ticks

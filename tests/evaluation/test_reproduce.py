@@ -11,8 +11,9 @@ from PIL import Image
 
 from safeswitch.app.reproduce import ENTRIES, TRAFFIC_PRESETS
 from safeswitch.cli import main
+from safeswitch.evaluation.verdict import verdict
 from safeswitch.leftturn.config import SCENARIO_NAMES
-from safeswitch.report.document import COMPARISON, DEFINITIONS, figure_list
+from safeswitch.report.document import COMPARISON, DEFINITIONS, VERDICT_POLICIES, figure_list
 
 EPISODES = 24
 
@@ -57,6 +58,28 @@ def tables(page):
     return parser.tables
 
 
+#: The report's tables in page order: the verdict first.
+VERDICT, COMPARED, SCENARIOS, POLICIES, STORY = range(5)
+
+
+@pytest.mark.slow
+def test_the_report_opens_with_a_verdict_that_matches_the_summary(report):
+    """Every shipped policy's targets, ✔ or ✘ as :func:`verdict` says of its own summary, each
+    missed target drawn red — before any other table."""
+    summary = json.loads((report / "summary.json").read_text())
+    page = (report / "report.html").read_text()
+    assert page.index("<h2>Verdict</h2>") < page.index("<table")
+    rows = tables(page)[VERDICT][1:]
+    assert [row[0].split(" (")[0] for row, _ in rows] == list(VERDICT_POLICIES)
+    missed = re.findall(
+        r"<tr>(.*?)</tr>", page.split("<h2>Verdict</h2>", 1)[1].split("</table>", 1)[0], re.DOTALL
+    )[1:]  # the body rows' html, to read the red cells
+    for (row, _), html in zip(rows, missed, strict=True):
+        checks = verdict(summary["controllers"][row[0].split(" (")[0]]["random"])
+        assert [cell[0] for cell in row[1:]] == [c.mark for c in checks]
+        assert html.count(" bad") == sum(c.ok is False for c in checks)
+
+
 @pytest.mark.slow
 def test_the_report_embeds_every_figure_and_animation_it_lists(report):
     summary = json.loads((report / "summary.json").read_text())
@@ -89,7 +112,7 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     for name, _ in DEFINITIONS:
         assert f"<dt>{name}</dt>" in page
     assert "3 m/s²" in page and "5 m/s²" in page  # the comfort limits, with their values
-    policies = tables(page)[0]
+    policies = tables(page)[POLICIES]
     made = {row[0]: row[1] for row, _ in policies[1:]}
     evaluated_under = {row[0]: row[2] for row, _ in policies[1:]}
     assert evaluated_under["ppo-paper"] == "paper"  # trained under guarded, run under paper
@@ -99,9 +122,9 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     assert "speed limiter" not in made["ppo-paper"]  # trained without one
     assert made["ppo-paper-warm"].startswith("warm start (behaviour cloning of the planner")
     assert made["ppo-paper-scratch"].startswith("PPO from a random initialisation, 1,200,")
-    story = tables(page)[1]  # the training curves beside what the paper says of its own
+    story = tables(page)[STORY]  # the training curves beside what the paper says of its own
     assert story[0][0] == ["the paper (Section V-B)", "this run"] and len(story) == 6
-    comparison_header = tables(page)[2][0][0]
+    comparison_header = tables(page)[COMPARED][0][0]
     for _, header, _ in COMPARISON:
         assert header in comparison_header
     assert page.count("reproduced:") == 4
@@ -116,7 +139,7 @@ def test_a_collision_is_shown_in_every_table_and_figure_caption(report):
     crashed = [name for name, row in raw.items() if row["collision"] == "1"]
     assert crashed  # the premise: this policy collides in some paper scenario
     page = (report / "report.html").read_text()
-    comparison, scenarios = tables(page)[2], tables(page)[3]
+    comparison, scenarios = tables(page)[COMPARED], tables(page)[SCENARIOS]
     header = comparison[0][0]
     summary = json.loads((report / "summary.json").read_text())
     for row, css in comparison[1:]:

@@ -455,7 +455,8 @@ def reproduce(
             rows.append(
                 ComparisonRow(
                     entry.name, random_result.time_to_clear, random_result.collision,
-                    random_result.outcome, ratio,
+                    random_result.outcome, ratio, random_result.lost_control,
+                    random_result.speeding_steps > 0,
                 )
             )  # fmt: skip
             for i, name in enumerate(names):

@@ -33,16 +33,24 @@ from safeswitch.training.config import TrainConfig, load_config
 
 #: The columns of the table, from each run's ``metrics.json``: (label, path, format).
 COLUMNS = (
-    ("training collisions", ("training", "collisions"), "{:d}"),
+    ("training failures", ("training", "failures"), "{:d}"),
+    ("failures", ("evaluation", "failures"), "{:d}"),
     ("collisions", ("evaluation", "collisions"), "{:d}"),
     ("safety episodes", ("evaluation", "safety_activation_episodes"), "{:d}"),
     ("comfort exceeded", ("evaluation", "comfort_violation_fraction"), "{:.2%}"),
+    ("speeding", ("evaluation", "speeding_episodes"), "{:d}"),
+    ("top speed [km/h]", ("evaluation", "max_speed_kmh"), "{:.1f}"),
     ("full stops", ("evaluation", "stops"), "{:d}"),
     ("cut", ("evaluation", "cut_episodes"), "{:d}"),
+    ("cleared", ("evaluation", "cleared_episodes"), "{:d}"),
     ("time to clear [s]", ("evaluation", "mean_time_to_clear_s"), "{:.2f}"),
+    ("faster than the oracle", ("evaluation", "faster_than_oracle_episodes"), "{:d}"),
     ("efficiency", ("evaluation", "mean_efficiency"), "{:.3f}"),
     ("wall time [s]", ("wall_time_s",), "{:.0f}"),
 )
+#: Columns whose value breaks a target when it is not 0 (marked ✘ in the table).
+MUST_BE_ZERO = ("training failures", "failures", "collisions", "speeding",
+                "faster than the oracle")  # fmt: skip
 
 
 def parse_sets(specs: list[str]) -> list[tuple[str, list[Any]]]:
@@ -172,7 +180,9 @@ def _value(metrics: dict[str, Any], path: tuple[str, ...]) -> Any:
 
 
 def table(summary: dict[str, Any]) -> str:
-    """The sweep's runs as a Markdown table."""
+    """The sweep's runs as a Markdown table, every column that could hide a violation beside
+    the efficiency (a non-zero count of failures, speeding or faster-than-oracle episodes
+    marked ✘)."""
     header = ["run", *(label for label, _, _ in COLUMNS)]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for name, result in summary["runs"].items():
@@ -180,8 +190,11 @@ def table(summary: dict[str, Any]) -> str:
             lines.append(f"| {name} | failed: {result['error']} |")
             continue
         cells = []
-        for _, path, fmt in COLUMNS:
+        for label, path, fmt in COLUMNS:
             value = _value(result["metrics"], path)
-            cells.append("–" if value is None else fmt.format(value))
+            cell = "–" if value is None else fmt.format(value)
+            if label in MUST_BE_ZERO and value:
+                cell = f"✘ {cell}"  # a violation stands out, as a collision does
+            cells.append(cell)
         lines.append("| " + " | ".join([name, *cells]) + " |")
     return "\n".join(lines) + "\n"

@@ -40,11 +40,13 @@ Fields:
     mean_efficiency: Mean over scenarios of the oracle's time to clear divided by the
         controller's; an episode that never clears counts with the whole horizon (with an
         oracle).
-    faster_than_oracle_episodes: Episodes that cleared sooner than the oracle (efficiency
-        above 1), with an oracle. Each did something the oracle's model rules out: speeding,
-        breaking a comfort limit, being in its conflict zone while the north car is in its own,
-        or entering the turn faster than a point mass may (the plant's lateral acceleration
-        lags the route's curvature; README, "Evaluation").
+    faster_than_oracle_episodes: Episodes that cleared more than :data:`FASTER_MARGIN_S`
+        sooner than the oracle, with an oracle. Each did something the oracle's model rules
+        out: speeding, breaking a comfort limit, being in its conflict zone while the north car
+        is in its own, or entering the turn faster than a point mass may (the plant's lateral
+        acceleration lags the route's curvature; README, "Evaluation").
+    faster_than_oracle_speeding / _comfort / _either: Of those, the ones that sped, that broke
+        a comfort limit, and that did either (:mod:`safeswitch.evaluation.verdict` names them).
 
 Sums are taken per chunk with numpy and combined exactly (:class:`ExactSum`), so a summary
 depends only on the episodes and the chunk size — not on how many processes ran the chunks, nor
@@ -66,6 +68,12 @@ from safeswitch.sim.geometry import FloatArray
 
 #: Speed below which the ego counts as stopped [m/s].
 STOP_SPEED = 0.1
+
+#: An episode counts as faster than the oracle when it clears more than this much sooner [s]:
+#: the clearing instant is read in whole 20 ms ticks, and the speeding count's 0.1 km/h
+#: margin buys about one more tick over a 40 m turn at 30 km/h, so a controller that keeps
+#: every limit can beat the oracle by two ticks, never by three.
+FASTER_MARGIN_S = 0.05
 
 
 class ExactSum:
@@ -126,6 +134,9 @@ class SummaryAccumulator:
         "oracle_cleared",
         "efficiency_count",
         "faster_than_oracle_episodes",
+        "faster_than_oracle_speeding",
+        "faster_than_oracle_comfort",
+        "faster_than_oracle_either",
         "collision_course_episodes",
         "ttc_conflict_episodes",
         "encroachment_episodes",
@@ -195,7 +206,12 @@ class SummaryAccumulator:
             ratio = efficiency(oracle_time, r.time_to_clear, horizon_s)
             finite = np.isfinite(ratio)
             c["efficiency_count"] += int(finite.sum())
-            c["faster_than_oracle_episodes"] += int((ratio[finite] > 1.0 + 1e-9).sum())
+            faster = finite & (r.time_to_clear < oracle_time - FASTER_MARGIN_S)
+            sped, uncomfortable = r.speeding_steps > 0, r.comfort_violation_steps > 0
+            c["faster_than_oracle_episodes"] += int(faster.sum())
+            c["faster_than_oracle_speeding"] += int((faster & sped).sum())
+            c["faster_than_oracle_comfort"] += int((faster & uncomfortable).sum())
+            c["faster_than_oracle_either"] += int((faster & (sped | uncomfortable)).sum())
             s["efficiency"].add(float(ratio[finite].sum()))
 
     def merge(self, other: SummaryAccumulator) -> None:
@@ -280,7 +296,9 @@ class SummaryAccumulator:
         if self.with_oracle:
             out["mean_oracle_time_to_clear_s"] = mean("oracle_time", c["oracle_cleared"])
             out["mean_efficiency"] = mean("efficiency", c["efficiency_count"])
-            out["faster_than_oracle_episodes"] = c["faster_than_oracle_episodes"]
+            for key in ("faster_than_oracle_episodes", "faster_than_oracle_speeding",
+                        "faster_than_oracle_comfort", "faster_than_oracle_either"):  # fmt: skip
+                out[key] = c[key]
         return out
 
 

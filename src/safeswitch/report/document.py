@@ -15,22 +15,27 @@ from typing import Any
 
 import jinja2
 
+from safeswitch.evaluation.verdict import verdict
 from safeswitch.leftturn.config import SCENARIO_NAMES
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
-#: Columns of the comparison table: (summary key, header, format).
+#: Columns of the comparison table: (summary key, header, format). Every count that could hide
+#: a violation stands beside the efficiency.
 COMPARISON = (
+    ("failures", "failures", "{:d}"),
     ("collisions", "collisions", "{:d}"),
+    ("lost_control_episodes", "lost control", "{:d}"),
     ("safety_activation_episodes", "safety episodes", "{:d}"),
     ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
-    ("stops", "full stops", "{:d}"),
     ("speeding_episodes", "speeding", "{:d}"),
     ("max_speed_kmh", "top speed [km/h]", "{:.1f}"),
+    ("stops", "full stops", "{:d}"),
     ("cut_episodes", "cut", "{:d}"),
     ("yield_episodes", "yield", "{:d}"),
-    ("cleared_episodes", "cleared", "{:d}"),
+    ("never_cleared_episodes", "never cleared", "{:d}"),
     ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
+    ("faster_than_oracle_episodes", "faster than the oracle", "{:d}"),
     ("mean_efficiency", "efficiency", "{:.3f}"),
     ("ttc_conflict_episodes", "TTC ≤ 1.5 s", "{:d}"),
     ("mean_min_pet_s", "min PET [s]", "{:.2f}"),
@@ -39,18 +44,38 @@ COMPARISON = (
 
 #: Columns of the traffic table.
 TRAFFIC = (
+    ("failures", "failures", "{:d}"),
     ("collisions", "collisions", "{:d}"),
     ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("speeding_episodes", "speeding", "{:d}"),
+    ("max_speed_kmh", "top speed [km/h]", "{:.1f}"),
     ("cleared_episodes", "cleared", "{:d}"),
     ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
+    ("faster_than_oracle_episodes", "faster than the oracle", "{:d}"),
     ("mean_efficiency", "efficiency", "{:.3f}"),
     ("ttc_conflict_episodes", "TTC ≤ 1.5 s", "{:d}"),
     ("mean_min_pet_s", "min PET [s]", "{:.2f}"),
 )
 
+#: Counts that break a target unless they are 0: their cells are drawn red (as a collision's).
+MUST_BE_ZERO = frozenset(
+    {"failures", "collisions", "lost_control_episodes", "speeding_episodes",
+     "faster_than_oracle_episodes", "sumo_collision_episodes"}
+)  # fmt: skip
+
+#: The shipped policies the verdict judges against the targets (the results the project
+#: claims; the others are baselines and ablations).
+VERDICT_POLICIES = ("ppo-paper", "ppo-certified")
+
 #: What each column means (the report's introduction lists them).
 DEFINITIONS = (
+    ("failures", "collisions and losses of control: every episode that ended in one"),
     ("collisions", "episodes that ended with the two cars' footprints touching"),
+    (
+        "lost control",
+        "episodes that ended with the ego more than half a lane off its route: its tyres slid "
+        "(every vehicle keeps its combined acceleration within the friction circle μ·g)",
+    ),
     (
         "safety episodes / safety ticks",
         "episodes (ticks) in which the Safety controller's action was executed instead of the "
@@ -70,9 +95,15 @@ DEFINITIONS = (
     ),
     ("top speed", "the ego's highest speed in any episode"),
     (
-        "cut / yield",
+        "cut / yield / never cleared",
         "episodes in which the ego left its conflict zone before the north car left its own / "
-        "after it (neither: undecided within the horizon)",
+        "after it / not within the horizon (cut + yield = cleared)",
+    ),
+    (
+        "faster than the oracle",
+        "episodes that cleared more than 0.05 s sooner than the oracle, which keeps every limit "
+        "(two 20 ms ticks of reading and rounding are allowed): each broke one (the verdict "
+        "names which)",
     ),
     ("cleared", "episodes in which the ego left its conflict zone within the {horizon:g} s"),
     (
@@ -110,12 +141,17 @@ DEFINITIONS = (
 @dataclass(frozen=True)
 class Table:
     """A report table: its header, rows of cell texts, the rows that show a collision (drawn
-    red) and the columns holding words rather than numbers (aligned left)."""
+    red), the columns holding words rather than numbers (aligned left) and, per row, the cells
+    that show a violation (drawn red)."""
 
     header: list[str]
     rows: list[list[str]]
     alert: list[bool]
     text_columns: tuple[int, ...] = (0,)
+    bad: list[list[bool]] | None = None
+
+    def bad_cell(self, row: int, column: int) -> bool:
+        return self.bad is not None and self.bad[row][column]
 
 
 def _cell(value: Any, fmt: str, key: str) -> str:
@@ -124,13 +160,42 @@ def _cell(value: Any, fmt: str, key: str) -> str:
     return fmt.format(value)
 
 
+def _columns(
+    r: dict[str, Any], columns: tuple[tuple[str, str, str], ...], lead: int
+) -> tuple[list[str], list[bool]]:
+    """A summary's cells for ``columns``, and which show a violation (``lead`` text cells
+    first, never flagged)."""
+    cells = [_cell(r.get(k), f, k) for k, _, f in columns]
+    bad = [False] * lead + [k in MUST_BE_ZERO and bool(r.get(k)) for k, _, _ in columns]
+    return cells, bad
+
+
 def comparison_table(summary: dict[str, Any]) -> Table:
-    rows, alert = [], []
+    rows, alert, bad = [], [], []
     for name, result in summary["controllers"].items():
-        r = result["random"]
-        rows.append([name, *(_cell(r.get(k), f, k) for k, _, f in COMPARISON)])
-        alert.append(r["collisions"] > 0)
-    return Table(["controller", *(h for _, h, _ in COMPARISON)], rows, alert)
+        cells, flags = _columns(result["random"], COMPARISON, 1)
+        rows.append([name, *cells])
+        alert.append(result["random"]["collisions"] > 0)
+        bad.append(flags)
+    return Table(["controller", *(h for _, h, _ in COMPARISON)], rows, alert, bad=bad)
+
+
+def verdict_table(summary: dict[str, Any]) -> Table:
+    """For each shipped policy of :data:`VERDICT_POLICIES`, each target ✔ or ✘ with its
+    measured value (:mod:`safeswitch.evaluation.verdict`), on the random scenarios."""
+    header: list[str] = ["policy (evaluated under)"]
+    rows, bad = [], []
+    for name in VERDICT_POLICIES:
+        result = summary["controllers"].get(name)
+        if result is None:
+            continue
+        checks = verdict(result["random"])
+        if len(header) == 1:
+            header += [f"{c.name} ({c.target})" for c in checks]
+        rows.append([f"{name} ({result['switching']})", *(f"{c.mark} {c.value}" for c in checks)])
+        bad.append([False, *(c.ok is False for c in checks)])
+    return Table(header, rows, [False] * len(rows), text_columns=tuple(range(len(header))),
+                 bad=bad)  # fmt: skip
 
 
 def scenario_table(summary: dict[str, Any]) -> Table:
@@ -186,21 +251,22 @@ def reckless_table(summary: dict[str, Any]) -> Table:
 
 
 def traffic_table(summary: dict[str, Any]) -> Table:
-    rows, alert = [], []
+    rows, alert, bad = [], [], []
     for r in summary["traffic"]["rows"]:
-        rows.append(
-            [r["preset"], r["controller"], r["switching"] or "–",
-             *(_cell(r.get(k), f, k) for k, _, f in TRAFFIC)]
-        )  # fmt: skip
+        cells, flags = _columns(r, TRAFFIC, 3)
+        rows.append([r["preset"], r["controller"], r["switching"] or "–", *cells])
         alert.append(r["collisions"] > 0)
+        bad.append(flags)
     header = ["traffic", "controller", "switching", *(h for _, h, _ in TRAFFIC)]
-    return Table(header, rows, alert, text_columns=(0, 1, 2))
+    return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
 
 
 #: Columns of the cross-simulator table.
 SIMULATORS = (
+    ("failures", "failures", "{:d}"),
     ("collisions", "collisions", "{:d}"),
     ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("speeding_episodes", "speeding", "{:d}"),
     ("cleared_episodes", "cleared", "{:d}"),
     ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
     ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
@@ -211,15 +277,14 @@ SIMULATORS = (
 
 
 def sumo_table(summary: dict[str, Any]) -> Table:
-    rows, alert = [], []
+    rows, alert, bad = [], [], []
     for r in summary.get("sumo", {}).get("rows", []):
-        rows.append(
-            [r.get("scene", "paper's scene"), r["controller"], r["sim"],
-             *(_cell(r.get(k), f, k) for k, _, f in SIMULATORS)]
-        )  # fmt: skip
+        cells, flags = _columns(r, SIMULATORS, 3)
+        rows.append([r.get("scene", "paper's scene"), r["controller"], r["sim"], *cells])
         alert.append(r["collisions"] > 0)
+        bad.append(flags)
     header = ["scene", "controller", "simulator", *(h for _, h, _ in SIMULATORS)]
-    return Table(header, rows, alert, text_columns=(0, 1, 2))
+    return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
 
 
 def figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:
@@ -240,6 +305,7 @@ def _context(summary: dict[str, Any]) -> dict[str, Any]:
     return {
         "s": summary,
         "definitions": [(k, v.format(**limits)) for k, v in DEFINITIONS],
+        "verdict": verdict_table(summary),
         "comparison": comparison_table(summary),
         "scenarios": scenario_table(summary),
         "policies": policy_table(summary),

@@ -211,8 +211,10 @@ class ComparisonRow:
         label: What it is.
         time_to_clear: Per scenario [s] (NaN: never cleared) ``[N]``.
         collision: Per scenario ``[N]``.
-        outcome: Per scenario: 1 cut, 2 yield, 0 undecided ``[N]``.
+        outcome: Per scenario: 1 cut, 2 yield, 0 never cleared ``[N]``.
         efficiency: Per scenario (oracle time / time) ``[N]``.
+        lost_control: Per scenario: the episode ended with the ego off its lane ``[N]``.
+        speeding: Per scenario: the ego drove faster than the tolerated speed ``[N]``.
     """
 
     label: str
@@ -220,6 +222,8 @@ class ComparisonRow:
     collision: NDArray[np.bool_]
     outcome: NDArray[np.int8]
     efficiency: NDArray[np.float64]
+    lost_control: NDArray[np.bool_]
+    speeding: NDArray[np.bool_]
 
 
 def comparison_figure(
@@ -231,8 +235,9 @@ def comparison_figure(
 ) -> None:
     """Small multiples, one panel per controller: its time to clear against the north car's
     arrival offset (cuts blue, yields orange), the oracle's in grey on every panel, episodes
-    that never cleared as triangles at the top, collisions as red crosses; each title gives
-    the mean efficiency and the collisions. Saved as PNG."""
+    that never cleared as triangles at the top, speeding episodes ringed, collisions and losses
+    of control as red crosses; each title gives the mean efficiency, the failures and the
+    speeding episodes. Saved as PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -249,28 +254,38 @@ def comparison_figure(
         ax.scatter(offsets, oracle_time, s=3, color="0.75", label="oracle (the limit)")
         never = ~np.isfinite(row.time_to_clear)
         shown = np.where(never, top, row.time_to_clear)
+        failed = row.collision | row.lost_control
         for code, colour, name in ((1, "tab:blue", "crossed first (cut)"),
-                                   (2, "tab:orange", "crossed after (yield)"),
-                                   (0, "tab:purple", "undecided")):  # fmt: skip
-            pick = (row.outcome == code) & ~never & ~row.collision
+                                   (2, "tab:orange", "crossed after (yield)")):  # fmt: skip
+            pick = (row.outcome == code) & ~never & ~failed
             if pick.any():
                 ax.scatter(offsets[pick], shown[pick], s=5, color=colour, label=name)
-        pick = never & ~row.collision
+        pick = never & ~failed
         if pick.any():
             ax.scatter(
                 offsets[pick], shown[pick], s=14, marker="^", color="tab:purple",
                 label="never cleared",
             )  # fmt: skip
-        if row.collision.any():
+        if row.speeding.any():  # ringed: the episode drove above the tolerated speed
+            pick = row.speeding & ~failed
             ax.scatter(
-                offsets[row.collision], shown[row.collision], s=40, marker="x", color="red",
-                lw=1.5, label=f"collision ({int(row.collision.sum())})", zorder=5,
+                offsets[pick], shown[pick], s=22, facecolors="none", edgecolors="k", lw=0.6,
+                label=f"speeding ({int(row.speeding.sum())})", zorder=4,
             )  # fmt: skip
+        lost = row.lost_control & ~row.collision
+        for mask, marker, name in ((row.collision, "x", "collision"),
+                                   (lost, "+", "lost control")):  # fmt: skip
+            if mask.any():
+                ax.scatter(
+                    offsets[mask], shown[mask], s=40, marker=marker, color="red", lw=1.5,
+                    label=f"{name} ({int(mask.sum())})", zorder=5,
+                )  # fmt: skip
         mean = float(np.nanmean(row.efficiency)) if np.isfinite(row.efficiency).any() else 0.0
         ax.set_title(
-            f"{row.label}\nefficiency {mean:.2f}, {int(row.collision.sum())} collisions",
+            f"{row.label}\nefficiency {mean:.2f}, {int(failed.sum())} failures, "
+            f"{int(row.speeding.sum())} speeding",
             fontsize=9,
-            color="red" if row.collision.any() else "k",
+            color="red" if failed.any() or row.speeding.any() else "k",
         )
         ax.set_ylim(0, top + 0.6)
         ax.legend(fontsize=6, loc="lower right", markerscale=2, framealpha=0.8)
@@ -293,7 +308,7 @@ def traffic_figure(rows: list[dict[str, Any]], presets: tuple[str, ...], path: P
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8), constrained_layout=True)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.6), layout="constrained")
     x = np.arange(len(presets))
     series: dict[str, list[dict[str, Any]]] = {}
     for row in rows:
@@ -303,15 +318,16 @@ def traffic_figure(rows: list[dict[str, Any]], presets: tuple[str, ...], path: P
         by = {p["preset"]: p for p in points}
         cleared = [by[p]["cleared_episodes"] / by[p]["episodes"] for p in presets]
         mean = [by[p]["mean_time_to_clear_s"] or np.nan for p in presets]
+        failed = [by[p].get("failures", by[p]["collisions"]) for p in presets]
+        if sum(failed):  # named in the legend (a label on the plot would cross the lines)
+            where = (f"{n} ({p})" for n, p in zip(failed, presets, strict=True) if n)
+            label += f" — failures: {', '.join(where)}"
         (line,) = left.plot(x, cleared, marker="o", label=label)
         right.plot(x, mean, marker="o", color=line.get_color(), label=label)
-        for k, p in enumerate(presets):
-            if by[p]["collisions"]:
-                left.annotate(
-                    f"{by[p]['collisions']} collision{'s' * (by[p]['collisions'] != 1)}",
-                    (x[k], cleared[k]), color="red",
-                    fontsize=8, xytext=(4, -10), textcoords="offset points",
-                )  # fmt: skip
+        crashed = np.flatnonzero(failed)
+        if crashed.size:  # and marked on its points: a red cross
+            left.scatter(x[crashed], np.asarray(cleared)[crashed], marker="x", s=70, color="red",
+                         zorder=5, linewidths=2)  # fmt: skip
     for ax, title in ((left, "episodes that cleared the conflict zone"),
                       (right, "mean time to clear (episodes that cleared) [s]")):  # fmt: skip
         ax.set_xticks(x, presets)
@@ -320,7 +336,8 @@ def traffic_figure(rows: list[dict[str, Any]], presets: tuple[str, ...], path: P
         ax.grid(alpha=0.3)
     left.set_ylim(0, 1.05)
     left.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
-    right.legend(fontsize=8)
+    handles, labels = right.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=8)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

@@ -9,6 +9,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 #: The paper's six panels (a)–(f), then two of ours: when the policy starts to cut in front,
 #: and how often the Safety controller still acts.
@@ -22,6 +23,15 @@ PANELS = (
     ("cut_rate", "(g) episodes the ego crosses first (ours)"),
     ("activation_episode_rate", "(h) episodes with a safety action (ours)"),
 )
+
+
+def steps_label(steps: float) -> str:
+    """A tick label for a number of time steps: ``0``, ``400k``, ``1.2M``."""
+    if abs(steps) >= 1e6:
+        return f"{steps / 1e6:.3g}M"
+    if abs(steps) >= 1e3:
+        return f"{steps / 1e3:.3g}k"
+    return f"{steps:.0f}"
 
 
 def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = "") -> None:
@@ -40,6 +50,9 @@ def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = 
         ax.grid(alpha=0.3)
     for ax in axes[-1]:
         ax.set_xlabel("time steps")
+        # a few ticks, written short (400k, 1.2M): legible at any run length
+        ax.xaxis.set_major_locator(MaxNLocator(5))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: steps_label(x)))
     if title:
         fig.suptitle(title)
     fig.tight_layout()
