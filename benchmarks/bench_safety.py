@@ -4,8 +4,9 @@ For every switching logic (certified, paper, none) and every adversary of
 ``safeswitch.evaluation.adversaries``, the adversary drives the whole episode
 (``learned_scope="episode"``) over 10,000 random scenarios and over an exhaustive grid of north
 arrival offset × north speed × ego initial speed. Reported: episodes with a collision,
-episodes with an intervention, and intervention ticks per episode. Then: interventions for
-sensible drivers, the assumption breaks, and the certified logic's cost per VecEnv step.
+episodes that lost control (the tyres slid the ego off its lane), episodes with an
+intervention, and intervention ticks per episode. Then: interventions for sensible drivers, the
+assumption breaks, and the certified logic's cost per VecEnv step.
 
 Run: ``python benchmarks/bench_safety.py [--json] [--random N]``; writes
 ``benchmarks/results/safety.json``.
@@ -59,13 +60,15 @@ def adversarial_table(random_count: int) -> list[dict[str, object]]:
                 )
                 row[f"{label}_episodes"] = batch
                 row[f"{label}_collisions"] = int(result.collision.sum())
+                row[f"{label}_lost_control"] = int(result.lost_control.sum())
                 row[f"{label}_intervention_episodes"] = int((result.safety_steps > 0).sum())
                 row[f"{label}_intervention_ticks_per_episode"] = float(result.safety_steps.mean())
             rows.append(row)
             print(
                 f"  {switching:9} {name:16} collisions {row['random_collisions']:5} / "
                 f"{random_count} random, {row['grid_collisions']:4} / {row['grid_episodes']} "
-                f"grid cells",
+                f"grid cells; lost control {row['random_lost_control']:5} random, "
+                f"{row['grid_lost_control']:4} grid",
                 file=sys.stderr,
             )
     return rows
@@ -95,6 +98,8 @@ def invalid_actions(count: int) -> list[dict[str, object]]:
                         "episodes": count,
                         "collisions": int(alone.collision.sum()),
                         "collisions_with_30pct_nan": int(invalid.collision.sum()),
+                        "lost_control": int(alone.lost_control.sum()),
+                        "lost_control_with_30pct_nan": int(invalid.lost_control.sum()),
                     }
                 )
     return rows
@@ -250,24 +255,29 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(
-        "| adversary | switching | collisions (random) | collisions (grid) | "
-        "interventions (random episodes) | intervention ticks/episode |"
+        "| adversary | switching | collisions (random) | collisions (grid) | lost control "
+        "(random / grid) | interventions (random episodes) | intervention ticks/episode |"
     )
-    print("| --- | --- | ---: | ---: | ---: | ---: |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: |")
     for r in result["adversarial"]:
         print(
             f"| {r['adversary']} | {r['switching']} | {r['random_collisions']:,} / "
             f"{r['random_episodes']:,} | {r['grid_collisions']} / {r['grid_episodes']} | "
+            f"{r['random_lost_control']:,} / {r['grid_lost_control']} | "
             f"{100 * r['random_intervention_episodes'] / r['random_episodes']:.1f} % | "
             f"{r['random_intervention_ticks_per_episode']:.1f} |"
         )
     print()
-    print("| scope | switching | adversary | collisions | with 30 % NaN ticks |")
-    print("| --- | --- | --- | ---: | ---: |")
+    print(
+        "| scope | switching | adversary | collisions | with 30 % NaN ticks | lost control "
+        "| with 30 % NaN ticks |"
+    )
+    print("| --- | --- | --- | ---: | ---: | ---: | ---: |")
     for r in result["invalid_actions"]:
         print(
             f"| {r['scope']} | {r['switching']} | {r['adversary']} | {r['collisions']} / "
-            f"{r['episodes']} | {r['collisions_with_30pct_nan']} |"
+            f"{r['episodes']} | {r['collisions_with_30pct_nan']} | {r['lost_control']} | "
+            f"{r['lost_control_with_30pct_nan']} |"
         )
     print()
     for r in result["sensible_drivers"]:

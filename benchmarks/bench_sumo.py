@@ -94,7 +94,8 @@ def safety_cell(
     closes its own SUMO)."""
     task = sumo_task({"episode": {"learned_scope": "episode"}}, traffic, switching=switching)
     row = {"switching": switching, "adversary": name, "episodes": episodes, "collisions": 0,
-           "sumo_collision_episodes": 0, "assumption_break_episodes": 0}  # fmt: skip
+           "lost_control": 0, "sumo_collision_episodes": 0,
+           "assumption_break_episodes": 0}  # fmt: skip
     if traffic is not None:
         row["traffic"] = traffic
     try:
@@ -102,6 +103,7 @@ def safety_cell(
             scenario = task.draw_scenarios(2024, np.array([k]), np.zeros(1, int))
             result = rollout(task, scenario, catalogue(task, 1, k)[name]())
             row["collisions"] += int(result.collision[0])  # type: ignore[operator]
+            row["lost_control"] += int(result.lost_control[0])  # type: ignore[operator]
             row["sumo_collision_episodes"] += int(task.sumo_collisions > 0)  # type: ignore[operator]
             row["assumption_break_episodes"] += int(task.assumption_breaks)  # type: ignore[operator]
     finally:
@@ -130,7 +132,13 @@ def traffic_safety(episodes: int, workers: int = 2) -> list[dict[str, object]]:
 
 
 def totals(rows: list[dict[str, object]]) -> dict[str, dict[str, int]]:
-    keys = ("episodes", "collisions", "sumo_collision_episodes", "assumption_break_episodes")
+    keys = (
+        "episodes",
+        "collisions",
+        "lost_control",
+        "sumo_collision_episodes",
+        "assumption_break_episodes",
+    )
     return {
         s: {k: sum(int(r[k]) for r in rows if r["switching"] == s) for k in keys}  # type: ignore[call-overload]
         for s in ("certified", "paper")

@@ -150,6 +150,7 @@ def safety(episodes: int, paper_episodes: int) -> list[dict[str, object]]:
                     result = rollout(task, scenarios, catalogue(task, batch, seed=7)[name](), npcs)  # type: ignore[arg-type]
                     row[f"{label}_episodes"] = batch
                     row[f"{label}_collisions"] = int(result.collision.sum())
+                    row[f"{label}_lost_control"] = int(result.lost_control.sum())
                     row[f"{label}_npc_collisions"] = npcs.count
                     row[f"{label}_cleared"] = int(np.isfinite(result.time_to_clear).sum())
                     row[f"{label}_seconds"] = round(time.perf_counter() - began, 1)
@@ -158,7 +159,8 @@ def safety(episodes: int, paper_episodes: int) -> list[dict[str, object]]:
                     f"  {preset:6} {switching:9} {name:16} collisions "
                     f"{row['random_collisions']:4} / {count} random, "
                     f"{row['grid_collisions']:3} / {row['grid_episodes']} grid; among the others "
-                    f"{row['random_npc_collisions']} / {row['grid_npc_collisions']}",
+                    f"{row['random_npc_collisions']} / {row['grid_npc_collisions']}; lost control "
+                    f"{row['random_lost_control']} / {row['grid_lost_control']}",
                     file=sys.stderr,
                 )
     return rows
@@ -171,7 +173,8 @@ def totals(rows: list[dict[str, object]]) -> dict[str, dict[str, int]]:
         out[switching] = {
             key: sum(int(r[key]) for r in mine)  # type: ignore[call-overload]
             for key in ("random_episodes", "random_collisions", "grid_episodes",
-                        "grid_collisions", "random_npc_collisions", "grid_npc_collisions")
+                        "grid_collisions", "random_npc_collisions", "grid_npc_collisions",
+                        "random_lost_control", "grid_lost_control")
         }  # fmt: skip
     return out
 

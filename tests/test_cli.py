@@ -299,3 +299,20 @@ def test_a_traffic_policy_keeps_its_observation_in_other_traffic(tmp_path, capsy
     assert main(["evaluate", "--model", str(tmp_path / "run"), "--traffic", "test",
                  "--episodes", "3", "--json"]) == 0  # fmt: skip
     assert json.loads(capsys.readouterr().out)["traffic"] == "test"
+
+
+def test_evaluating_a_shipped_policy_that_misses_its_targets_says_so(capsys):
+    """The shipped policies trained before tyre friction carry a note wherever they are
+    evaluated; a policy not listed gets none."""
+    from safeswitch.training.shipped import MISSING_TARGETS, missing_targets
+
+    assert main([*EVAL, "--model", "certified"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        f"note: the shipped policy 'certified' misses its targets: {MISSING_TARGETS['certified']}"
+        in err
+    )
+    assert missing_targets("shipped") == MISSING_TARGETS["paper"]  # the paper policy's alias
+    assert missing_targets("paper-warm") is None and missing_targets("runs/mine") is None
+    assert main([*EVAL, "--model", "paper-warm"]) == 0
+    assert "misses its targets" not in capsys.readouterr().err

@@ -258,6 +258,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             traffic=args.traffic,
             sim=args.sim,
         )
+    _note_missing_targets(args.model)
     if args.json:
         from safeswitch.io import to_json
 
@@ -265,6 +266,15 @@ def _evaluate(args: argparse.Namespace) -> int:
     else:
         print_left_turn_summary(summary)
     return 0
+
+
+def _note_missing_targets(model: str | None) -> None:
+    """Say on stderr when a shipped policy evaluated is known to miss its targets."""
+    from safeswitch.training.shipped import missing_targets
+
+    why = missing_targets(model)
+    if why is not None:
+        print(f"note: the shipped policy {model!r} misses its targets: {why}", file=sys.stderr)
 
 
 def print_left_turn_summary(summary: dict[str, Any]) -> None:
@@ -403,6 +413,8 @@ def _campaign(args: argparse.Namespace) -> int:
         _cells(args), space, args.out, workers=args.workers, address=args.address,
         resume=args.resume, shard_size=args.shard_size, progress=not args.no_progress,
     )  # fmt: skip
+    for model in args.model or ():
+        _note_missing_targets(model)
     if args.json:
         from safeswitch.io import to_json
 

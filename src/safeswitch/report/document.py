@@ -17,6 +17,7 @@ import jinja2
 
 from safeswitch.evaluation.verdict import verdict
 from safeswitch.leftturn.config import SCENARIO_NAMES
+from safeswitch.training.shipped import MISSING_TARGETS, SHIPPED_DIR
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
@@ -198,6 +199,21 @@ def verdict_table(summary: dict[str, Any]) -> Table:
                  bad=bad)  # fmt: skip
 
 
+def verdict_notes(summary: dict[str, Any]) -> list[str]:
+    """For each judged policy that is a shipped one known to miss its targets on today's plant
+    (:data:`~safeswitch.training.shipped.MISSING_TARGETS`), why — so the verdict's ✘ is read
+    as "to be retrained", not as the method's ceiling."""
+    notes = []
+    for name in VERDICT_POLICIES:
+        model = (summary["controllers"].get(name) or {}).get("model")
+        if model is None or Path(model).resolve().parent != SHIPPED_DIR:
+            continue
+        why = MISSING_TARGETS.get(Path(model).name)
+        if why is not None:
+            notes.append(f"{name}: {why}")
+    return notes
+
+
 def scenario_table(summary: dict[str, Any]) -> Table:
     header = ["controller", "scenario", "outcome", "collision", "time to clear",
               "oracle", "min speed", "safety ticks", "comfort ticks"]  # fmt: skip
@@ -306,6 +322,7 @@ def _context(summary: dict[str, Any]) -> dict[str, Any]:
         "s": summary,
         "definitions": [(k, v.format(**limits)) for k, v in DEFINITIONS],
         "verdict": verdict_table(summary),
+        "verdict_notes": verdict_notes(summary),
         "comparison": comparison_table(summary),
         "scenarios": scenario_table(summary),
         "policies": policy_table(summary),
