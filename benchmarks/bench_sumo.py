@@ -173,7 +173,7 @@ def patience_check(episodes: int, traffic: str = "medium") -> list[dict[str, obj
     the simulators under ``paper`` is our drivers' patience (SUMO's have none)."""
     from safeswitch.app.evaluate import controller_setup
     from safeswitch.evaluation.evaluate import run_controller, scenario_set
-    from safeswitch.leftturn.task import build_task
+    from safeswitch.leftturn.make import build_task
 
     config, rule = controller_setup("rule", None, "paper")
     rows = []

@@ -31,7 +31,7 @@ from safeswitch.app.reproduce import EVAL_SEED
 from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.logic_limit import PaperLogicLimit
 from safeswitch.evaluation.oracle import efficiency
-from safeswitch.leftturn.task import build_task
+from safeswitch.leftturn.make import build_task
 from safeswitch.training.policies import SHIPPED_DIR
 
 RESULTS = Path(__file__).parent / "results" / "traffic_limit.json"

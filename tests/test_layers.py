@@ -1,7 +1,7 @@
 """The package's layers: each imports only the layers below it (no cycles between packages),
 and only ``report`` imports matplotlib.
 
-core → sim → leftturn → sumo, evaluation → training, report → app, examples → cli
+core → sim → leftturn → sumo, evaluation → training → report → app, examples → cli
 (``io`` and ``progress`` are leaf utilities every layer may use.)
 """
 
@@ -22,7 +22,7 @@ BELOW = {
     "sumo": UTILITIES | {"core", "sim", "leftturn"},
     "evaluation": UTILITIES | {"core", "sim", "leftturn"},
     "training": UTILITIES | {"core", "sim", "leftturn", "evaluation"},
-    "report": UTILITIES | {"core", "sim", "leftturn", "evaluation"},
+    "report": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
     "examples": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
     "bench": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
 }
@@ -61,3 +61,68 @@ def test_each_module_imports_only_the_layers_below_it(layer, path):
             f"{path.relative_to(PACKAGE)} ({layer}) imports {name} ({target}), which is not "
             f"below it"
         )
+
+
+# -- within a package ------------------------------------------------------------------------
+
+#: The left-turn package bottom-up: each module imports only modules listed before it (at
+#: module level or inside a function). The scene hooks the logics read are typed protocols in
+#: ``views``; the logics are built from a finished scene; only ``make`` knows every scene.
+LEFTTURN_ORDER = (
+    "config", "rewards", "scenarios", "views", "logics.certified", "logics.paper", "task",
+    "traffic", "make", "statistics", "info", "spaces", "render", "env", "vec_env",
+)  # fmt: skip
+
+
+def module_name(path):
+    parts = path.relative_to(PACKAGE).with_suffix("").parts
+    return ".".join(("safeswitch", *(parts[:-1] if parts[-1] == "__init__" else parts)))
+
+
+def test_the_leftturn_modules_import_only_the_ones_below_them():
+    package = PACKAGE / "leftturn"
+    listed = {f"safeswitch.leftturn.{m}" for m in LEFTTURN_ORDER}
+    found = {module_name(p) for p in package.rglob("*.py") if p.name != "__init__.py"}
+    assert found == listed, f"modules not in LEFTTURN_ORDER: {sorted(found ^ listed)}"
+    rank = {f"safeswitch.leftturn.{m}": i for i, m in enumerate(LEFTTURN_ORDER)}
+    for path in package.rglob("*.py"):
+        if path.name == "__init__.py":
+            continue  # the package's lazy exports
+        me = module_name(path)
+        for name in imported(path):
+            target = next((m for m in rank if name == m or name.startswith(m + ".")), None)
+            assert target is None or rank[target] < rank[me], (
+                f"{me} imports {name}, which is not below it in LEFTTURN_ORDER"
+            )
+
+
+def test_no_package_has_an_import_cycle_among_its_modules():
+    """Function-level imports count: a cycle hidden inside a function is still a cycle."""
+    graph = {}
+    for path in PACKAGE.rglob("*.py"):
+        if path.name == "__init__.py":
+            continue
+        me = module_name(path)
+        graph[me] = {
+            name for name in imported(path)
+            if name.startswith("safeswitch.") and name != me
+        }  # fmt: skip
+    modules_ = set(graph)
+    for me in graph:
+        graph[me] = {m for m in modules_ if any(n == m or n.startswith(m + ".") for n in graph[me])}
+        graph[me].discard(me)
+    state = {}
+
+    def visit(node, trail):
+        state[node] = "open"
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == "open":
+                cycle = [*trail[trail.index(nxt) :], nxt]
+                raise AssertionError("import cycle: " + " → ".join(cycle))
+            if nxt not in state:
+                visit(nxt, [*trail, nxt])
+        state[node] = "done"
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])

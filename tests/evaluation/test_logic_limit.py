@@ -11,8 +11,9 @@ from safeswitch.evaluation.logic_limit import PaperLogicLimit
 from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.planner import Planner, PlannerConfig
 from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.spaces import speed_tracking_action
-from safeswitch.leftturn.task import LeftTurnTask, build_task
+from safeswitch.leftturn.task import LeftTurnTask
 
 EPISODES = 40
 
@@ -208,7 +209,7 @@ def test_clearing_into_a_zone_about_to_be_occupied_does_not_count(setup):
     Occupied only long after the ego is through, it changes nothing."""
     task, scenarios, _ = setup
     limit = PaperLogicLimit(task, logic=False)
-    base = limit._north_timeline(scenarios)
+    base = task.conflict_timeline(scenarios)
     free = limit.bound(base)
     clear_at = task.conflict.zone_a[1]
     dt = task.config.episode.dt

@@ -7,7 +7,7 @@ import pytest
 from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.evaluation.traffic_planner import GapPlanner, GapPlannerConfig
-from safeswitch.leftturn.task import build_task
+from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import TrainConfig
 
 SCENES = 24

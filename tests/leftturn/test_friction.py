@@ -10,7 +10,8 @@ from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.metrics import summarize
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
-from safeswitch.leftturn.task import LeftTurnTask, build_task
+from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.sim.streams import TURN_LATERAL_ACCEL
 from safeswitch.sim.vehicle import GRAVITY
 

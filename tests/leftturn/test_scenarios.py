@@ -7,7 +7,7 @@ import pytest
 
 from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig
-from safeswitch.leftturn.task import build_task
+from safeswitch.leftturn.make import build_task
 
 N = 20_000
 

@@ -111,10 +111,9 @@ def test_the_task_switches_exactly_as_supervise_with_the_registered_logic(switch
     from safeswitch.leftturn.config import resolve_config
     from safeswitch.leftturn.task import LeftTurnTask
 
+    task = LeftTurnTask(resolve_config({"episode": {"learned_scope": scope}}, switching=switching))
     try:
-        task = LeftTurnTask(
-            resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
-        )
+        task.check_logic()  # the logic is built from the finished scene, here on demand
     except LogicContextError:
         pytest.skip(f"{switching} is a logic for another plant")
     ctrl, dt = task.config.controllers, task.config.episode.dt
@@ -179,7 +178,7 @@ def test_a_reason_in_end_on_reasons_ends_the_episode_on_its_first_tick():
     from safeswitch.core.config import from_dict
     from safeswitch.evaluation.rollout import rollout
     from safeswitch.leftturn.config import LeftTurnConfig
-    from safeswitch.leftturn.task import build_task
+    from safeswitch.leftturn.make import build_task
 
     plain_config = from_dict(
         LeftTurnConfig, {"switching": "guarded", "episode": {"learned_scope": "episode"}}
@@ -222,7 +221,7 @@ def test_a_reason_in_end_on_reasons_ends_the_episode_on_its_first_tick():
 def test_an_unknown_reason_to_end_on_is_named():
     from safeswitch.core.config import from_dict
     from safeswitch.leftturn.config import LeftTurnConfig
-    from safeswitch.leftturn.task import build_task
+    from safeswitch.leftturn.make import build_task
 
     config = from_dict(LeftTurnConfig, {"episode": {"end_on_reasons": [OVERRULES[0]]}})
     with pytest.raises(ValueError, match=r"end_on_reasons.*overrules_primary.*'paper'"):

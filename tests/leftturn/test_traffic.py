@@ -14,7 +14,8 @@ from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
 from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, traffic_config
 from safeswitch.leftturn.logics.certified import certified_logic
-from safeswitch.leftturn.task import LeftTurnTask, build_task
+from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.traffic import (
     CONFLICT_FEATURES,
     MARGIN_FEATURES,
@@ -389,8 +390,9 @@ def test_oracle_plans_around_every_crossing_vehicle():
     task = traffic_task("medium", "certified", horizon_s=20.0)
     batch = scenes(task, 64)
     plan = Oracle(task).plan(batch)
-    _, occupied = task.others_without_ego(batch)
-    zones = task.network.conflicts[task.ego_route]
+    others = task.without_ego(batch)
+    occupied, zones = others.occupied, others.zones
+    assert zones.shape == (len(task.network.movements), 2)
     ego = plan.progress
     for r in range(zones.shape[0]):
         if math.isnan(zones[r, 0]):

@@ -7,7 +7,7 @@ import pytest
 
 from safeswitch.leftturn import LeftTurnTask
 from safeswitch.leftturn.config import LeftTurnConfig
-from safeswitch.leftturn.task import build_task
+from safeswitch.leftturn.make import build_task
 from safeswitch.training.policies import SHIPPED, load_policy
 
 

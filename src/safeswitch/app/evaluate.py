@@ -30,8 +30,9 @@ from safeswitch.leftturn.config import (
     TrafficConfig,
     traffic_config,
 )
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.task import LeftTurnTask, build_task
+from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.progress import Progress, format_duration
 from safeswitch.training.config import TrainConfig
 

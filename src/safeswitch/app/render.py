@@ -16,8 +16,9 @@ from safeswitch.app.evaluate import controller_setup, fit_observations, traffic_
 from safeswitch.evaluation.evaluate import run_controller
 from safeswitch.io import OutputDirectoryError, write_bytes_atomic
 from safeswitch.leftturn.config import SCENARIO_NAMES
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
-from safeswitch.leftturn.task import LeftTurnTask, build_task
+from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.report.figures import Trace
 
 

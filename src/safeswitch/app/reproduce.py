@@ -266,7 +266,7 @@ def traffic_study(
     Rows: preset, controller, switching and the summary."""
     from safeswitch.app.evaluate import fit_observations, traffic_setup
     from safeswitch.evaluation.evaluate import summary_against_oracle
-    from safeswitch.leftturn.task import build_task
+    from safeswitch.leftturn.make import build_task
 
     rows = []
     for preset in TRAFFIC_PRESETS:

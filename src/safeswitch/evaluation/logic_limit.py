@@ -22,7 +22,7 @@ every conflict at once, as the paper logic sees them (:mod:`~safeswitch.leftturn
 written over any number of conflicts): the ego is out of each conflict zone while its
 vehicle is in its own (the union of the occupied intervals), and no conflict's Algorithm 1 fires.
 Like the multi-conflict oracle it plans against the others' world *without* the ego
-(:meth:`~safeswitch.leftturn.traffic.LeftTurnTrafficTask.conflict_timeline`): in the episode
+(:meth:`~safeswitch.leftturn.task.LeftTurnTask.conflict_timeline`): in the episode
 itself drivers who give way to the ego or follow it react to it, which the bound does not know.
 
 The result is a *relaxation*, so the times are lower bounds (up to float rounding): grid speeds
@@ -45,7 +45,6 @@ driving resistance: the learned controller's means, which has no brake pedal).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 from typing import Literal, NamedTuple
 
 import numba
@@ -184,15 +183,11 @@ class PaperLogicLimit:
         """Lower bounds on the time to clear [s] ``[B]`` (NaN: not possible within the
         horizon without triggering the logic). In traffic the scenarios are taken ``chunk``
         at a time (the conflict timeline holds every conflict on every tick)."""
-        timeline = getattr(self.task, "conflict_timeline", None)
         batch = len(scenarios.ego_speed)
-        parts: Iterable[ConflictTimeline]
-        if timeline is None:
-            parts = [self._north_timeline(scenarios)]
-            rows = [np.arange(batch)]
-        else:
-            rows = [np.arange(i, min(i + chunk, batch)) for i in range(0, batch, chunk)]
-            parts = (timeline(scenarios.take(r)) for r in rows)
+        if not len(self.task.crossing_zones()):
+            chunk = max(batch, 1)  # the paper's scene: one conflict, the whole batch at once
+        rows = [np.arange(i, min(i + chunk, batch)) for i in range(0, batch, chunk)]
+        parts = (self.task.conflict_timeline(scenarios.take(r)) for r in rows)
         out = np.empty(batch)
         for r, t in zip(rows, parts, strict=True):
             out[r] = self.bound(t)
@@ -208,31 +203,6 @@ class PaperLogicLimit:
             self._curve, self._constants, self._paper,
         )  # fmt: skip
         return np.where(ticks >= 0, ticks * self.task.config.episode.dt, np.nan)
-
-    def _north_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
-        """The paper's scene: one conflict, the north car (it never reacts to the ego)."""
-        north, speed, start = self.oracle.north_trajectory(scenarios)
-        geo = self.task.conflict
-        batch, ticks = north.shape
-
-        def const(value: float) -> FloatArray:
-            return np.full((batch, ticks, 1), value)
-
-        distance = (geo.s_point_b - north)[..., None]
-        return ConflictTimeline(
-            start=start,
-            present=np.ones((batch, ticks, 1), dtype=np.bool_),
-            ego_entry=const(geo.zone_a[0]),
-            ego_exit=const(geo.zone_a[1]),
-            ego_point=const(geo.s_point_a),
-            other_distance=distance,
-            other_inside=((north >= geo.zone_b[0]) & (north <= geo.zone_b[1]))[..., None],
-            other_window=(
-                (distance[..., 0] <= self.task.config.episode.approach_distance_m)
-                & (north <= geo.zone_b[1])
-            )[..., None],
-            other_speed=speed[..., None],
-        )
 
 
 def _crossing(grid: FloatArray, cap: FloatArray, i: int, j: int, target: float) -> float:

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple, cast
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -125,7 +125,7 @@ class Oracle:
     """
 
     def __init__(self, task: LeftTurnTask, limits: OracleLimits | None = None) -> None:
-        task = cast(LeftTurnTask, getattr(task, "embedded", task))
+        task = task.embedded
         self.task = task
         self.limits = limits or OracleLimits.from_config(task.config)
         route = task.world.routes[0]
@@ -171,27 +171,12 @@ class Oracle:
         engine = (available_drive_force(p, speed) - driving_resistance(p, speed)) / p.mass
         return np.minimum(engine, self.limits.accel_lon)
 
-    def north_progress(self, scenarios: Scenarios) -> tuple[FloatArray, FloatArray]:
-        """The north car's arc length on every tick ``[B, H + 1]`` and the ego's start
-        ``(s0, v0)`` ``[B, 2]`` (see :meth:`north_trajectory`)."""
-        progress, _, start = self.north_trajectory(scenarios)
-        return progress, start
-
     def north_trajectory(self, scenarios: Scenarios) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The north car's arc length and speed on every tick, each ``[B, H + 1]`` (simulated
         on the plant; the ego's actions cannot change them), and the ego's start ``(s0, v0)``
         as ``[B, 2]``."""
-        task = self.task
-        state = task.initial(scenarios)
-        start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], axis=1)
-        progress = [state.world.progress[:, 1].copy()]
-        speed = [state.world.vehicles.speed[:, 1].copy()]
-        hold = np.zeros(state.batch_size)
-        for _ in range(task.config.episode.horizon_ticks):
-            state, _ = task.step(state, hold)
-            progress.append(state.world.progress[:, 1].copy())
-            speed.append(state.world.vehicles.speed[:, 1].copy())
-        return np.stack(progress, axis=1), np.stack(speed, axis=1), start
+        others = self.task.without_ego(scenarios)
+        return others.north, others.north_speed, others.start
 
     def _fastest(self, s: FloatArray, v: FloatArray) -> FloatArray:
         """The fastest allowed acceleration: as hard as the engine and comfort allow, lowered
@@ -266,12 +251,11 @@ class Oracle:
         task = self.task
         geo = task.conflict
         horizon = task.config.episode.horizon_ticks
-        others = getattr(task, "others_without_ego", None)
+        crossing = task.crossing_zones()  # in traffic: every movement that crosses the ego's
         occupied = None
-        if others is not None:  # in traffic: every movement that crosses the ego's
-            north, occupied = others(scenarios)
-        if north is None:
-            north, start = self.north_progress(scenarios)
+        if north is None or len(crossing):
+            others = task.without_ego(scenarios)
+            north, start, occupied = others.north, others.start, others.occupied
         else:
             state = task.initial(scenarios)
             start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], 1)
@@ -279,13 +263,11 @@ class Oracle:
         north_in = (north >= geo.zone_b[0]) & (north <= geo.zone_b[1])
         c, k = self.kernel_constants, self._plant
         brake_time = np.empty(batch)
-        if occupied is not None:
+        if len(crossing):
+            assert occupied is not None
             # The north car's zone and every crossing movement's: the smallest θ that keeps
             # the ego out of each while it is occupied (grid, then bisection).
-            zones = np.concatenate(
-                [np.asarray([geo.zone_a], dtype=np.float64),
-                 task.network.conflicts[task.ego_route]]  # type: ignore[attr-defined]
-            )  # fmt: skip
+            zones = np.concatenate([np.asarray([geo.zone_a], dtype=np.float64), crossing])
             _plan_brake_times_many(
                 np.ascontiguousarray(start), np.concatenate([north_in[:, None], occupied], 1),
                 zones, c, k, self._grid, self._w_sq, brake_time,
@@ -408,7 +390,7 @@ class Oracle:
 
         geo, dt = self.task.conflict, self.task.config.episode.dt
         batch, ticks = plan.progress.shape[0], plan.progress.shape[1] - 1
-        if hasattr(self.task, "others_without_ego"):
+        if len(self.task.crossing_zones()):
             return np.full(batch, np.nan), np.full(batch, np.nan)
         north_speed = np.diff(plan.north_progress, axis=1, prepend=plan.north_progress[:, :1]) / dt
         present = np.ones((batch, 1), dtype=np.bool_)

@@ -10,12 +10,12 @@ from numpy.typing import NDArray
 
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import scenario_info, step_info
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.spaces import action_space, observation_space
 from safeswitch.leftturn.task import (
     LeftTurnTask,
     StepRecord,
     TaskState,
-    build_task,
     learned_actions,
 )
 
@@ -83,7 +83,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     def make_task(self, render_mode: str | None, config: Any, learned_scope: str,
                   traffic: Any, **overrides: Any) -> LeftTurnTask:  # fmt: skip
-        """The task behind the environment (:func:`~safeswitch.leftturn.task.build_task`; a
+        """The task behind the environment (:func:`~safeswitch.leftturn.make.build_task`; a
         subclass may run it on another simulator)."""
         return build_task(render_mode, config, learned_scope, traffic, **overrides)
 

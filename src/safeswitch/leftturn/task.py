@@ -26,24 +26,19 @@ the batch size, so the Gymnasium ``Env`` is fast too.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, fields, replace
+from functools import cached_property
 from typing import Any, NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import columns, jit, take_rows
-from safeswitch.core.config import to_dict
 from safeswitch.core.pid import PIDKernel, PIDState, pid_tick
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
-from safeswitch.leftturn.config import (
-    FROM_CONFIG,
-    LeftTurnConfig,
-    resolve_config,
-    traffic_config,
-)
+from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
@@ -186,6 +181,29 @@ class ConflictTimeline(NamedTuple):
     other_speed: FloatArray
 
 
+class WithoutEgo(NamedTuple):
+    """The other vehicles' world on every tick of an episode as if the ego were not there
+    (nobody gives way to it or follows it; it holds a zero action): what the oracle plans
+    against (:mod:`safeswitch.evaluation.oracle`). In the paper's scene the north car never
+    reacts to the ego, so this is any rollout's north car.
+
+    Attributes:
+        start: The ego's start ``(s0, v0)`` [m, m/s] ``[B, 2]``.
+        north: The north car's arc length [m] ``[B, H + 1]``.
+        north_speed: Its speed [m/s] ``[B, H + 1]``.
+        occupied: Per movement of :meth:`LeftTurnTask.crossing_zones`, whether a vehicle on it
+            is inside its conflict zone with the ego's route ``[B, R, H + 1]`` (``R = 0`` in the
+            paper's scene).
+        zones: The ego's zone with each of those movements, on its route [m] ``[R, 2]``.
+    """
+
+    start: FloatArray
+    north: FloatArray
+    north_speed: FloatArray
+    occupied: BoolArray
+    zones: FloatArray
+
+
 @dataclass
 class StepRecord:
     """Everything that happened on one tick, each field ``[B]`` (``observation``: ``[B, 6]``).
@@ -281,22 +299,6 @@ class LeftTurnTask:
             self.conflict.s_point_a, self.conflict.zone_a, cert.zone_a, self.conflict.s_point_b,
             self.conflict.zone_b, cert.zone_b, config.episode.approach_distance_m,
         )  # fmt: skip
-        #: The switching logic: the registered logic named by ``config.switching``.
-        self.switching: SwitchingLogic[ConflictView] = make_logic(config.switching, self)
-        #: Reason names of :attr:`StepRecord.reason`: the logic's, ``invalid_learned_action``,
-        #: then :data:`RULE_IN_CHARGE` (the logic accepted ``PID_th``'s proposal because the
-        #: learned controller was not in charge; ``"learned"`` always means the learned action
-        #: itself ran).
-        self.reasons = (*reason_names(self.switching), RULE_IN_CHARGE)
-        ends = config.episode.end_on_reasons
-        unknown = sorted(set(ends) - set(self.reasons[1:-1]))
-        if unknown:
-            raise ValueError(
-                f"episode.end_on_reasons: {unknown} not reasons of the switching logic "
-                f"{config.switching!r} (its reasons: {', '.join(self.reasons[1:-1])})"
-            )
-        #: Per reason code: its safety action ends the episode (``episode.end_on_reasons``).
-        self._ends_episode = np.isin(np.array(self.reasons), ends) if ends else None
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
         ctrl = config.controllers
@@ -328,6 +330,40 @@ class LeftTurnTask:
             v_cap = ctrl.learned_speed_limiter_kmh / 3.6
             hold = float(steady_state_throttle(config.vehicle, np.asarray(v_cap)))
             self._limiter = (v_cap, hold, ctrl.learned_speed_limiter_gain)
+
+    # -- the switching logic, built on first use: after the whole scene (a subclass's too) ---
+
+    @cached_property
+    def switching(self) -> SwitchingLogic[ConflictView]:
+        """The switching logic: the registered logic named by ``config.switching``, built from
+        the finished scene (its factory reads the scene's typed hooks,
+        :class:`~safeswitch.leftturn.views.LogicScene`)."""
+        return make_logic(self.config.switching, self)
+
+    @cached_property
+    def reasons(self) -> tuple[str, ...]:
+        """Reason names of :attr:`StepRecord.reason`: the logic's, ``invalid_learned_action``,
+        then :data:`RULE_IN_CHARGE` (the logic accepted ``PID_th``'s proposal because the
+        learned controller was not in charge; ``"learned"`` always means the learned action
+        itself ran)."""
+        return (*reason_names(self.switching), RULE_IN_CHARGE)
+
+    @cached_property
+    def _ends_episode(self) -> BoolArray | None:
+        """Per reason code: its safety action ends the episode (``episode.end_on_reasons``)."""
+        ends = self.config.episode.end_on_reasons
+        unknown = sorted(set(ends) - set(self.reasons[1:-1]))
+        if unknown:
+            raise ValueError(
+                f"episode.end_on_reasons: {unknown} not reasons of the switching logic "
+                f"{self.config.switching!r} (its reasons: {', '.join(self.reasons[1:-1])})"
+            )
+        return np.isin(np.array(self.reasons), ends) if ends else None
+
+    def check_logic(self) -> None:
+        """Build the switching logic now rather than on first use, and check
+        ``episode.end_on_reasons`` against its reasons (a bad name is refused here)."""
+        _ = self._ends_episode
 
     # -- pure functions -------------------------------------------------------------------
 
@@ -434,6 +470,83 @@ class LeftTurnTask:
         the certified logic keeps the ego's cornering within)."""
         route = self.world.routes[0]
         return route.spacing, np.abs(route.curvature)
+
+    @property
+    def embedded(self) -> LeftTurnTask:
+        """The same scene on the embedded simulator (what the oracle plans on, batched): the
+        task itself here; a task on another simulator returns its embedded twin."""
+        return self
+
+    def crossing_zones(self) -> FloatArray:
+        """The ego's conflict zone with each movement of other vehicles besides the north car,
+        on its route [m] ``[R, 2]``: none in the paper's scene."""
+        return np.empty((0, 2))
+
+    def initial_without_ego(self, scenarios: Scenarios) -> TaskState:
+        """The initial state of an episode in which the others drive as if the ego were not
+        there: in the paper's scene any episode's (the north car never reacts to the ego)."""
+        return self.initial(scenarios)
+
+    def mark_occupied(self, state: TaskState, tick: int, occupied: BoolArray) -> None:
+        """Set ``occupied[b, r, tick]`` where a vehicle on movement ``r`` of
+        :meth:`crossing_zones` is inside its conflict zone with the ego's route: no movement
+        here."""
+
+    def states_without_ego(self, scenarios: Scenarios) -> Iterator[TaskState]:
+        """The state on every tick ``0..H`` of an episode in which the others drive as if the
+        ego were not there (it holds a zero action)."""
+        state = self.initial_without_ego(scenarios)
+        hold = np.zeros(state.batch_size)
+        for tick in range(self.config.episode.horizon_ticks + 1):
+            if tick:
+                state, _ = self.step(state, hold)
+            yield state
+
+    def without_ego(self, scenarios: Scenarios) -> WithoutEgo:
+        """The others' world without the ego, tick by tick (:class:`WithoutEgo`)."""
+        batch, ticks = len(scenarios.ego_speed), self.config.episode.horizon_ticks + 1
+        zones = self.crossing_zones()
+        occupied = np.zeros((batch, zones.shape[0], ticks), dtype=np.bool_)
+        north, north_speed, start = np.empty((batch, ticks)), np.empty((batch, ticks)), None
+        for tick, state in enumerate(self.states_without_ego(scenarios)):
+            if start is None:
+                start = np.stack([state.world.progress[:, 0], state.world.vehicles.speed[:, 0]], 1)
+            north[:, tick] = state.world.progress[:, 1]
+            north_speed[:, tick] = state.world.vehicles.speed[:, 1]
+            self.mark_occupied(state, tick, occupied)
+        assert start is not None
+        return WithoutEgo(start, north, north_speed, occupied, zones)
+
+    def conflict_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
+        """Every conflict of the ego on every tick of the others' world without the ego, as the
+        paper logic sees it through :meth:`view` (:class:`ConflictTimeline`; in the paper's
+        scene the one conflict with the north car): what the logic-aware limit plans
+        against."""
+        batch, ticks = len(scenarios.ego_speed), self.config.episode.horizon_ticks + 1
+        approach = self.config.episode.approach_distance_m
+        start = np.empty((batch, 2))
+        arrays: list[NDArray[Any]] = []
+        for tick, state in enumerate(self.states_without_ego(scenarios)):
+            view = self.view(state)
+            if not tick:
+                start[:, 0] = state.world.progress[:, 0]
+                start[:, 1] = state.world.vehicles.speed[:, 0]
+                shape = (batch, ticks, view.present.shape[1])
+                arrays = [np.empty(shape, dtype=np.bool_) for _ in range(3)]
+                arrays += [np.empty(shape) for _ in range(5)]
+            present, inside, window, entry, exit_, point, distance, speed = arrays
+            in_reach = view.other_progress <= view.other_zone[..., 1]
+            present[:, tick] = view.present
+            distance[:, tick] = view.other_point - view.other_progress
+            inside[:, tick] = (view.other_progress >= view.other_zone[..., 0]) & in_reach
+            window[:, tick] = (distance[:, tick] <= approach) & in_reach
+            entry[:, tick] = view.ego_zone[..., 0]
+            exit_[:, tick] = view.ego_zone[..., 1]
+            point[:, tick] = view.ego_point
+            speed[:, tick] = view.other_speed
+        present, inside, window, entry, exit_, point, distance, speed = arrays
+        return ConflictTimeline(start, present, entry, exit_, point, distance, inside, window,
+                                speed)  # fmt: skip
 
     def conflicts(self, state: TaskState) -> ConflictArrays:
         """The ego's conflict with every other vehicle, for measures taken at them."""
@@ -667,34 +780,6 @@ def learned_actions(action: Any, batch: int) -> FloatArray:
             "expected one throttle action in [-1, 1] each"
         )
     return values.reshape(batch)
-
-
-def build_task(
-    render_mode: str | None,
-    config: LeftTurnConfig | dict[str, Any] | None,
-    learned_scope: str = FROM_CONFIG,
-    traffic: Any = None,
-    **overrides: Any,
-) -> LeftTurnTask:
-    """The task behind an environment: ``render_mode`` checked, ``config`` resolved with the
-    constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`;
-    ``learned_scope`` sets ``episode.learned_scope``); with ``traffic`` (a preset's name, a dict
-    or a :class:`~safeswitch.leftturn.config.TrafficConfig`) the task in traffic."""
-    if render_mode not in (None, "rgb_array", "human"):
-        raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
-    resolved = resolve_config(config, **overrides)
-    if learned_scope is not FROM_CONFIG:
-        episode = {**to_dict(resolved.episode), "learned_scope": learned_scope}
-        resolved = resolve_config(resolved, episode=episode)
-    settings = traffic_config(traffic)
-    if settings is None:
-        return LeftTurnTask(resolved)
-    if settings.horizon_s is not None:
-        episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
-        resolved = resolve_config(resolved, episode=episode)
-    from safeswitch.leftturn.traffic import LeftTurnTrafficTask
-
-    return LeftTurnTrafficTask(resolved, settings)
 
 
 class ControllerGains(NamedTuple):

@@ -24,8 +24,8 @@ With ``traffic=None`` none of this exists: the environments build the plain
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -36,7 +36,7 @@ from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.logics.certified import CertifiedSwitching, certified_logic
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
-from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState
+from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.leftturn.views import ConflictView, Phantoms
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.idm import IDMParams
@@ -106,10 +106,13 @@ class TrafficTaskState(TaskState):
     Attributes:
         traffic: The other vehicles ``[B, N]``.
         npc_collisions: Pairs of other vehicles that overlapped, summed over the episode ``[B]``.
+        ghost_ego: The others do not see the ego: they neither give way to it nor follow it
+            ``[B]`` (:meth:`LeftTurnTrafficTask.initial_without_ego`).
     """
 
     traffic: TrafficState
     npc_collisions: NDArray[np.int64]
+    ghost_ego: BoolArray
 
 
 class LeftTurnTrafficTask(LeftTurnTask):
@@ -121,6 +124,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
     """
 
     def __init__(self, config: LeftTurnConfig, traffic: TrafficConfig) -> None:
+        super().__init__(config)
         self.traffic = traffic
         footprint = (config.vehicle.length, config.vehicle.width)
         #: The movements with the paper logic's conflict margin, and with the certified one's.
@@ -138,8 +142,6 @@ class LeftTurnTrafficTask(LeftTurnTask):
             length=config.vehicle.length, patience=traffic.patience_s, slow_speed=1.0,
             look_ahead=60.0,
         )  # fmt: skip
-        super().__init__(config)
-        self._ghost_ego = False
         self._ext_is_ego = np.array([True, False])
         dt = config.episode.dt
         #: Ticks between two decisions of a driver (``traffic.action_step_s``).
@@ -167,13 +169,14 @@ class LeftTurnTrafficTask(LeftTurnTask):
                 low, high = [*low, 0, -MARGIN_CAP_S], [*high, MARGIN_CAP_S, MARGIN_CAP_S]
         else:
             low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
-        #: The certified filter whose reckoning ``observe: margins`` shows, whatever logic the
-        #: task runs (the observation belongs to the policy).
-        self._margins: CertifiedSwitching | None = None
-        if traffic.observe == "margins":
-            self._margins = certified_logic(self)
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
         self._observed_high = np.tile(np.array(high, dtype=np.float32), traffic.observed)
+
+    @cached_property
+    def _margins(self) -> CertifiedSwitching | None:
+        """The certified filter whose reckoning ``observe: margins`` shows, whatever logic the
+        task runs (the observation belongs to the policy), built from the finished scene."""
+        return certified_logic(self) if self.traffic.observe == "margins" else None
 
     # -- scenarios and the start ------------------------------------------------------------
 
@@ -319,6 +322,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
         return TrafficTaskState(
             **fields, traffic=scenarios.traffic.copy(schedule=True),
             npc_collisions=np.zeros(batch, dtype=np.int64),
+            ghost_ego=np.zeros(batch, dtype=np.bool_),
         )  # fmt: skip
 
     # -- the hooks ------------------------------------------------------------------------------
@@ -354,68 +358,22 @@ class LeftTurnTrafficTask(LeftTurnTask):
             other_speed=other[1], other_top=other[2],
         )  # fmt: skip
 
-    def _without_ego(self, scenarios: Scenarios) -> Iterator[TrafficTaskState]:
-        """The state on every tick ``0..H`` of the other vehicles' world as if the ego were not
-        there (nobody gives way to it or follows it; it holds a zero action)."""
-        state: TaskState = self.initial(scenarios)
-        hold = np.zeros(state.batch_size)
-        self._ghost_ego = True
-        try:
-            for tick in range(self.config.episode.horizon_ticks + 1):
-                if tick:
-                    state, _ = self.step(state, hold)
-                assert isinstance(state, TrafficTaskState)
-                yield state
-        finally:
-            self._ghost_ego = False
+    def crossing_zones(self) -> FloatArray:
+        """The ego's conflict zone with each movement, on its route [m] ``[R, 2]`` (``inf``
+        where a movement does not cross the ego's)."""
+        return np.ascontiguousarray(self.network.conflicts[self.ego_route])
 
-    def others_without_ego(self, scenarios: Scenarios) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """The other vehicles' world as if the ego were not there: the north car's arc length
-        ``[B, H + 1]`` and, per movement, whether a vehicle on it is inside its conflict zone
-        with the ego's route ``[B, R, H + 1]`` — what the oracle plans against
-        (:mod:`safeswitch.evaluation.oracle`)."""
-        batch, horizon = len(scenarios.ego_speed), self.config.episode.horizon_ticks
+    def initial_without_ego(self, scenarios: Scenarios) -> TrafficTaskState:
+        """The initial state with the ego a ghost: the others neither give way to it nor
+        follow it (its arc length is put infinitely far behind in what they see)."""
+        state = self.initial(scenarios)
+        return replace(state, ghost_ego=np.ones(state.batch_size, dtype=np.bool_))
+
+    def mark_occupied(self, state: TaskState, tick: int, occupied: BoolArray) -> None:
+        assert isinstance(state, TrafficTaskState)
+        tr = state.traffic
         zones = np.ascontiguousarray(self.network.conflicts[:, self.ego_route])
-        occupied = np.zeros((batch, len(self.network.movements), horizon + 1), dtype=np.bool_)
-        north = np.empty((batch, horizon + 1))
-        for tick, state in enumerate(self._without_ego(scenarios)):
-            north[:, tick] = state.world.progress[:, 1]
-            tr = state.traffic
-            _occupied(tr.route, tr.progress, tr.active, zones, tick, occupied)
-        return north, occupied
-
-    def conflict_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
-        """Every conflict of the ego on every tick of the others' world without the ego, as the
-        paper logic sees it (:class:`ConflictTimeline`, ``C`` = the north car plus every
-        slot): what the logic-aware limit plans against."""
-        batch, ticks = len(scenarios.ego_speed), self.config.episode.horizon_ticks + 1
-        slots = self.traffic.max_vehicles + 1
-        approach = self.config.episode.approach_distance_m
-        present = np.empty((batch, ticks, slots), dtype=np.bool_)
-        inside, window = np.empty_like(present), np.empty_like(present)
-        floats = np.empty((5, batch, ticks, slots))
-        start = np.empty((batch, 2))
-        for tick, state in enumerate(self._without_ego(scenarios)):
-            if not tick:
-                start[:, 0] = state.world.progress[:, 0]
-                start[:, 1] = state.world.vehicles.speed[:, 0]
-            view = self.view(state)
-            distance = view.other_point - view.other_progress
-            present[:, tick] = view.present
-            inside[:, tick] = (view.other_progress >= view.other_zone[..., 0]) & (
-                view.other_progress <= view.other_zone[..., 1]
-            )
-            window[:, tick] = (distance <= approach) & (
-                view.other_progress <= view.other_zone[..., 1]
-            )
-            floats[0, :, tick] = view.ego_zone[..., 0]
-            floats[1, :, tick] = view.ego_zone[..., 1]
-            floats[2, :, tick] = view.ego_point
-            floats[3, :, tick] = distance
-            floats[4, :, tick] = view.other_speed
-        return ConflictTimeline(
-            start, present, floats[0], floats[1], floats[2], floats[3], inside, window, floats[4]
-        )
+        _occupied(tr.route, tr.progress, tr.active, zones, tick, occupied)
 
     def phantoms(self) -> Phantoms:
         """Every movement whose route crosses the ego's, with the certified margin: the ego's
@@ -438,7 +396,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
         top[:, 0] = EGO_TOP_SPEED
         top[:, 1] = state.scenarios.north_speed
         new = tr.copy(overwritten=_TICK_WRITES)
-        ext_progress = _ghost(np.ascontiguousarray(world.progress), self._ghost_ego)
+        ext_progress = _ghost(np.ascontiguousarray(world.progress), state.ghost_ego)
         traffic_tick(
             self.tables, self.rules, self.idm.kernel, self.config.episode.dt, tr.route,
             tr.progress, tr.speed, tr.desired, tr.yields, tr.active, tr.waited, externals,
@@ -452,7 +410,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
             tr.schedule.time, tr.schedule.route, tr.schedule.desired, tr.schedule.yields,
             new.entered, new.next_arrival, self._exit_at, new.route, new.progress, new.speed,
             new.desired, new.yields, new.active, new.waited, new.accel, externals,
-            _ghost(np.ascontiguousarray(new_world.progress), self._ghost_ego),
+            _ghost(np.ascontiguousarray(new_world.progress), state.ghost_ego),
             np.ascontiguousarray(new_world.vehicles.speed),
         )  # fmt: skip
         place(self.tables, new)
@@ -475,12 +433,14 @@ class LeftTurnTrafficTask(LeftTurnTask):
             np.ascontiguousarray(nv.cos_yaw[:, 0]), np.ascontiguousarray(nv.sin_yaw[:, 0]),
             gap, collisions,
         )  # fmt: skip
-        return (new, state.npc_collisions + collisions), np.minimum(separation, gap)
+        others = (new, state.npc_collisions + collisions, state.ghost_ego)
+        return others, np.minimum(separation, gap)
 
     def make_state(self, base: TaskState, others: Any) -> TrafficTaskState:
-        traffic, collisions = others
+        traffic, collisions, ghost = others
         fields = {f: getattr(base, f) for f in base.__dataclass_fields__}
-        return TrafficTaskState(**fields, traffic=traffic, npc_collisions=collisions)
+        return TrafficTaskState(**fields, traffic=traffic, npc_collisions=collisions,
+                                ghost_ego=ghost)  # fmt: skip
 
     def extend_observation(
         self, state: TaskState, observation: NDArray[np.float32]
@@ -657,12 +617,13 @@ def _conflict_view(
             )
 
 
-def _ghost(progress: FloatArray, ghost: bool) -> FloatArray:
-    """The plant's arc lengths with the ego's put infinitely far behind when it is a ghost."""
-    if not ghost:
+def _ghost(progress: FloatArray, ghost: BoolArray) -> FloatArray:
+    """The plant's arc lengths with the ego's put infinitely far behind in the episodes where
+    it is a ghost."""
+    if not ghost.any():
         return progress
     out = progress.copy()
-    out[:, 0] = -np.inf
+    out[ghost, 0] = -np.inf
     return out
 
 

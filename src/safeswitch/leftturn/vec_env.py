@@ -34,9 +34,10 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import BatchInfos, scenario_info
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.spaces import action_space, observation_space
 from safeswitch.leftturn.statistics import EpisodeStatistics, TickCosts
-from safeswitch.leftturn.task import StepRecord, TaskState, build_task, learned_actions
+from safeswitch.leftturn.task import StepRecord, TaskState, learned_actions
 
 
 class LeftTurnVecEnv(VecEnv):

@@ -31,12 +31,12 @@ import math
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.env import LeftTurnEnv
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState, build_task
+from safeswitch.leftturn.task import ConflictTimeline, LeftTurnTask, TaskState, WithoutEgo
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 from safeswitch.sim.collision import separation as footprint_gap
 from safeswitch.sim.geometry import FloatArray, locate
@@ -220,20 +220,18 @@ class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
         self._arrived = 0
         self._poses: dict[int, Pose] = {}
 
-    @property
+    @functools.cached_property
     def embedded(self) -> LeftTurnTrafficTask:
         """The same scene on the embedded simulator (batched; what the oracle plans on)."""
-        if not hasattr(self, "_embedded_task"):
-            self._embedded_task = LeftTurnTrafficTask(self.config, self.traffic)
-        return self._embedded_task
+        return LeftTurnTrafficTask(self.config, self.traffic)
 
-    def others_without_ego(self, scenarios: Scenarios) -> tuple[FloatArray, NDArray[np.bool_]]:
+    def without_ego(self, scenarios: Scenarios) -> WithoutEgo:
         """The embedded scene's others without the ego (what the oracle plans against: SUMO's
         drivers are not replayed, and SUMO runs one scene at a time)."""
-        return self.embedded.others_without_ego(scenarios)
+        return self.embedded.without_ego(scenarios)
 
     def conflict_timeline(self, scenarios: Scenarios) -> ConflictTimeline:
-        """The embedded scene's (see :meth:`others_without_ego`)."""
+        """The embedded scene's (see :meth:`without_ego`)."""
         return self.embedded.conflict_timeline(scenarios)
 
     def initial(self, scenarios: Scenarios) -> TrafficTaskState:
@@ -343,7 +341,7 @@ class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
 def sumo_task(
     config: LeftTurnConfig | dict[str, Any] | None = None, traffic: Any = None, **overrides: Any
 ) -> LeftTurnSumoTask | LeftTurnSumoTrafficTask:
-    """The SUMO task of a configuration (as :func:`~safeswitch.leftturn.task.build_task`):
+    """The SUMO task of a configuration (as :func:`~safeswitch.leftturn.make.build_task`):
     the paper's scene, or with ``traffic`` (a preset's name, a dict or a
     :class:`~safeswitch.leftturn.config.TrafficConfig`) traffic from every leg.
 

@@ -35,7 +35,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.io import write_atomic
-from safeswitch.leftturn.task import build_task
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.activations import NumpyTanh
 from safeswitch.training.callbacks import ProgressLines, TrainingMonitor

@@ -40,7 +40,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
-from safeswitch.leftturn.task import build_task
+from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import TrainedPolicy
 

@@ -40,7 +40,8 @@ from stable_baselines3.common.vec_env import VecNormalize
 from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import Policy, rollout
 from safeswitch.evaluation.traffic_planner import GapPlanner
-from safeswitch.leftturn.task import TaskState, build_task
+from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.task import TaskState
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.ppo import SwitchPPO
 
