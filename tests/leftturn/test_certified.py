@@ -146,7 +146,7 @@ def advance(logic, north, s, pedals, north_accel, progress_ratio):
     ego, _ = vehicle_step(logic.vehicle, ego, pedals[:, 0], pedals[:, 1], 0.0, dt)
     th, br, speed = ego.throttle, ego.brake, ego.speed
     progress = s.ego_progress + 0.5 * (s.ego_speed + speed) * dt * progress_ratio
-    top = logic.config.north_max_speed_kmh / 3.6
+    top = logic.config.other_max_speed_kmh / 3.6
     n_speed = np.clip(s.north_speed + north_accel * dt, 0.0, top)
     n_progress = s.north_progress + 0.5 * (s.north_speed + n_speed) * dt
     return make_state(north, progress, speed, th, br, n_progress, n_speed)
@@ -460,3 +460,16 @@ def test_the_narrower_zones_let_the_ego_follow_a_north_car_it_yielded_to_more_cl
     assert wide.collision.sum() == 0 and narrow.collision.sum() == 0
     assert np.nanmean(narrow.time_to_clear) < np.nanmean(wide.time_to_clear) - 0.2
     assert np.nanmean(narrow.min_pet) < np.nanmean(wide.min_pet) - 0.3
+
+
+def test_a_configuration_written_with_the_old_north_names_still_loads():
+    """The assumptions hold for every other vehicle, so they are named ``other_*``; a run's
+    config.yaml written with ``north_max_*`` loads unchanged, and both names at once are refused
+    by name."""
+    from safeswitch.core.config import ConfigError
+    from safeswitch.leftturn.config import resolve_config
+
+    old = resolve_config({"certified": {"north_max_accel": 1.5, "north_max_speed_kmh": 40.0}})
+    assert (old.certified.other_max_accel, old.certified.other_max_speed_kmh) == (1.5, 40.0)
+    with pytest.raises(ConfigError, match="north_max_accel is the old name of other_max_accel"):
+        resolve_config({"certified": {"north_max_accel": 1.5, "other_max_accel": 2.0}})

@@ -259,7 +259,7 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
     low, high = task.observation_bounds
     f = len(CONFLICT_FEATURES if observe == "conflicts" else MARGIN_FEATURES)
     cert = task.config.certified
-    accel, top = cert.north_max_accel, cert.north_max_speed_kmh / 3.6
+    accel, top = cert.other_max_accel, cert.other_max_speed_kmh / 3.6
     filter_ = certified_logic(task)
     factor, margin = cert.progress_factor, cert.time_margin_s
     margins_seen = []

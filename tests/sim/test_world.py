@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from safeswitch.core.pid import PIDGains, PIDState, pid_step
+from safeswitch.sim.autopilot import AutopilotParams, autopilot_pedals
 from safeswitch.sim.conflict import conflict_geometry
 from safeswitch.sim.road import Intersection
-from safeswitch.sim.traffic import AutopilotParams, autopilot_pedals
 from safeswitch.sim.vehicle import steady_state_throttle
 from safeswitch.sim.world import World, preview_offsets
 

@@ -22,7 +22,8 @@ class ConfigError(ValueError):
 
 
 def from_dict(cls: type[T], data: Mapping[str, Any] | None, where: str = "") -> T:
-    """Build the dataclass ``cls`` from ``data``; missing keys keep their defaults.
+    """Build the dataclass ``cls`` from ``data``; missing keys keep their defaults. A class
+    attribute ``RENAMED`` (old key → new key) lets configurations written before a rename load.
 
     Raises:
         ConfigError: On an unknown key or a value of the wrong type (the message names it).
@@ -31,6 +32,14 @@ def from_dict(cls: type[T], data: Mapping[str, Any] | None, where: str = "") -> 
         data = {}
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where or cls.__name__}: expected a mapping, got {data!r}")
+    renamed: Mapping[str, str] = getattr(cls, "RENAMED", {})
+    if renamed:  # a configuration written before a key was renamed still loads
+        for old, new in renamed.items():
+            if old in data and new in data:
+                raise ConfigError(
+                    f"{where + '.' if where else ''}{old} is the old name of {new}: give one"
+                )
+        data = {renamed.get(key, key): value for key, value in data.items()}
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
     unknown = sorted(set(data) - names)

@@ -10,7 +10,7 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
 from safeswitch.core.pid import PIDGains
@@ -167,10 +167,12 @@ class CertifiedConfig:
     when possible), and the benchmarks measure what then happens.
 
     Attributes:
-        north_max_accel: Assumption: the north car accelerates at most this much [m/s²]
-            (a brisk but ordinary urban acceleration; its autopilot holds its speed).
-        north_max_speed_kmh: Assumption: the north car never drives faster [km/h] (20 km/h
-            over the 30 km/h zone its scenarios use).
+        other_max_accel: Assumption: every other vehicle — the north car, and in traffic each
+            vehicle of the streams — accelerates at most this much [m/s²] (a brisk but ordinary
+            urban acceleration; the north car's autopilot holds its speed). Formerly
+            ``north_max_accel`` (still read).
+        other_max_speed_kmh: Assumption: no other vehicle ever drives faster [km/h] (20 km/h
+            over the 30 km/h zone the scenarios use). Formerly ``north_max_speed_kmh``.
         ego_max_lateral_m: Assumption: the ego stays this close to its route [m]. It holds
             because the filter keeps the ego within ``curve_lateral_accel`` (below): there
             ``PID_lka`` tracks the route within 0.45 m, braking included
@@ -194,8 +196,14 @@ class CertifiedConfig:
             leaves the tyres ``√((μ·g)² − 5²)`` = 7.3 m/s² for braking in it.
     """
 
-    north_max_accel: float = 2.5
-    north_max_speed_kmh: float = 50.0
+    #: Old key → new key: configurations written before the rename still load.
+    RENAMED: ClassVar[dict[str, str]] = {
+        "north_max_accel": "other_max_accel",
+        "north_max_speed_kmh": "other_max_speed_kmh",
+    }
+
+    other_max_accel: float = 2.5
+    other_max_speed_kmh: float = 50.0
     ego_max_lateral_m: float = 0.6
     zone_margin_m: float = 1.2
     progress_factor: float = 1.05
@@ -207,17 +215,17 @@ class CertifiedConfig:
     def __post_init__(self) -> None:
         o = "certified"
         check(
-            0 < self.north_max_accel <= 10,
+            0 < self.other_max_accel <= 10,
             o,
-            "north_max_accel",
-            self.north_max_accel,
+            "other_max_accel",
+            self.other_max_accel,
             "must be in (0, 10] m/s²",
         )
         check(
-            0 < self.north_max_speed_kmh <= 200,
+            0 < self.other_max_speed_kmh <= 200,
             o,
-            "north_max_speed_kmh",
-            self.north_max_speed_kmh,
+            "other_max_speed_kmh",
+            self.other_max_speed_kmh,
             "must be in (0, 200] km/h",
         )
         check(

@@ -48,10 +48,10 @@ from safeswitch.leftturn.scenarios import (
     scenario_uniforms,
 )
 from safeswitch.leftturn.views import ConflictView, NorthConflict, Phantoms, north_view
+from safeswitch.sim.autopilot import AutopilotParams, autopilot_tick
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
 from safeswitch.sim.geometry import FloatArray, IntArray, preview
 from safeswitch.sim.road import Intersection
-from safeswitch.sim.traffic import AutopilotParams, autopilot_tick
 from safeswitch.sim.vehicle import VehicleConstants, steady_state_throttle
 from safeswitch.sim.world import World, WorldState
 

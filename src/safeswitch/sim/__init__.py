@@ -4,11 +4,11 @@ Batch-first throughout (numpy, with the vehicle tick compiled per element by num
 in here knows about rewards or learning.
 """
 
+from safeswitch.sim.autopilot import AutopilotParams, autopilot_pedals
 from safeswitch.sim.collision import rectangle_separation, rectangles_overlap
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry, polyline_crossing
 from safeswitch.sim.geometry import Route, RouteSet, resample_polyline, wrap_angle
 from safeswitch.sim.road import Intersection, IntersectionGeometry
-from safeswitch.sim.traffic import AutopilotParams, autopilot_pedals
 from safeswitch.sim.vehicle import (
     VehicleOutputs,
     VehicleParams,

@@ -9,8 +9,8 @@ logics and the learned policy act exactly as on the embedded simulator, on the s
 ego. Collisions are ours (footprints); SUMO's own (junctions included) are counted beside them
 (:attr:`LeftTurnSumoTask.sumo_collisions`) for a cross-check.
 
-The certified logic assumes the north car accelerates at most ``north_max_accel`` and drives at
-most ``north_max_speed_kmh``; what SUMO's north car actually does is measured every tick and an
+The certified logic assumes the north car accelerates at most ``other_max_accel`` and drives at
+most ``other_max_speed_kmh``; what SUMO's north car actually does is measured every tick and an
 episode in which it broke either is counted (:attr:`LeftTurnSumoTask.assumption_breaks`), not
 hidden.
 
@@ -112,7 +112,7 @@ class _SumoScene:
         self.north_max_accel = max(self.north_max_accel, accel)
         self.north_max_speed = max(self.north_max_speed, speed)
         c = self.config.certified
-        if accel > c.north_max_accel + 1e-6 or speed > c.north_max_speed_kmh / 3.6 + 1e-6:
+        if accel > c.other_max_accel + 1e-6 or speed > c.other_max_speed_kmh / 3.6 + 1e-6:
             self.assumption_breaks = True
 
     def _sync_north(self, world: WorldState) -> None:

@@ -17,7 +17,7 @@
 north car; in traffic every vehicle whose route crosses the ego's): a state is *safe* when the
 *stop* backup ends before the entry of the first zone whose vehicle has not left, or the *clear*
 backup leaves every such zone ``time_margin_s`` before its vehicle can first enter its own
-(accelerating at ``north_max_accel`` up to ``north_max_speed_kmh``: the assumptions hold for
+(accelerating at ``other_max_accel`` up to ``other_max_speed_kmh``: the assumptions hold for
 every other vehicle, the north car's name is historical). A conflict is over once its vehicle
 has left its zone or the ego its own. The learned action is executed exactly when
 the state after one tick of it — predicted with the plant's own longitudinal model, actuator
@@ -47,7 +47,7 @@ cornering against μ·g = 8.8 m/s²): braking in the curve still leaves them som
 **Vehicles still to come** (a scene in traffic: streams keep bringing vehicles). For every
 movement that crosses the ego's, a *phantom* vehicle that could appear at the start of its
 approach at any moment, at the assumed top speed, can reach its zone no sooner than ``entry /
-north_max_speed`` from now (:class:`~safeswitch.leftturn.views.Phantoms`): the stop backup ends
+other_max_speed`` from now (:class:`~safeswitch.leftturn.views.Phantoms`): the stop backup ends
 before every zone the ego has not passed, and the clear backup must beat the phantoms too.
 Without them a vehicle appearing on a crossing route could turn the place where the ego waits
 into a conflict zone. A vehicle behind the ego is assumed to follow it without running into it
@@ -766,8 +766,8 @@ class CertifiedSwitching:
             lag_time=kk * dt,
             accel_max=drive_max / p.mass,
             decel_tail_worst=decel_tail_worst,
-            other_accel=config.north_max_accel,
-            other_top=config.north_max_speed_kmh / 3.6,
+            other_accel=config.other_max_accel,
+            other_top=config.other_max_speed_kmh / 3.6,
             curve_decel=curve_decel,
             clear_hold=min(hold, config.clear_speed_cap),
             lag_gain_worst=lag_gain_worst,

@@ -1,4 +1,5 @@
-"""Other road users: the north car's "autopilot".
+"""The north car's "autopilot" (the stream vehicles of traffic from every leg are driven by
+:mod:`safeswitch.sim.streams`).
 
 It follows its lane at a target speed with its own speed and lane-keeping controllers and never
 yields (the paper switches CARLA's autopilot's yielding off).
