@@ -31,6 +31,13 @@ def error_line(capsys):
     return err[0]
 
 
+def test_the_version_has_one_source():
+    """The package metadata reads ``safeswitch.__version__`` (pyproject's dynamic version)."""
+    from importlib.metadata import version
+
+    assert version("safeswitch") == __version__
+
+
 def test_no_arguments_prints_help_and_version_and_module_entry_work(capsys):
     assert main([]) == 0
     assert "usage: safeswitch" in capsys.readouterr().out

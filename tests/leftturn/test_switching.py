@@ -111,9 +111,9 @@ def test_the_task_switches_exactly_as_supervise_with_the_registered_logic(switch
     from safeswitch.leftturn.config import resolve_config
     from safeswitch.leftturn.task import LeftTurnTask
 
-    task = LeftTurnTask(resolve_config({"episode": {"learned_scope": scope}}, switching=switching))
+    config = resolve_config({"episode": {"learned_scope": scope}}, switching=switching)
     try:
-        task.check_logic()  # the logic is built from the finished scene, here on demand
+        task = LeftTurnTask(config)  # the logic is built once the scene is
     except LogicContextError:
         pytest.skip(f"{switching} is a logic for another plant")
     ctrl, dt = task.config.controllers, task.config.episode.dt

@@ -206,7 +206,7 @@ def evaluate(
             # SUMO runs scene by scene; in traffic the oracle plans on the embedded twin, so
             # it is planned once for the whole chunk (one batch).
             whole = None
-            if getattr(on_sumo, "embedded", None) is not None:
+            if on_sumo is not None and on_sumo.embedded is not on_sumo:
                 whole = Oracle(task).plan(batch, full=False)
             for k, (part, scenes) in enumerate(_one_by_one(names, batch, on_sumo is not None)):
                 given = None if whole is None else take_rows(whole, np.array([k]))

@@ -17,7 +17,7 @@ from safeswitch.evaluation.evaluate import run_controller
 from safeswitch.io import OutputDirectoryError, write_bytes_atomic
 from safeswitch.leftturn.config import SCENARIO_NAMES
 from safeswitch.leftturn.make import build_task
-from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
+from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.report.figures import Trace
 
@@ -26,8 +26,7 @@ def scenario_by_name(task: LeftTurnTask, name: str, seed: int) -> Scenarios:
     """``cut``, ``yield1``, ``yield2``, or ``random:K`` (random scenario ``K`` of ``seed``,
     the one ``evaluate --seed`` calls ``random-K``)."""
     if name in SCENARIO_NAMES:
-        named = getattr(task, "named", None)  # in traffic: the paper's cars among others
-        return named(name, 1, seed) if named is not None else named_scenarios(name, 1)
+        return task.named(name, 1, seed)  # in traffic: the paper's cars among others
     prefix, _, index = name.partition(":")
     if prefix == "random" and index.isdigit():
         k = int(index)

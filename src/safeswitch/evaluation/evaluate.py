@@ -24,7 +24,7 @@ from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.leftturn.config import SCENARIO_NAMES, LearnedScope, LeftTurnConfig
-from safeswitch.leftturn.scenarios import Scenarios, named_scenarios
+from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
 from safeswitch.sim.geometry import FloatArray
 
@@ -45,11 +45,8 @@ def scenario_set(
 ) -> tuple[Scenarios, list[str]]:
     """The paper's three scenarios, or ``episodes`` random ones drawn with ``seed``."""
     if which == "paper":
-        named = getattr(task, "named", None)  # in traffic: the paper's cars among others
-        parts = [
-            named(name, 1, seed) if named is not None else named_scenarios(name, 1)
-            for name in SCENARIO_NAMES
-        ]
+        # in traffic: the paper's cars among others, drawn with ``seed``
+        parts = [task.named(name, 1, seed) for name in SCENARIO_NAMES]
         return concat_rows(parts), list(SCENARIO_NAMES)
     if which != "random":
         raise ValueError(f"--scenarios must be 'paper' or 'random', got {which!r}")

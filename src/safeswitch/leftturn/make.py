@@ -24,9 +24,7 @@ def build_task(
     """The task behind an environment: ``render_mode`` checked, ``config`` resolved with the
     constructor's keyword arguments (see :func:`~safeswitch.leftturn.config.resolve_config`;
     ``learned_scope`` sets ``episode.learned_scope``); with ``traffic`` (a preset's name, a dict
-    or a :class:`~safeswitch.leftturn.config.TrafficConfig`) the task in traffic. The
-    switching logic is built once the scene is (and ``episode.end_on_reasons`` checked
-    against its reasons)."""
+    or a :class:`~safeswitch.leftturn.config.TrafficConfig`) the task in traffic."""
     if render_mode not in (None, "rgb_array", "human"):
         raise ValueError(f"render_mode must be None, 'rgb_array' or 'human', got {render_mode!r}")
     resolved = resolve_config(config, **overrides)
@@ -34,13 +32,9 @@ def build_task(
         episode = {**to_dict(resolved.episode), "learned_scope": learned_scope}
         resolved = resolve_config(resolved, episode=episode)
     settings = traffic_config(traffic)
-    task: LeftTurnTask
     if settings is None:
-        task = LeftTurnTask(resolved)
-    else:
-        if settings.horizon_s is not None:
-            episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
-            resolved = resolve_config(resolved, episode=episode)
-        task = LeftTurnTrafficTask(resolved, settings)
-    task.check_logic()
-    return task
+        return LeftTurnTask(resolved)
+    if settings.horizon_s is not None:
+        episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
+        resolved = resolve_config(resolved, episode=episode)
+    return LeftTurnTrafficTask(resolved, settings)

@@ -267,7 +267,19 @@ class StepRecord:
     ego_cleared: BoolArray
 
 
-class LeftTurnTask:
+class _SceneThenLogic(type):
+    """Constructs a task, then builds its switching logic: the logic's factory reads the scene's
+    typed hooks (:class:`~safeswitch.leftturn.views.LogicScene`), so it runs once the whole
+    scene — a subclass's included — is built, and a logic that does not fit it, or an
+    ``episode.end_on_reasons`` it does not have, is refused at construction."""
+
+    def __call__(cls, *args: Any, **kwargs: Any) -> Any:
+        task = super().__call__(*args, **kwargs)
+        task.check_logic()
+        return task
+
+
+class LeftTurnTask(metaclass=_SceneThenLogic):
     """The unprotected left turn as batched functions over :class:`TaskState`.
 
     Args:
@@ -331,7 +343,7 @@ class LeftTurnTask:
             hold = float(steady_state_throttle(config.vehicle, np.asarray(v_cap)))
             self._limiter = (v_cap, hold, ctrl.learned_speed_limiter_gain)
 
-    # -- the switching logic, built on first use: after the whole scene (a subclass's too) ---
+    # -- the switching logic, built once the whole scene (a subclass's too) is ---------------
 
     @cached_property
     def switching(self) -> SwitchingLogic[ConflictView]:
@@ -361,8 +373,8 @@ class LeftTurnTask:
         return np.isin(np.array(self.reasons), ends) if ends else None
 
     def check_logic(self) -> None:
-        """Build the switching logic now rather than on first use, and check
-        ``episode.end_on_reasons`` against its reasons (a bad name is refused here)."""
+        """Build the switching logic and check ``episode.end_on_reasons`` against its reasons
+        (run by the constructor, after the scene is built)."""
         _ = self._ends_episode
 
     # -- pure functions -------------------------------------------------------------------
@@ -376,6 +388,11 @@ class LeftTurnTask:
             return named_scenarios(self.config.scenario, len(env_ids))
         draws = counter_uniforms(seed, env_ids, episodes, scenario_uniforms(self.config.scenarios))
         return sample_scenarios(self.config.scenarios, draws)
+
+    def named(self, name: str, batch: int, seed: int = 0) -> Scenarios:
+        """A named scenario of the paper (``cut``, ``yield1``, ``yield2``) ``batch`` times; a
+        scene with other vehicles draws them around it from ``seed`` (here there are none)."""
+        return named_scenarios(name, batch)
 
     def scenario_set(self, seed: int, count: int) -> Scenarios:
         """A fixed set of ``count`` scenarios under ``seed`` (the first episode of environments

@@ -611,28 +611,49 @@ def _merged(base: dict[str, Any], over: Any, where: str) -> dict[str, Any]:
 #: The configurations that ship with the package, by name (``--config paper``).
 PACKAGED_CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
+#: The experiment recipes behind the learning log (``--config experimental/NAME``): records of
+#: runs, kept in the source tree's ``experiments/`` — not in the package. An installed wheel
+#: has none; a checkout (an editable install) finds them beside ``src/``.
+EXPERIMENTS = PACKAGED_CONFIGS.parents[2] / "experiments"
+EXPERIMENT_PREFIX = "experimental/"
+
 
 def packaged_config_names() -> tuple[str, ...]:
-    """Names of the packaged configurations (``paper``, ``experimental/...``)."""
-    return tuple(
-        sorted(p.relative_to(PACKAGED_CONFIGS).with_suffix("").as_posix()
-               for p in PACKAGED_CONFIGS.rglob("*.yaml"))
-    )  # fmt: skip
+    """Names of the shipped configurations (``paper``, …) and, in a source checkout, of the
+    experiment recipes (``experimental/...``)."""
+    shipped = [p.stem for p in PACKAGED_CONFIGS.glob("*.yaml")]
+    experiments = [
+        EXPERIMENT_PREFIX + p.relative_to(EXPERIMENTS).with_suffix("").as_posix()
+        for p in EXPERIMENTS.rglob("*.yaml")
+    ]  # an empty list where the folder is absent
+    return tuple(sorted(shipped)) + tuple(sorted(experiments))
 
 
 def config_path(name_or_path: str | Path) -> Path:
-    """A configuration file: an existing path, or a packaged configuration by name.
+    """A configuration file: an existing path, a shipped configuration by name, or an
+    experiment recipe (``experimental/NAME``, from ``experiments/`` in a source checkout).
 
     Raises:
-        FileNotFoundError: Neither, naming the packaged configurations.
+        FileNotFoundError: None of these, naming the configurations there are.
     """
     path = Path(name_or_path)
     if path.is_file():
         return path
     name = str(name_or_path).removesuffix(".yaml")  # not with_suffix: names may hold dots
-    packaged = PACKAGED_CONFIGS / f"{name}.yaml"
-    if packaged.is_file():
-        return packaged
+    if name.startswith(EXPERIMENT_PREFIX):
+        experiment = EXPERIMENTS / f"{name.removeprefix(EXPERIMENT_PREFIX)}.yaml"
+        if experiment.is_file():
+            return experiment
+        if not EXPERIMENTS.is_dir():
+            raise FileNotFoundError(
+                f"no configuration {str(name_or_path)!r}: the experiment recipes live in the "
+                "repository's experiments/ folder, which an installed package does not have; "
+                "run from a checkout (pip install -e .) or pass the file's path"
+            )
+    else:
+        packaged = PACKAGED_CONFIGS / f"{name}.yaml"
+        if packaged.is_file():
+            return packaged
     raise FileNotFoundError(
         f"no configuration {str(name_or_path)!r}: not a file, and not a packaged configuration "
         f"({', '.join(packaged_config_names())})"
