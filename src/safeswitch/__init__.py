@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import gymnasium as _gym
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 ENV_ID = "safeswitch/LeftTurn-v0"
 #: highway-env's highway with continuous actions under a switching logic (needs the

@@ -48,7 +48,6 @@ def test_full_throttle_into_the_turn_loses_control_and_counts_as_a_failure():
         lost = result.lost_control
         assert lost.sum() > 100, switching
         assert (result.max_lateral[lost] > task.config.geometry.lane_width / 2).all()
-        assert np.isnan(result.time_to_clear[lost]).all() or True  # may have cleared first
         summary = summarize(result)
         assert summary["lost_control_episodes"] == int(lost.sum())
         assert summary["failures"] == int((lost | result.collision).sum())

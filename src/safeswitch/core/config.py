@@ -9,6 +9,8 @@ ignored. Range checks live in each dataclass's ``__post_init__``.
 from __future__ import annotations
 
 import dataclasses
+import inspect
+import re
 import types
 import typing
 from collections.abc import Mapping
@@ -129,3 +131,100 @@ def check(condition: bool, owner: str, name: str, value: Any, requirement: str) 
     """Raise :class:`ConfigError` naming ``owner.name`` and its value unless ``condition``."""
     if not condition:
         raise ConfigError(f"{owner}.{name} {requirement}, got {value!r}")
+
+
+# -- the reference --------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Field:
+    """One key of a configuration class, as the reference documents it."""
+
+    name: str
+    type: str
+    default: str
+    description: str
+
+
+def _attributes(cls: type) -> dict[str, str]:
+    """The ``Attributes:`` section of a Google-style class docstring: name → description
+    (continuation lines joined)."""
+    doc = inspect.cleandoc(cls.__doc__ or "")
+    described: dict[str, str] = {}
+    inside, name, indent = False, "", 0
+    for line in doc.splitlines():
+        if line.strip() == "Attributes:":
+            inside, indent = True, len(line) - len(line.lstrip())
+            continue
+        if not inside:
+            continue
+        if line.strip() and len(line) - len(line.lstrip()) <= indent:
+            break  # the next section
+        entry = re.match(r"\s+(\w+)(?: \([^)]*\))?: (.*)", line)
+        if entry and len(line) - len(line.lstrip()) == indent + 4:
+            name = entry.group(1)
+            described[name] = entry.group(2).strip()
+        elif name and line.strip():
+            described[name] += " " + line.strip()
+    return described
+
+
+def _type_name(hint: Any) -> str:
+    text = hint if isinstance(hint, str) else getattr(hint, "__name__", None) or str(hint)
+    return re.sub(r"\b(?:typing|safeswitch(?:\.\w+)*)\.", "", str(text))
+
+
+def fields_of(cls: type) -> list[Field]:
+    """Every key of the configuration class ``cls`` with its type, default and the
+    description its docstring gives (empty when it gives none)."""
+    described = _attributes(cls)
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        if f.default is not dataclasses.MISSING:
+            default = to_dict(f.default)
+        elif f.default_factory is not dataclasses.MISSING:
+            made = f.default_factory()
+            default = "(section)" if dataclasses.is_dataclass(made) else to_dict(made)
+        else:
+            default = "(required)"
+        shown = default if isinstance(default, str) and default.startswith("(") else repr(default)
+        shown = {"None": "null", "True": "true", "False": "false"}.get(shown, shown)
+        out.append(Field(f.name, _type_name(hints[f.name]), shown, described.get(f.name, "")))
+    return out
+
+
+def sections(cls: type, prefix: str = "") -> list[tuple[str, type]]:
+    """``cls`` and every configuration class nested in it, depth first, each with the dotted
+    key it is found under (``""`` for ``cls`` itself)."""
+    found = [(prefix, cls)]
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+            found += sections(hint, f"{prefix}.{f.name}" if prefix else f.name)
+    return found
+
+
+def _markdown(text: str) -> str:
+    """reStructuredText roles and literals of a docstring as Markdown code."""
+    text = re.sub(r":\w+:`~?([^`]+)`", lambda m: f"`{m.group(1).split('.')[-1]}`", text)
+    return text.replace("``", "`")
+
+
+def reference(cls: type, title: str) -> str:
+    """A Markdown reference of the configuration tree under ``cls``: one table per class (key,
+    type, default, description), read from the dataclasses and their docstrings."""
+    lines = [f"## {title}", ""]
+    for key, section in sections(cls):
+        lines += [f"### `{key or '(top level)'}` — `{section.__name__}`", ""]
+        summary = _markdown(inspect.cleandoc(section.__doc__ or "").split("\n\n")[0])
+        summary = summary.replace("\n", " ")
+        lines += [summary, "", "| key | type | default | description |", "|---|---|---|---|"]
+        for f in fields_of(section):
+            cells = (f"`{f.name}`", f"`{f.type}`", f"`{f.default}`", _markdown(f.description))
+            lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        lines.append("")
+    return "\n".join(lines)

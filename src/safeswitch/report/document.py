@@ -141,7 +141,7 @@ DEFINITIONS = (
 
 @dataclass(frozen=True)
 class Table:
-    """A report table: its header, rows of cell texts, the rows that show a collision (drawn
+    """A report table: its header, rows of cell texts, the rows that show a failure (drawn
     red), the columns holding words rather than numbers (aligned left) and, per row, the cells
     that show a violation (drawn red)."""
 
@@ -176,7 +176,7 @@ def comparison_table(summary: dict[str, Any]) -> Table:
     for name, result in summary["controllers"].items():
         cells, flags = _columns(result["random"], COMPARISON, 1)
         rows.append([name, *cells])
-        alert.append(result["random"]["collisions"] > 0)
+        alert.append(result["random"]["failures"] > 0)
         bad.append(flags)
     return Table(["controller", *(h for _, h, _ in COMPARISON)], rows, alert, bad=bad)
 
@@ -258,12 +258,16 @@ def policy_table(summary: dict[str, Any]) -> Table:
 
 
 def reckless_table(summary: dict[str, Any]) -> Table:
+    """Full throttle under each logic: a loss of control is a failure as a collision is."""
+    reckless = summary["reckless_full_throttle"]
     rows = [
-        [r["switching"], str(r["collisions"]), str(r["safety_activation_episodes"])]
-        for r in summary["reckless_full_throttle"]
-    ]
-    alert = [r["collisions"] > 0 for r in summary["reckless_full_throttle"]]
-    return Table(["switching logic", "collisions", "safety episodes"], rows, alert)
+        [r["switching"], str(r["failures"]), str(r["collisions"]),
+         str(r["lost_control_episodes"]), str(r["safety_activation_episodes"])]
+        for r in reckless
+    ]  # fmt: skip
+    alert = [r["failures"] > 0 for r in reckless]
+    header = ["switching logic", "failures", "collisions", "lost control", "safety episodes"]
+    return Table(header, rows, alert)
 
 
 def traffic_table(summary: dict[str, Any]) -> Table:
@@ -271,7 +275,7 @@ def traffic_table(summary: dict[str, Any]) -> Table:
     for r in summary["traffic"]["rows"]:
         cells, flags = _columns(r, TRAFFIC, 3)
         rows.append([r["preset"], r["controller"], r["switching"] or "–", *cells])
-        alert.append(r["collisions"] > 0)
+        alert.append(r["failures"] > 0)
         bad.append(flags)
     header = ["traffic", "controller", "switching", *(h for _, h, _ in TRAFFIC)]
     return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
@@ -297,7 +301,7 @@ def sumo_table(summary: dict[str, Any]) -> Table:
     for r in summary.get("sumo", {}).get("rows", []):
         cells, flags = _columns(r, SIMULATORS, 3)
         rows.append([r.get("scene", "paper's scene"), r["controller"], r["sim"], *cells])
-        alert.append(r["collisions"] > 0)
+        alert.append(r["failures"] > 0)
         bad.append(flags)
     header = ["scene", "controller", "simulator", *(h for _, h, _ in SIMULATORS)]
     return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
