@@ -2,12 +2,14 @@
 points of an installed distribution."""
 
 import sys
+from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import safeswitch
+from safeswitch import Decision
 from safeswitch.core.config import ConfigError
 from safeswitch.core.registry import (
     LogicContextError,
@@ -16,9 +18,12 @@ from safeswitch.core.registry import (
     make_logic,
     refresh_entry_points,
     register_logic,
+    resolve_logic,
     unregister_logic,
 )
 from safeswitch.core.switching import NeverSwitch, SwitchingError
+from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.task import LeftTurnTask
 
 PLUGIN = '''
 import numpy as np
@@ -119,3 +124,62 @@ def test_a_logic_refuses_a_plant_it_was_not_written_for():
             gym.make(safeswitch.ENV_ID, switching="bad-reasons")
     finally:
         unregister_logic("bad-reasons")
+
+
+@dataclass(frozen=True)
+class HoldParams:
+    """Parameters of the toy logic below.
+
+    Attributes:
+        distance: Brake within this distance of the zone [m].
+    """
+
+    distance: float = 2.0
+
+    def __post_init__(self):
+        if not self.distance > 0:
+            raise ConfigError(f"hold.distance must be > 0, got {self.distance!r}")
+
+
+class HoldBefore:
+    reasons = ("learned", "near_zone")
+
+    def __init__(self, distance):
+        self.distance = distance
+
+    def decide(self, state, learned, safe):
+        near = np.abs(state.ego_to_stop) < self.distance
+        return Decision(near, near.astype(np.int8), safe)
+
+
+@pytest.fixture
+def configurable():
+    register_logic("hold-before", lambda task, p: HoldBefore(p.distance), config=HoldParams)
+    yield
+    unregister_logic("hold-before")
+
+
+def test_a_logic_registered_with_its_parameters_is_configured_from_plain_data(configurable):
+    assert make_logic("hold-before", None).distance == 2.0  # its defaults
+    assert make_logic("hold-before", None, {"distance": 5.0}).distance == 5.0
+    # from a configuration file, as any other key of the left turn
+    config = LeftTurnConfig.from_dict({"switching": "hold-before", "logic_params": {"distance": 7}})
+    assert LeftTurnTask(config).switching.distance == 7.0
+    with pytest.raises(
+        ConfigError,
+        match=r"unknown configuration key logic_params.'distanse' \(valid keys: distance\)",
+    ):
+        LeftTurnConfig.from_dict({"switching": "hold-before", "logic_params": {"distanse": 7}})
+    with pytest.raises(ConfigError, match=r"logic_params\.distance: expected a number"):
+        make_logic("hold-before", None, {"distance": "far"})
+    with pytest.raises(ConfigError, match=r"hold\.distance must be > 0, got -1"):
+        make_logic("hold-before", None, {"distance": -1.0})
+
+
+def test_parameters_are_refused_where_no_logic_takes_them(configurable):
+    with pytest.raises(ConfigError, match=r"'paper' takes no parameters, got 'ttr'"):
+        LeftTurnConfig.from_dict({"switching": "paper", "logic_params": {"ttr": 3}})
+    with pytest.raises(SwitchingError, match="configure a registered logic by name"):
+        resolve_logic(NeverSwitch(), None, {"distance": 1.0})
+    with pytest.raises(ValueError, match="must be a dataclass"):
+        register_logic("x", NeverSwitch, config=dict)

@@ -93,3 +93,21 @@ def test_an_env_with_a_registered_safety_controller_trains_through_safeswitch(tm
         from safeswitch.training.generic import make_supervised_env
 
         make_supervised_env("CartPole-v1", "none")
+
+
+def test_the_ttc_thresholds_are_configured_from_a_training_file():
+    from safeswitch.core.config import ConfigError, from_dict
+    from safeswitch.training.config import EnvTrainConfig
+
+    config = from_dict(EnvTrainConfig, {"env_id": safeswitch.HIGHWAY_ENV_ID, "switching": "ttc",
+                                        "logic_params": {"min_ttc": 2.5}})  # fmt: skip
+    env = gym.make(config.env_id, switching=config.switching, logic_params=config.logic_params)
+    assert env.unwrapped is not env and env.get_wrapper_attr("logic").rules.min_ttc == 2.5
+    assert env.get_wrapper_attr("logic").rules.decision_period == 0.2  # from the environment
+    env.close()
+    with pytest.raises(ConfigError, match=r"ttc\.min_ttc must be > 0, got -1"):
+        from_dict(EnvTrainConfig, {"env_id": safeswitch.HIGHWAY_ENV_ID, "switching": "ttc",
+                                   "logic_params": {"min_ttc": -1}})  # fmt: skip
+    with pytest.raises(ConfigError, match="logic_params need switching"):
+        from_dict(EnvTrainConfig, {"env_id": safeswitch.HIGHWAY_ENV_ID,
+                                   "logic_params": {"min_ttc": 2}})  # fmt: skip

@@ -7,37 +7,71 @@ serve the context it is given raises :class:`LogicContextError`, naming the plan
 
 Logics come from two places:
 
-* :func:`register_logic` at run time (``register_logic("mylogic", MyLogic)``);
+* :func:`register_logic` at run time (``register_logic("mylogic", MyLogic)``, or with the
+  class of its parameters, ``register_logic("mylogic", make, config=MyParams)``);
 * the entry-point group ``safeswitch.logics`` of any installed distribution, e.g. in its
   ``pyproject.toml``::
 
       [project.entry-points."safeswitch.logics"]
       mylogic = "mypackage.logics:make_my_logic"
 
-  safeswitch's own ``paper``, ``certified`` and ``none`` are declared exactly so. Entry points
-  are read once, the first time a name is looked up, and loaded only when used.
+  safeswitch's own ``paper``, ``certified`` and ``none`` are declared exactly so. An entry
+  point names either a factory or a :class:`LogicPlugin` (a factory with the class of its
+  parameters). Entry points are read once, the first time a name is looked up, and loaded
+  only when used.
 
 Once known, ``switching="mylogic"`` works in ``gymnasium.make``, in configuration files and on
 the command line, without editing the package.
+
+**Parameters.** A logic registered with ``config=Params`` (a frozen dataclass, as every
+configuration here) is configured from plain data — ``logic_params:`` in a configuration file,
+``logic_params=`` of the wrappers: :func:`make_logic` builds ``Params`` from the mapping with
+:func:`~safeswitch.core.config.from_dict` (unknown keys and bad values refused by name) and
+calls ``factory(context, params)``. A logic registered without one is called as
+``factory(context)`` and refuses any parameter.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
 
+from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.core.switching import SwitchingError, SwitchingLogic, check_logic
 
 #: The entry-point group third-party packages declare their logics in.
 ENTRY_POINT_GROUP = "safeswitch.logics"
 
-LogicFactory = Callable[[Any], SwitchingLogic[Any]]
+LogicFactory = Callable[..., SwitchingLogic[Any]]
+
+
+@dataclass(frozen=True)
+class LogicPlugin:
+    """A registered switching logic.
+
+    Attributes:
+        factory: ``factory(context)``, or ``factory(context, params)`` with ``config``.
+        config: The frozen dataclass of the logic's parameters (``None``: it takes none).
+    """
+
+    factory: LogicFactory
+    config: type | None = None
+
+    def __post_init__(self) -> None:
+        if not callable(self.factory):
+            raise ValueError(f"a logic factory must be callable, got {self.factory!r}")
+        if self.config is not None and not (
+            isinstance(self.config, type) and dataclasses.is_dataclass(self.config)
+        ):
+            raise ValueError(f"a logic's config must be a dataclass, got {self.config!r}")
+
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_.-]*$")
-_registered: dict[str, LogicFactory] = {}
+_registered: dict[str, LogicPlugin] = {}
 _entry_points: dict[str, metadata.EntryPoint] | None = None
 
 
@@ -63,18 +97,22 @@ class UnknownLogicError(SwitchingError, KeyError):
         return str(self.args[0])
 
 
-def register_logic(name: str, factory: LogicFactory, *, replace: bool = False) -> None:
+def register_logic(
+    name: str, factory: LogicFactory, *, config: type | None = None, replace: bool = False
+) -> None:
     """Make ``factory`` available as the switching logic ``name``.
 
     Args:
         name: Letters, digits, ``_``, ``.`` and ``-``, starting with a letter.
         factory: ``factory(context) -> SwitchingLogic`` (a logic class taking the context
-            works too).
+            works too); with ``config``, ``factory(context, params)``.
+        config: The frozen dataclass of the logic's parameters, so that it can be configured
+            from a file (``logic_params:``); ``None``: the logic takes no parameters.
         replace: Allow replacing a logic registered under the same name.
 
     Raises:
-        ValueError: A malformed name, a factory that is not callable, or a name already taken
-            (without ``replace``).
+        ValueError: A malformed name, a factory that is not callable, a config that is not a
+            dataclass, or a name already taken (without ``replace``).
     """
     if not isinstance(name, str) or not _NAME.match(name):
         raise ValueError(
@@ -85,7 +123,7 @@ def register_logic(name: str, factory: LogicFactory, *, replace: bool = False) -
         raise ValueError(f"the factory of logic {name!r} is not callable: {factory!r}")
     if name in _registered and not replace:
         raise ValueError(f"a switching logic named {name!r} is already registered")
-    _registered[name] = factory
+    _registered[name] = LogicPlugin(factory, config)
 
 
 def unregister_logic(name: str) -> None:
@@ -113,8 +151,8 @@ def logic_names() -> tuple[str, ...]:
     return tuple(sorted(set(_registered) | set(_discovered())))
 
 
-def logic_factory(name: str) -> LogicFactory:
-    """The factory registered as ``name`` (a run-time registration wins over an entry point).
+def logic_plugin(name: str) -> LogicPlugin:
+    """The logic registered as ``name`` (a run-time registration wins over an entry point).
 
     Raises:
         UnknownLogicError: Naming the known logics.
@@ -125,32 +163,82 @@ def logic_factory(name: str) -> LogicFactory:
     if entry is None:
         known = ", ".join(logic_names()) or "none"
         raise UnknownLogicError(f"unknown switching logic {name!r}; known logics: {known}")
-    factory = entry.load()
-    if not callable(factory):
+    loaded = entry.load()
+    if not isinstance(loaded, LogicPlugin) and not callable(loaded):
         raise SwitchingError(
-            f"entry point {name!r} of group {ENTRY_POINT_GROUP!r} ({entry.value}) is not callable"
+            f"entry point {name!r} of group {ENTRY_POINT_GROUP!r} ({entry.value}) is neither "
+            "a LogicPlugin nor callable"
         )
-    _registered[name] = factory
-    return factory
+    plugin = loaded if isinstance(loaded, LogicPlugin) else LogicPlugin(loaded)
+    _registered[name] = plugin
+    return plugin
 
 
-def make_logic(name: str, context: Any) -> SwitchingLogic[Any]:
-    """The logic ``name`` built for ``context``, checked against the protocol.
+def logic_factory(name: str) -> LogicFactory:
+    """The factory registered as ``name`` (see :func:`logic_plugin`)."""
+    return logic_plugin(name).factory
+
+
+def logic_params(name: str, data: Mapping[str, Any] | None, where: str = "logic_params") -> Any:
+    """The parameters of logic ``name`` built from plain data: an instance of its registered
+    config class (its defaults where ``data`` is silent), or ``None`` for a logic that takes
+    none.
 
     Raises:
         UnknownLogicError: No such logic.
+        ConfigError: An unknown key or a bad value, or parameters for a logic that takes none
+            (the message names the key and the logic).
+    """
+    plugin = logic_plugin(name)
+    if plugin.config is None:
+        if data:
+            raise ConfigError(
+                f"{where}: the switching logic {name!r} takes no parameters, got "
+                f"{', '.join(map(repr, data))}"
+            )
+        return None
+    return from_dict(plugin.config, data, where)
+
+
+def make_logic(
+    name: str, context: Any, params: Mapping[str, Any] | None = None
+) -> SwitchingLogic[Any]:
+    """The logic ``name`` built for ``context``, checked against the protocol.
+
+    Args:
+        name: A registered logic.
+        context: The plant it is to supervise.
+        params: Its parameters as plain data (see :func:`logic_params`).
+
+    Raises:
+        UnknownLogicError: No such logic.
+        ConfigError: Bad parameters (named).
         LogicContextError: The logic does not serve this kind of plant.
         SwitchingError: The factory's result is not a valid switching logic.
     """
-    logic = logic_factory(name)(context)
+    plugin = logic_plugin(name)
+    built = logic_params(name, params)
+    logic = plugin.factory(context) if plugin.config is None else plugin.factory(context, built)
     check_logic(logic)
     return logic
 
 
-def resolve_logic(logic: SwitchingLogic[Any] | str, context: Any) -> SwitchingLogic[Any]:
-    """A logic object as given (checked), or the registered logic of that name."""
+def resolve_logic(
+    logic: SwitchingLogic[Any] | str, context: Any, params: Mapping[str, Any] | None = None
+) -> SwitchingLogic[Any]:
+    """A logic object as given (checked), or the registered logic of that name built with
+    ``params``.
+
+    Raises:
+        SwitchingError: ``params`` given with a logic object (they configure a registered one).
+    """
     if isinstance(logic, str):
-        return make_logic(logic, context)
+        return make_logic(logic, context, params)
+    if params:
+        raise SwitchingError(
+            "logic_params configure a registered logic by name; the logic given is an object "
+            f"({type(logic).__name__}): build it with its parameters instead"
+        )
     check_logic(logic)
     return logic
 

@@ -25,7 +25,7 @@ without it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, MutableMapping, Sequence
+from collections.abc import Callable, Mapping, MutableMapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -173,6 +173,8 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
             (``R_ADAS``, paper Eq. 4): a number ``<= 0``.
         state_fn: ``state_fn(env) -> state`` — what the Safety controller and the logic see;
             by default the last observation as a ``[1, obs_dim]`` float64 array.
+        logic_params: Parameters of a logic given by name, as plain data (a logic registered
+            with ``config=``; see :func:`~safeswitch.core.registry.make_logic`).
 
     Raises:
         SwitchingError: A non-Box action space, an unknown or malformed logic, a penalty that
@@ -187,13 +189,17 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
         *,
         penalty: float = -25.0,
         state_fn: StateFn | None = None,
+        logic_params: Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__(env)
         space = _box(env.action_space, "SafeSwitch")
         if state_fn is None:
             _default_state(env.observation_space, "SafeSwitch")
         self.supervisor = _Supervisor(
-            space, safety_controller, resolve_logic(logic, env), check_penalty(penalty)
+            space,
+            safety_controller,
+            resolve_logic(logic, env, logic_params),
+            check_penalty(penalty),
         )
         self.state_fn = state_fn
         self._observation: Any = None
@@ -245,6 +251,7 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         state_fn: ``state_fn(venv) -> state`` for all ``N`` environments; by default the last
             observations as an ``[N, obs_dim]`` float64 array (after an automatic reset: the
             new episode's first observation, as SB3 returns it).
+        logic_params: Parameters of a logic given by name, as plain data.
 
     Stack it *inside* ``VecNormalize`` (``VecNormalize(SafeSwitchVecEnv(venv, …))``): the
     Safety controller and the logic must see the plant's own observations, the policy the
@@ -260,6 +267,7 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         *,
         penalty: float = -25.0,
         state_fn: StateFn | None = None,
+        logic_params: Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__(venv)
         space = _box(venv.action_space, "SafeSwitchVecEnv")
@@ -272,7 +280,10 @@ class SafeSwitchVecEnv(VecEnvWrapper):
                     "(VecNormalize(SafeSwitchVecEnv(venv, ...))) or pass state_fn"
                 )
         self.supervisor = _Supervisor(
-            space, safety_controller, resolve_logic(logic, venv), check_penalty(penalty)
+            space,
+            safety_controller,
+            resolve_logic(logic, venv, logic_params),
+            check_penalty(penalty),
         )
         self.state_fn = state_fn
         self._observation: Any = None

@@ -29,14 +29,15 @@ Highway-env is imported only when an environment is made.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from safeswitch.core.arrays import clamp
-from safeswitch.core.registry import LogicContextError, context_name
+from safeswitch.core.config import check
+from safeswitch.core.registry import LogicContextError, LogicPlugin, context_name
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
 from safeswitch.core.wrappers import SafeSwitch
 
@@ -275,14 +276,43 @@ class TimeToCollisionLogic:
         return Decision(reason > 0, reason, safe)
 
 
-def ttc_logic(context: object) -> TimeToCollisionLogic:
-    """Factory of the ``ttc`` logic (registered under that name) for highway-env plants."""
+@dataclass(frozen=True)
+class TTCParams:
+    """The ``ttc`` logic's thresholds, configurable from a file (``logic_params:``); the
+    decision period comes from the environment.
+
+    Attributes:
+        lead_max_brake: Assumed hardest braking of a leader [m/s²].
+        min_gap: Gap that must remain when both have braked to a stop [m].
+        min_ttc: Smallest time to collision at the current closing speed [s].
+        max_heading: Largest heading relative to the road the learned action may reach [rad].
+    """
+
+    lead_max_brake: float = HighwayRules.lead_max_brake
+    min_gap: float = HighwayRules.min_gap
+    min_ttc: float = HighwayRules.min_ttc
+    max_heading: float = HighwayRules.max_heading
+
+    def __post_init__(self) -> None:
+        for name in ("lead_max_brake", "min_gap", "min_ttc", "max_heading"):
+            value = getattr(self, name)
+            check(math.isfinite(value) and value > 0, "ttc", name, value, "must be > 0")
+
+
+def ttc_logic(context: object, params: TTCParams | None = None) -> TimeToCollisionLogic:
+    """Factory of the ``ttc`` logic (registered under that name, with :class:`TTCParams`)
+    for highway-env plants."""
     road = getattr(getattr(context, "unwrapped", None), "road", None)
     if road is None:
         raise LogicContextError(
             f"the 'ttc' switching logic supervises highway-env plants, not {context_name(context)}"
         )
-    return TimeToCollisionLogic(_rules_for(context))
+    rules = _rules_for(context)
+    return TimeToCollisionLogic(replace(rules, **asdict(params or TTCParams())))
+
+
+#: ``ttc`` as its entry point declares it: the factory and the class of its parameters.
+TTC = LogicPlugin(ttc_logic, config=TTCParams)
 
 
 def _rules_for(env: object) -> HighwayRules:
@@ -295,6 +325,7 @@ def make_highway_env(
     penalty: float = -1.0,
     config: dict[str, Any] | None = None,
     render_mode: str | None = None,
+    logic_params: dict[str, Any] | None = None,
 ) -> SafeSwitch:
     """``safeswitch/Highway-v0``: highway-env's ``highway-fast-v0`` with continuous actions
     under a switching logic.
@@ -306,6 +337,7 @@ def make_highway_env(
             paper's -25 was set against a per-tick reward of up to 4).
         config: highway-env configuration entries that replace :data:`HIGHWAY_CONFIG`'s.
         render_mode: Passed to highway-env (``"rgb_array"`` for pictures).
+        logic_params: Parameters of the logic (``ttc``: :class:`TTCParams`' keys).
     """
     import highway_env  # noqa: F401  (registers highway-fast-v0)
 
@@ -313,7 +345,14 @@ def make_highway_env(
         "highway-fast-v0", config={**HIGHWAY_CONFIG, **(config or {})}, render_mode=render_mode
     )
     controller = HighwaySafetyController(_rules_for(env))
-    return SafeSwitch(env, controller, switching, penalty=penalty, state_fn=highway_state)
+    return SafeSwitch(
+        env,
+        controller,
+        switching,
+        penalty=penalty,
+        state_fn=highway_state,
+        logic_params=logic_params,
+    )
 
 
 def collided(info: dict[str, Any]) -> bool:

@@ -14,7 +14,7 @@ from typing import Any, ClassVar, Literal
 
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
 from safeswitch.core.pid import PIDGains
-from safeswitch.core.registry import logic_names
+from safeswitch.core.registry import logic_names, logic_params
 from safeswitch.sim.road import IntersectionGeometry
 from safeswitch.sim.vehicle import VehicleParams
 
@@ -666,6 +666,10 @@ class LeftTurnConfig:
         switching: Name of a registered switching logic (:mod:`safeswitch.core.registry`):
             ``"paper"`` (Algorithm 1), ``"certified"`` (safety filter), ``"none"`` (the learned
             action always), or a plugin's.
+        logic_params: Parameters of a plugin logic registered with the class of its parameters
+            (``register_logic(name, factory, config=Params)``), as a mapping of its keys
+            (``null``: its defaults). The built-in logics take theirs from ``paper`` and
+            ``certified`` below.
         adas_penalty: Whether ``R_ADAS`` is part of the reward (off: the paper's ablation).
         scenario: ``None`` for the random distribution, or a named scenario of Section VI.
         episode: Timing and scope of the learned controller.
@@ -679,6 +683,7 @@ class LeftTurnConfig:
     """
 
     switching: str = "paper"
+    logic_params: dict[str, Any] | None = None
     adas_penalty: bool = True
     scenario: ScenarioName | None = None
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
@@ -696,6 +701,8 @@ class LeftTurnConfig:
                 f"switching={self.switching!r} is not a registered switching logic "
                 f"(known: {', '.join(logic_names())})"
             )
+        if self.logic_params:  # checked against the logic's own parameter class
+            logic_params(self.switching, self.logic_params, "logic_params")
         if self.scenario is not None and self.scenario not in SCENARIO_NAMES:
             raise ConfigError(
                 f"scenario={self.scenario!r} is not None or one of {list(SCENARIO_NAMES)}"

@@ -350,7 +350,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         """The switching logic: the registered logic named by ``config.switching``, built from
         the finished scene (its factory reads the scene's typed hooks,
         :class:`~safeswitch.leftturn.views.LogicScene`)."""
-        return make_logic(self.config.switching, self)
+        return make_logic(self.config.switching, self, self.config.logic_params)
 
     @cached_property
     def reasons(self) -> tuple[str, ...]:

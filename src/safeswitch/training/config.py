@@ -18,7 +18,7 @@ import gymnasium as gym
 import yaml
 
 from safeswitch.core.config import ConfigError, check, from_dict, to_dict
-from safeswitch.core.registry import logic_names
+from safeswitch.core.registry import logic_names, logic_params
 from safeswitch.evaluation.planner import PlannerConfig
 from safeswitch.evaluation.traffic_planner import GapPlannerConfig
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig, TrafficConfig, traffic_config
@@ -736,6 +736,8 @@ class EnvTrainConfig:
     Attributes:
         env_id: The Gymnasium id.
         switching: A registered switching logic (``None``: the environment's default).
+        logic_params: Parameters of that logic, for one registered with the class of its
+            parameters (e.g. ``ttc``: ``{min_ttc: 2.0}``); ``null``: its defaults.
         penalty: The reward added on a step the Safety controller acted (``None``: the
             environment's default, or -25 — the paper's ``R_ADAS`` — for a wrapped one).
         env_kwargs: Further keyword arguments of ``gymnasium.make``.
@@ -751,6 +753,7 @@ class EnvTrainConfig:
 
     env_id: str
     switching: str | None = None
+    logic_params: dict[str, Any] | None = None
     penalty: float | None = None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     timesteps: int = 100_000
@@ -776,6 +779,10 @@ class EnvTrainConfig:
                 f"switching={self.switching!r} is not a registered switching logic "
                 f"(known: {', '.join(logic_names())})"
             )
+        if self.logic_params:
+            if self.switching is None:
+                raise ConfigError("logic_params need switching: the logic they configure")
+            logic_params(self.switching, self.logic_params, "logic_params")
         if self.penalty is not None:
             check(math.isfinite(self.penalty) and self.penalty <= 0, o, "penalty", self.penalty,
                   "must be a finite number <= 0 (a bonus for needing the Safety controller "

@@ -69,9 +69,11 @@ def make_supervised_env(
     env_id: str,
     switching: str | None = None,
     penalty: float | None = None,
+    logic_params: dict[str, Any] | None = None,
     **kwargs: Any,
 ) -> gym.Env[Any, Any]:
-    """The environment ``env_id`` under a switching logic (see the module docstring).
+    """The environment ``env_id`` under a switching logic (see the module docstring);
+    ``logic_params`` configure a logic registered with the class of its parameters.
 
     Raises:
         ConfigError: ``env_id`` takes no ``switching`` and has no registered Safety controller.
@@ -79,18 +81,24 @@ def make_supervised_env(
             ``env_id``: the plant inside may be registered under another id).
     """
     try:
-        return _make_supervised(env_id, switching, penalty, **kwargs)
+        return _make_supervised(env_id, switching, penalty, logic_params, **kwargs)
     except LogicContextError as exc:
         raise LogicContextError(f"{env_id}: {exc}") from exc
 
 
 def _make_supervised(
-    env_id: str, switching: str | None, penalty: float | None, **kwargs: Any
+    env_id: str,
+    switching: str | None,
+    penalty: float | None,
+    logic_params: dict[str, Any] | None,
+    **kwargs: Any,
 ) -> gym.Env[Any, Any]:
     if _takes_switching(env_id):
         extra: dict[str, Any] = {} if switching is None else {"switching": switching}
         if penalty is not None:
             extra["penalty"] = penalty
+        if logic_params:
+            extra["logic_params"] = logic_params
         return gym.make(env_id, **kwargs, **extra)
     registered = safety_controller_for(env_id)
     if registered is None:
@@ -105,6 +113,7 @@ def _make_supervised(
         switching or "none",
         penalty=-25.0 if penalty is None else penalty,
         state_fn=registered.state_fn,
+        logic_params=logic_params,
     )
 
 
@@ -200,7 +209,11 @@ class EnvMonitor(BaseCallback):
 def _make_vec(config: EnvTrainConfig) -> VecMonitor:
     def make() -> gym.Env[Any, Any]:
         return make_supervised_env(
-            config.env_id, config.switching, config.penalty, **config.env_kwargs
+            config.env_id,
+            config.switching,
+            config.penalty,
+            config.logic_params,
+            **config.env_kwargs,
         )
 
     vec = DummyVecEnv([make] * config.n_envs)
@@ -286,7 +299,11 @@ def train_env(
     if config.eval_episodes:
         policy = load_policy(run)
         eval_env = make_supervised_env(
-            config.env_id, config.switching, config.penalty, **config.env_kwargs
+            config.env_id,
+            config.switching,
+            config.penalty,
+            config.logic_params,
+            **config.env_kwargs,
         )
         evaluation = run_episodes(eval_env, policy.act_one, config.eval_episodes, config.eval_seed)
         eval_env.close()
