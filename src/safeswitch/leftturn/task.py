@@ -335,6 +335,13 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             ep.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1],
             config.geometry.lane_width / 2.0,
         )  # fmt: skip
+        routes = self.world.route_set
+        #: Everything the compiled controllers read that stays fixed for the task.
+        self._controller_constants = ControllerConstants(
+            self._gains, ep.dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
+            self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
+            self._layout, self._scope_code,
+        )  # fmt: skip
         #: The learned controller's speed limiter (``None`` if off): its speed [m/s], the
         #: throttle that holds that speed and the gain (see ControllerConfig).
         self._limiter: tuple[float, float, float] | None = None
@@ -344,6 +351,16 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             self._limiter = (v_cap, hold, ctrl.learned_speed_limiter_gain)
 
     # -- the switching logic, built once the whole scene (a subclass's too) is ---------------
+
+    @cached_property
+    def _bookkeeping_constants(self) -> BookkeepingConstants:
+        """Everything the compiled bookkeeping reads that stays fixed for the task (the rule's
+        reason code comes from the logic, so it is built on first use)."""
+        r = self.config.rewards
+        return BookkeepingConstants(
+            self._reward_tables, r.adas_penalty if self.config.adas_penalty else 0.0,
+            r.collision_penalty, self._limits, len(self.reasons) - 1,
+        )  # fmt: skip
 
     @cached_property
     def switching(self) -> SwitchingLogic[ConflictView]:
@@ -635,36 +652,35 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         Returns:
             The next state and the record of the tick. Episodes that ended are not reset here.
         """
-        c, dt = self.config, self.config.episode.dt
-        ctrl = c.controllers
         world = state.world
         batch = state.batch_size
 
         # 1. Every controller side by side, who proposes the ego's pedals, and what the
         # switching logic sees (one compiled loop, see _controllers).
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
+        v = world.vehicles
         pids = (state.pid_throttle, state.pid_brake, state.pid_north)
-        one, two = np.empty((16, batch)), np.empty((7, batch, 2))
-        flags = np.empty((2, batch), dtype=np.bool_)
-        v, routes = world.vehicles, self.world.route_set
+        out = ControllerOutputs.empty(batch)
         _controllers(
-            self._gains, dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
-            self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
-            self._layout, self._scope_code, learned_throttle,
-            v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress, state.accel_lon,
-            state.scenarios.north_speed, (v.throttle, v.brake),
-            tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
-            (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
-            one, two, flags,
+            self._controller_constants,
+            ControllerInputs(
+                learned_throttle, v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress,
+                state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
+                tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
+                (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
+            ),
+            out,
         )  # fmt: skip
-        safety_brake, north_throttle, north_brake = one[1:4]
-        pid_throttle, pid_brake, pid_north = (
-            PIDState(*one[4 + 3 * j : 7 + 3 * j]) for j in range(3)
+        safety_brake, north_throttle, north_brake = (
+            out.safety_brake,
+            out.north_throttle,
+            out.north_brake,
         )
-        steer = two[0]
-        pid_lane = PIDState(*two[1:4])
-        proposed, safe, fallback = two[4:7]
-        both, in_charge = flags
+        pid_throttle, pid_brake, pid_north, pid_lane = (
+            PIDState(*p) for p in (out.pid_throttle, out.pid_brake, out.pid_north, out.pid_lane)
+        )
+        steer, proposed, safe, fallback = out.steer, out.proposed, out.safe, out.fallback
+        both, in_charge = out.both, out.in_charge
         cut_over_range = None
         if self._limiter is not None:
             # The learned controller's speed limiter cuts its finite throttle (NaN/inf is left
@@ -689,24 +705,28 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             world, columns(throttle, north_throttle), columns(brake, north_brake), steer
         )
         others, separation = self.advance_others(state, new_world, separation)
-        speed = new_world.vehicles.speed
-        terms_out = tuple(np.empty(batch) for _ in REWARD_TERMS)
-        reward, tick = np.empty(batch), np.empty(batch, dtype=np.int64)
-        ends = tuple(np.empty(batch, dtype=np.bool_) for _ in range(5))
-        outcome, controller = np.empty(batch, dtype=np.int8), np.empty(batch, dtype=np.int8)
-        reason = np.empty(batch, dtype=np.int8)
-        observation = np.empty((batch, 6), dtype=np.float32)
         nv = new_world.vehicles
+        speed = nv.speed
+        book = Bookkeeping.empty(batch)
         _after_plant(
-            self._reward_tables, c.rewards.adas_penalty if c.adas_penalty else 0.0,
-            c.rewards.collision_penalty, self._limits, sup.safety_active, sup.use_safety,
-            sup.valid, in_charge, sup.reason, len(self.reasons) - 1, separation,
-            nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
-            outputs.accel_lat, state.tick, state.outcome,
-            terms_out, reward, tick, ends, outcome, controller, reason, observation,
+            self._bookkeeping_constants,
+            AfterPlant(
+                sup.safety_active, sup.use_safety, sup.valid, in_charge, sup.reason, separation,
+                nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
+                outputs.accel_lat, state.tick, state.outcome,
+            ),
+            book,
         )  # fmt: skip
+        terms_out, reward, tick = book.terms, book.reward, book.tick
+        outcome, controller, reason, observation = (
+            book.outcome,
+            book.controller,
+            book.reason,
+            book.observation,
+        )
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
-        collision, terminated, truncated, ego_cleared, lost_control = ends
+        collision, terminated, truncated = book.collision, book.terminated, book.truncated
+        ego_cleared, lost_control = book.ego_cleared, book.lost_control
         if self._ends_episode is not None:
             ended = sup.safety_active & self._ends_episode[reason]
             terminated, truncated = terminated | ended, truncated & ~ended
@@ -852,141 +872,327 @@ class EpisodeLimits(NamedTuple):
 LEARNED_SCOPES: tuple[str, ...] = ("window", "episode", "never")
 
 
+class ControllerConstants(NamedTuple):
+    """What the compiled controllers read that stays fixed for a task.
+
+    Attributes:
+        gains: PID_th, PID_b, PID_lka and the autopilot's speed PID.
+        dt: Tick [s].
+        speed_limit: PID_th's target speed [m/s].
+        emergency_decel: PID_b's deceleration target [m/s²].
+        lookahead: PID_lka's look-ahead distance [m].
+        plant: The vehicle model's constants (the autopilot's feed-forward).
+        tables: The routes' waypoint tables (see :class:`~safeswitch.sim.road.RouteSet`).
+        spacing: Waypoint spacing [m].
+        k_max: Last waypoint segment index.
+        base: Each car's route row in ``tables`` ``[2]``.
+        layout: The conflict geometry.
+        scope: Who drives (:data:`LEARNED_SCOPES` code).
+    """
+
+    gains: ControllerGains
+    dt: float
+    speed_limit: float
+    emergency_decel: float
+    lookahead: float
+    plant: VehicleConstants
+    tables: FloatArray
+    spacing: float
+    k_max: int
+    base: IntArray
+    layout: ConflictLayout
+    scope: int
+
+
+class ControllerInputs(NamedTuple):
+    """The state the compiled controllers read: ``[B]`` per episode, ``[B, 2]`` per car (ego,
+    north car).
+
+    Attributes:
+        learned_throttle: The learned controller's throttle ``[B]`` (NaN/inf pass through).
+        x: Position ``[B, 2]`` [m].
+        y: Position ``[B, 2]`` [m].
+        cos_yaw: Heading's cosine ``[B, 2]``.
+        sin_yaw: Heading's sine ``[B, 2]``.
+        speed: ``[B, 2]`` [m/s].
+        progress: Arc length along each route ``[B, 2]`` [m].
+        accel_lon: The ego's last longitudinal acceleration ``[B]`` [m/s²].
+        north_target: The north car's target speed ``[B]`` [m/s].
+        throttle: The actual throttle ``[B, 2]`` (held in place of an invalid learned action).
+        brake: The actual brake ``[B, 2]``.
+        pids: (integral, previous error, derivative) of PID_th, PID_b and the autopilot's PID,
+            nine ``[B]`` arrays.
+        lane: (integral, previous error, derivative) of PID_lka, three ``[B, 2]`` arrays.
+    """
+
+    learned_throttle: FloatArray
+    x: FloatArray
+    y: FloatArray
+    cos_yaw: FloatArray
+    sin_yaw: FloatArray
+    speed: FloatArray
+    progress: FloatArray
+    accel_lon: FloatArray
+    north_target: FloatArray
+    throttle: FloatArray
+    brake: FloatArray
+    pids: tuple[FloatArray, ...]
+    lane: tuple[FloatArray, ...]
+
+
+class ControllerOutputs(NamedTuple):
+    """What the compiled controllers write.
+
+    Attributes:
+        safety_brake: PID_b's brake, the safety action ``[B]``.
+        north_throttle: The autopilot's throttle ``[B]``.
+        north_brake: The autopilot's brake ``[B]``.
+        pid_throttle: PID_th's new (integral, error, derivative) ``[3, B]``.
+        pid_brake: PID_b's ``[3, B]``.
+        pid_north: The autopilot's speed PID's ``[3, B]``.
+        steer: PID_lka's steering of both cars ``[B, 2]``.
+        pid_lane: PID_lka's new state ``[3, B, 2]``.
+        proposed: The proposed ego pedals (throttle, brake) ``[B, 2]``: the learned throttle
+            while the learned controller is in charge, else PID_th's.
+        safe: The safety action's pedals ``[B, 2]``.
+        fallback: The pedals held in place of an invalid learned action ``[B, 2]``.
+        both: Both cars at the intersection (Algorithm 1's While condition) ``[B]``.
+        in_charge: The learned controller is in charge ``[B]``.
+    """
+
+    safety_brake: FloatArray
+    north_throttle: FloatArray
+    north_brake: FloatArray
+    pid_throttle: FloatArray
+    pid_brake: FloatArray
+    pid_north: FloatArray
+    steer: FloatArray
+    pid_lane: FloatArray
+    proposed: FloatArray
+    safe: FloatArray
+    fallback: FloatArray
+    both: BoolArray
+    in_charge: BoolArray
+
+    @classmethod
+    def empty(cls, batch: int) -> ControllerOutputs:
+        pair = (batch, 2)
+        return cls(
+            np.empty(batch), np.empty(batch), np.empty(batch), np.empty((3, batch)),
+            np.empty((3, batch)), np.empty((3, batch)), np.empty(pair), np.empty((3, *pair)),
+            np.empty(pair), np.empty(pair), np.empty(pair), np.empty(batch, dtype=np.bool_),
+            np.empty(batch, dtype=np.bool_),
+        )  # fmt: skip
+
+
 @jit
-def _controllers(
-    gains: ControllerGains, dt: float, speed_limit: float, emergency_decel: float,
-    lookahead: float, plant: VehicleConstants, tables: FloatArray, spacing: float, k_max: int,
-    base: IntArray, layout: ConflictLayout, scope: int, learned_throttle: FloatArray,
-    x: FloatArray, y: FloatArray, cos_yaw: FloatArray, sin_yaw: FloatArray, speed: FloatArray,
-    progress: FloatArray, accel_lon: FloatArray, north_target: FloatArray,
-    pedals: tuple[FloatArray, FloatArray], pids: tuple[FloatArray, ...],
-    lane: tuple[FloatArray, ...], one: FloatArray, two: FloatArray, flags: BoolArray,
-) -> None:  # fmt: skip
+def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOutputs) -> None:
     """Step 1 of the tick for every episode: ``PID_th`` on ``v_lim − v``, ``PID_b`` on
     ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, the
     north car's autopilot (feed-forward throttle for its target speed plus a speed PID); then
     who proposes the ego's pedals (``scope`` codes :data:`LEARNED_SCOPES`: the learned throttle
-    while in charge, else ``PID_th``'s), the fallback for an invalid learned action (the
-    ``pedals`` — actual throttle and brake — held) and the distances the switching logic reads.
-
-    ``pids`` holds (integral, previous error, derivative) of PID_th, PID_b and the autopilot's
-    PID, ``[B]`` each; ``lane`` those of PID_lka, ``[B, 2]``. Written (by row): ``one``
-    ``[16, B]`` = rule throttle,
-    safety brake, north throttle, north brake, the new (integral, error, derivative) of the
-    three ``[B]`` PIDs, then the ego's distance to the conflict point and to its stopping point
-    and the north car's distance to the conflict point; ``two`` ``[7, B, 2]`` = steering of
-    both cars, PID_lka's new state, then the proposed, safety and fallback pedals (throttle,
-    brake); ``flags`` ``[2, B]`` = both cars at the intersection, the learned controller in
-    charge.
-    """
-    for b in range(x.shape[0]):
-        pid = pids
-        error = speed_limit - speed[b, 0]
-        out, integral, derivative = pid_tick(
-            gains.throttle, dt, error, pid[0][b], pid[1][b], pid[2][b]
+    while in charge, else ``PID_th``'s) and the fallback for an invalid learned action (the
+    actual pedals held)."""
+    pid, lane, g = i.pids, i.lane, c.gains
+    for b in range(i.x.shape[0]):
+        error = c.speed_limit - i.speed[b, 0]
+        rule, integral, derivative = pid_tick(g.throttle, c.dt, error, pid[0][b], pid[1][b],
+                                              pid[2][b])  # fmt: skip
+        out.pid_throttle[0, b], out.pid_throttle[1, b], out.pid_throttle[2, b] = (
+            integral,
+            error,
+            derivative,
         )
-        rule = out
-        one[0, b], one[4, b], one[5, b], one[6, b] = out, integral, error, derivative
-        error = emergency_decel + accel_lon[b]
-        out, integral, derivative = pid_tick(
-            gains.brake, dt, error, pid[3][b], pid[4][b], pid[5][b]
+        error = c.emergency_decel + i.accel_lon[b]
+        brake, integral, derivative = pid_tick(g.brake, c.dt, error, pid[3][b], pid[4][b],
+                                               pid[5][b])  # fmt: skip
+        out.safety_brake[b] = brake
+        out.pid_brake[0, b], out.pid_brake[1, b], out.pid_brake[2, b] = (
+            integral,
+            error,
+            derivative,
         )
-        one[1, b], one[7, b], one[8, b], one[9, b] = out, integral, error, derivative
-        one[2, b], one[3, b], one[10, b], one[11, b], one[12, b] = autopilot_tick(
-            gains.north_speed, dt, plant, speed[b, 1], north_target[b], pid[6][b], pid[7][b],
-            pid[8][b],
+        (out.north_throttle[b], out.north_brake[b], out.pid_north[0, b], out.pid_north[1, b],
+         out.pid_north[2, b]) = autopilot_tick(
+            g.north_speed, c.dt, c.plant, i.speed[b, 1], i.north_target[b], pid[6][b],
+            pid[7][b], pid[8][b],
         )  # fmt: skip
         for j in range(2):
             error = preview(
-                tables, spacing, k_max, base[j], progress[b, j], x[b, j], y[b, j],
-                cos_yaw[b, j], sin_yaw[b, j], lookahead,
+                c.tables, c.spacing, c.k_max, c.base[j], i.progress[b, j], i.x[b, j], i.y[b, j],
+                i.cos_yaw[b, j], i.sin_yaw[b, j], c.lookahead,
             )  # fmt: skip
-            out, integral, derivative = pid_tick(
-                gains.lane, dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
+            steer, integral, derivative = pid_tick(
+                g.lane, c.dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
-            two[0, b, j], two[1, b, j], two[2, b, j], two[3, b, j] = (
-                out,
+            out.steer[b, j] = steer
+            out.pid_lane[0, b, j], out.pid_lane[1, b, j], out.pid_lane[2, b, j] = (
                 integral,
                 error,
                 derivative,
             )
-        s_e, s_n = progress[b, 0], progress[b, 1]
-        one[13, b] = layout.ego_point - s_e
-        one[14, b] = layout.ego_zone_entry - s_e
-        one[15, b] = layout.north_point - s_n
-        at = at_intersection(s_e, s_n, layout)
-        in_charge = at if scope == 0 else scope == 1
-        flags[0, b], flags[1, b] = at, in_charge
-        two[4, b, 0], two[4, b, 1] = (learned_throttle[b] if in_charge else rule), 0.0
-        two[5, b, 0], two[5, b, 1] = 0.0, one[1, b]
-        two[6, b, 0], two[6, b, 1] = pedals[0][b, 0], pedals[1][b, 0]
+        at = at_intersection(i.progress[b, 0], i.progress[b, 1], c.layout)
+        in_charge = at if c.scope == 0 else c.scope == 1
+        out.both[b], out.in_charge[b] = at, in_charge
+        out.proposed[b, 0], out.proposed[b, 1] = (i.learned_throttle[b] if in_charge else rule), 0.0
+        out.safe[b, 0], out.safe[b, 1] = 0.0, brake
+        out.fallback[b, 0], out.fallback[b, 1] = i.throttle[b, 0], i.brake[b, 0]
+
+
+class BookkeepingConstants(NamedTuple):
+    """What the compiled bookkeeping reads that stays fixed for a task.
+
+    Attributes:
+        tables: The reward terms' breakpoint tables.
+        adas_penalty: ``R_ADAS`` per tick of safety action (0 with it off).
+        collision_penalty: Added on a failure's tick.
+        limits: When an episode ends.
+        rule_code: The reason code reported where the rule's proposal ran.
+    """
+
+    tables: tuple[FloatArray, ...]
+    adas_penalty: float
+    collision_penalty: float
+    limits: EpisodeLimits
+    rule_code: int
+
+
+class AfterPlant(NamedTuple):
+    """The supervision's decision and the new plant state the bookkeeping reads.
+
+    Attributes:
+        safety_active: The safety side acted ``[B]``.
+        use_safety: The logic chose its safety action ``[B]``.
+        valid: The learned action was finite ``[B]``.
+        in_charge: The learned controller was in charge ``[B]``.
+        reason: The supervision's reason code ``[B]``.
+        separation: Distance between the footprints ``[B]`` [m] (≤ 0: a collision).
+        x: ``[B, 2]`` [m].
+        y: ``[B, 2]`` [m].
+        speed: ``[B, 2]`` [m/s].
+        progress: ``[B, 2]`` [m].
+        lateral: Offset from the route ``[B, 2]`` [m].
+        accel_lon: ``[B, 2]`` [m/s²].
+        accel_lat: ``[B, 2]`` [m/s²].
+        tick: The tick before this one ``[B]``.
+        outcome: Cut/yield so far ``[B]`` (0 undecided, 1 cut, 2 yield).
+    """
+
+    safety_active: BoolArray
+    use_safety: BoolArray
+    valid: BoolArray
+    in_charge: BoolArray
+    reason: NDArray[np.int8]
+    separation: FloatArray
+    x: FloatArray
+    y: FloatArray
+    speed: FloatArray
+    progress: FloatArray
+    lateral: FloatArray
+    accel_lon: FloatArray
+    accel_lat: FloatArray
+    tick: NDArray[np.int64]
+    outcome: NDArray[np.int8]
+
+
+class Bookkeeping(NamedTuple):
+    """What the compiled bookkeeping writes, ``[B]`` each.
+
+    Attributes:
+        terms: The five reward terms, in :data:`REWARD_TERMS` order.
+        reward: Their sum (and the failure penalty).
+        tick: The new tick.
+        collision: The footprints touch.
+        terminated: A failure (collision or lost control) ended the episode.
+        truncated: The horizon or the end of the route.
+        ego_cleared: The ego has left its conflict zone.
+        lost_control: The ego left its lane.
+        outcome: Cut/yield, decided as the ego clears.
+        controller: Who proposed the executed pedals (:data:`CONTROLLERS`).
+        reason: The tick's reason code.
+        observation: The paper's six values ``[B, 6]``.
+    """
+
+    terms: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
+    reward: FloatArray
+    tick: NDArray[np.int64]
+    collision: BoolArray
+    terminated: BoolArray
+    truncated: BoolArray
+    ego_cleared: BoolArray
+    lost_control: BoolArray
+    outcome: NDArray[np.int8]
+    controller: NDArray[np.int8]
+    reason: NDArray[np.int8]
+    observation: NDArray[np.float32]
+
+    @classmethod
+    def empty(cls, batch: int) -> Bookkeeping:
+        def flag() -> BoolArray:
+            return np.empty(batch, dtype=np.bool_)
+
+        def code() -> NDArray[np.int8]:
+            return np.empty(batch, dtype=np.int8)
+
+        return cls(
+            (np.empty(batch), np.empty(batch), np.empty(batch), np.empty(batch), np.empty(batch)),
+            np.empty(batch), np.empty(batch, dtype=np.int64), flag(), flag(), flag(), flag(),
+            flag(), code(), code(), code(), np.empty((batch, 6), dtype=np.float32),
+        )  # fmt: skip
 
 
 @jit
-def _after_plant(
-    tables: tuple[FloatArray, ...], adas_penalty: float, collision_penalty: float,
-    limits: EpisodeLimits,
-    safety_active: BoolArray, use_safety: BoolArray, valid: BoolArray, in_charge: BoolArray,
-    reason: NDArray[np.int8], rule_code: int, separation: FloatArray, x: FloatArray,
-    y: FloatArray,
-    speed: FloatArray, progress: FloatArray, lateral: FloatArray, accel_lon: FloatArray,
-    accel_lat: FloatArray, tick: NDArray[np.int64], outcome: NDArray[np.int8],
-    terms: tuple[FloatArray, ...], reward: FloatArray, new_tick: NDArray[np.int64],
-    flags: tuple[BoolArray, ...], new_outcome: NDArray[np.int8], controller: NDArray[np.int8],
-    new_reason: NDArray[np.int8], observation: NDArray[np.float32],
-) -> None:  # fmt: skip
+def _after_plant(c: BookkeepingConstants, i: AfterPlant, out: Bookkeeping) -> None:
     """Step 4's bookkeeping for every episode, from the new plant state: the five reward terms
-    (Eq. 5, in :data:`REWARD_TERMS` order) and their sum, collision, termination, truncation
-    (horizon or end of route), the ego leaving its zone, who crossed first, and the observation.
-    ``flags`` = (collision, terminated, truncated, ego_cleared, lost_control); ``controller`` =
-    who proposed the executed pedals (:data:`CONTROLLERS`: the safety side where the logic
-    chose its safety action, the learned controller where it was in charge with a valid action,
-    else the rule); ``new_reason`` = the supervision's reason, ``rule_code`` where the rule's
-    proposal ran. A failure — a collision or a loss of control — ends the episode and gets
-    ``collision_penalty``.
-    """
-    for b in range(x.shape[0]):
+    (Eq. 5) and their sum, collision, termination, truncation (horizon or end of route), the
+    ego leaving its zone, who crossed first, who proposed the executed pedals (the safety side
+    where the logic chose its safety action, the learned controller where it was in charge with
+    a valid action, else the rule, whose reason code then replaces the supervision's), and the
+    observation. A failure — a collision or a loss of control — ends the episode and gets
+    ``collision_penalty``."""
+    limits, terms = c.limits, out.terms
+    for b in range(i.x.shape[0]):
         adas, lka, v, lon, lat = tick_terms(
-            tables, adas_penalty, safety_active[b], lateral[b, 0], speed[b, 0], accel_lon[b, 0],
-            accel_lat[b, 0],
+            c.tables, c.adas_penalty, i.safety_active[b], i.lateral[b, 0], i.speed[b, 0],
+            i.accel_lon[b, 0], i.accel_lat[b, 0],
         )  # fmt: skip
         terms[0][b], terms[1][b], terms[2][b], terms[3][b], terms[4][b] = adas, lka, v, lon, lat
-        collision = separation[b] <= 0.0
-        lost = abs(lateral[b, 0]) > limits.lost_control_m
+        collision = i.separation[b] <= 0.0
+        lost = abs(i.lateral[b, 0]) > limits.lost_control_m
         failed = collision or lost
         total = adas + lka + v + lon + lat
-        if collision_penalty != 0.0:
-            total = total + (collision_penalty if failed else 0.0)
-        reward[b] = total
-        t = tick[b] + 1
-        new_tick[b] = t
-        flags[0][b] = collision
-        flags[1][b] = failed
-        flags[2][b] = (not failed) and (
-            t >= limits.horizon_ticks or progress[b, 0] >= limits.ego_route_end
+        if c.collision_penalty != 0.0:
+            total = total + (c.collision_penalty if failed else 0.0)
+        out.reward[b] = total
+        t = i.tick[b] + 1
+        out.tick[b] = t
+        out.collision[b] = collision
+        out.terminated[b] = failed
+        out.truncated[b] = (not failed) and (
+            t >= limits.horizon_ticks or i.progress[b, 0] >= limits.ego_route_end
         )
-        cleared = progress[b, 0] > limits.ego_zone_exit
-        flags[3][b] = cleared
-        flags[4][b] = lost
-        if outcome[b] != 0:
-            new_outcome[b] = outcome[b]
+        cleared = i.progress[b, 0] > limits.ego_zone_exit
+        out.ego_cleared[b] = cleared
+        out.lost_control[b] = lost
+        if i.outcome[b] != 0:
+            out.outcome[b] = i.outcome[b]
         elif cleared:  # decided as the ego clears: before the north car left its zone, or after
-            new_outcome[b] = 2 if progress[b, 1] > limits.north_zone_exit else 1
+            out.outcome[b] = 2 if i.progress[b, 1] > limits.north_zone_exit else 1
         else:
-            new_outcome[b] = 0
-        new_reason[b] = reason[b]
-        if use_safety[b]:
-            controller[b] = 2
-        elif in_charge[b] and valid[b]:
-            controller[b] = 0
+            out.outcome[b] = 0
+        out.reason[b] = i.reason[b]
+        if i.use_safety[b]:
+            out.controller[b] = 2
+        elif i.in_charge[b] and i.valid[b]:
+            out.controller[b] = 0
         else:
-            controller[b] = 1
-            if not in_charge[b]:
-                new_reason[b] = rule_code
+            out.controller[b] = 1
+            if not i.in_charge[b]:
+                out.reason[b] = c.rule_code
         for j in range(2):
-            observation[b, 3 * j] = x[b, j]
-            observation[b, 3 * j + 1] = y[b, j]
-            observation[b, 3 * j + 2] = speed[b, j]
+            out.observation[b, 3 * j] = i.x[b, j]
+            out.observation[b, 3 * j + 1] = i.y[b, j]
+            out.observation[b, 3 * j + 2] = i.speed[b, j]
 
 
 @jit
