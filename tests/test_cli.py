@@ -64,7 +64,7 @@ def test_packaged_configs_by_name_and_the_default_is_the_papers_recipe(tmp_path,
     assert default != TrainConfig()
     for name in packaged_config_names():  # every packaged recipe is valid, experiments too
         assert load_config(name).timesteps > 0, name
-    assert load_config("experimental/scratch_shaped").ppo.progress_shaping == 5.0
+    assert load_config("experimental/scratch_shaped").shaping.progress_shaping == 5.0
 
 
 def test_a_config_with_a_base_is_its_base_with_the_values_it_names(tmp_path):
@@ -82,9 +82,9 @@ def test_a_config_with_a_base_is_its_base_with_the_values_it_names(tmp_path):
     )
     loaded = load_config(child)
     assert loaded.seed == 7 and base.seed == 1
-    assert loaded.ppo.learning_rate_final == 1e-4
+    assert loaded.policy.learning_rate_final == 1e-4
     assert loaded.ppo.learning_rate == base.ppo.learning_rate  # kept: not named
-    assert loaded.ppo.reason_penalties == {} and base.ppo.reason_penalties  # emptied
+    assert loaded.shaping.reason_penalties == {} and base.shaping.reason_penalties  # emptied
     assert loaded.constraints.clear_time is None and base.constraints.clear_time is not None
     assert loaded.constraints.comfort == base.constraints.comfort
     assert loaded.env.episode.decision_interval == 2

@@ -1,11 +1,11 @@
-"""``ppo.fast_tanh``: numpy's tanh in the forward pass is the same function, and its gradient
+"""``policy.fast_tanh``: numpy's tanh in the forward pass is the same function, and its gradient
 is tanh's."""
 
 import numpy as np
 import torch
 
 from safeswitch.training.activations import NumpyTanh
-from safeswitch.training.config import PPOConfig
+from safeswitch.training.config import PolicyConfig
 from safeswitch.training.run import _activation
 
 
@@ -26,7 +26,7 @@ def test_fast_tanh_is_opt_in():
     assert _activation("tanh") is torch.nn.Tanh
     assert _activation("tanh", fast_tanh=True) is NumpyTanh
     assert _activation("relu", fast_tanh=True) is torch.nn.ReLU
-    assert PPOConfig().fast_tanh is False
+    assert PolicyConfig().fast_tanh is False
 
 
 def test_a_run_with_fast_tanh_saves_loads_and_acts_as_it_predicts(tmp_path):

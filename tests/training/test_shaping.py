@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from safeswitch.core.config import ConfigError
+from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
-from safeswitch.training.config import EnvTrainConfig, PPOConfig, TrainConfig
+from safeswitch.training.config import EnvTrainConfig, ShapingConfig, TrainConfig
 from safeswitch.training.shaping import (
     ClearTimePenalty,
     CounterfactualPenalty,
@@ -95,19 +95,19 @@ def test_the_ego_moving_on_pays_and_standing_still_costs_only_the_discount():
 
 def test_bad_shaping_settings_are_named():
     with pytest.raises(ConfigError, match="progress_shaping"):
-        PPOConfig(progress_shaping=-1.0)
-    with pytest.raises(ConfigError, match="progress_shaping"):
-        EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(progress_shaping=1.0))
+        ShapingConfig(progress_shaping=-1.0)
+    with pytest.raises(ConfigError, match=r"ppo\.'progress_shaping'"):  # the left turn's only
+        from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"progress_shaping": 1.0}})
     with pytest.raises(TypeError, match="LeftTurnVecEnv"):
         ProgressShaping(object(), 1.0, 0.99)  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match=r"progress_shaping_final .*needs progress_shaping"):
-        PPOConfig(progress_shaping_final=1.0)
+        ShapingConfig(progress_shaping_final=1.0)
     with pytest.raises(ConfigError, match=r"progress_shaping_final .*-2\.0"):
-        PPOConfig(progress_shaping=5.0, progress_shaping_final=-2.0)
+        ShapingConfig(progress_shaping=5.0, progress_shaping_final=-2.0)
 
 
 def test_an_annealed_shaping_falls_linearly_over_the_run_and_shapes_with_its_current_k():
-    """``ppo.progress_shaping_final``: before each rollout ``k`` is set from the run's
+    """``shaping.progress_shaping_final``: before each rollout ``k`` is set from the run's
     progress; the next step's shaping uses it."""
     from types import SimpleNamespace
 
@@ -136,7 +136,7 @@ def test_an_annealed_shaping_falls_linearly_over_the_run_and_shapes_with_its_cur
 
 
 def test_the_reasons_that_acted_are_counted_per_tick_and_charged_as_configured():
-    """``ppo.reason_penalties``: with a decision per tick, a step's counts are exactly the
+    """``shaping.reason_penalties``: with a decision per tick, a step's counts are exactly the
     reason its ``info`` reports when the safety action ran; the penalty PPO sees is those
     counts times the configured values, and the environment's own reward is unchanged."""
     config = {"episode": {"decision_interval": 1, "learned_scope": "episode"}}
@@ -166,7 +166,7 @@ def test_the_reasons_that_acted_are_counted_per_tick_and_charged_as_configured()
 
 
 def test_ramped_reason_penalties_charge_their_share_of_the_configured_values():
-    """``ppo.reason_penalties_initial_scale``: before each rollout the charge is scaled
+    """``shaping.reason_penalties_initial_scale``: before each rollout the charge is scaled
     linearly from the initial share to the full value; each step charges counts × values ×
     the current scale."""
     from types import SimpleNamespace
@@ -206,7 +206,7 @@ def test_ramped_reason_penalties_charge_their_share_of_the_configured_values():
 
 
 def test_the_clear_time_penalty_charges_each_step_until_the_ego_clears_or_the_horizon():
-    """``ppo.clear_time_penalty``: per episode, the cost is ``c`` per second for every step
+    """``shaping.clear_time_penalty``: per episode, the cost is ``c`` per second for every step
     begun with the ego short of its zone's exit — as many steps as the environment's own
     time to clear spans — and a collision before the exit pays the whole horizon."""
     per_second, interval, horizon = 10.0, 5, 6.0
@@ -241,7 +241,7 @@ def test_the_clear_time_penalty_charges_each_step_until_the_ego_clears_or_the_ho
     with pytest.raises(ValueError, match="per_second=-1"):
         ClearTimePenalty(base, -1.0)
     with pytest.raises(ConfigError, match=r"clear_time_penalty .*-5"):
-        PPOConfig(clear_time_penalty=-5.0)
+        ShapingConfig(clear_time_penalty=-5.0)
 
 
 def test_bad_reason_penalties_are_named():
@@ -251,15 +251,13 @@ def test_bad_reason_penalties_are_named():
     with pytest.raises(ValueError, match="finite and <= 0"):
         ReasonPenalty(base, {"no_gap_at_braking_point": 5.0})
     with pytest.raises(ConfigError, match=r"reason_penalties\['x'\] .*got 3"):
-        PPOConfig(reason_penalties={"x": 3})
+        ShapingConfig(reason_penalties={"x": 3})
     with pytest.raises(ConfigError, match="reason_penalties"):
-        PPOConfig(reason_penalties={"x": "a lot"})
+        ShapingConfig(reason_penalties={"x": "a lot"})
     with pytest.raises(ConfigError, match=r"reason_penalties_initial_scale .*1\.5"):
-        PPOConfig(reason_penalties={"x": -1.0}, reason_penalties_initial_scale=1.5)
+        ShapingConfig(reason_penalties={"x": -1.0}, reason_penalties_initial_scale=1.5)
     with pytest.raises(ConfigError, match=r"reason_penalties_initial_scale .*needs reason_pen"):
-        PPOConfig(reason_penalties_initial_scale=0.0)
-    with pytest.raises(ConfigError, match="reason_penalties"):
-        EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(reason_penalties={"x": -1.0}))
+        ShapingConfig(reason_penalties_initial_scale=0.0)
 
 
 def _episodes_hit(env, vec, actions, episodes, hit):
@@ -286,7 +284,7 @@ BAND = {  # where the paper logic's gap lies
 
 
 def test_the_first_counterfactual_of_an_episode_is_the_episode_under_the_deployed_logic_alone():
-    """``ppo.counterfactual_penalty``: with a constant action per environment the guarded and
+    """``shaping.counterfactual_penalty``: with a constant action per environment the guarded and
     the paper-alone episodes are the same until the guard first intervenes, so the
     counterfactual rolled from there is the paper-alone episode: the episodes whose first
     counterfactual collides are exactly those that collide under ``paper`` alone (on the same
@@ -348,10 +346,10 @@ def test_bad_counterfactual_settings_are_named():
             LeftTurnVecEnv(2, seed=1, switching="guarded", traffic="light"), -1.0, 4.0, "paper"
         )
     with pytest.raises(ConfigError, match=r"counterfactual_penalty .*got 3"):
-        PPOConfig(counterfactual_penalty=3)
+        ShapingConfig(counterfactual_penalty=3)
     with pytest.raises(ConfigError, match=r"counterfactual_horizon_s .*got 0"):
-        PPOConfig(counterfactual_horizon_s=0)
-    with pytest.raises(ConfigError, match="counterfactual_penalty"):
-        EnvTrainConfig(env_id="CartPole-v1", ppo=PPOConfig(counterfactual_penalty=-1.0))
+        ShapingConfig(counterfactual_horizon_s=0)
     with pytest.raises(ConfigError, match="needs deploy_switching"):
-        TrainConfig(ppo=PPOConfig(counterfactual_penalty=-1.0), env={"switching": "guarded"})
+        TrainConfig(
+            shaping=ShapingConfig(counterfactual_penalty=-1.0), env={"switching": "guarded"}
+        )

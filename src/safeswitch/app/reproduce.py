@@ -157,9 +157,9 @@ def training_record(model_dir: str | Path) -> dict[str, Any]:
         )
     else:
         method = f"PPO from a random initialisation, {steps:,} steps"
-    if config.ppo.progress_shaping:
+    if config.shaping.progress_shaping:
         method += (
-            f", with progress shaping ({config.ppo.progress_shaping:g} per metre, "
+            f", with progress shaping ({config.shaping.progress_shaping:g} per metre, "
             "potential-based, learning only)"
         )
     constrained = config.constraints.active()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 import re
 import types
 import typing
@@ -25,7 +26,9 @@ class ConfigError(ValueError):
 
 def from_dict(cls: type[T], data: Mapping[str, Any] | None, where: str = "") -> T:
     """Build the dataclass ``cls`` from ``data``; missing keys keep their defaults. A class
-    attribute ``RENAMED`` (old key → new key) lets configurations written before a rename load.
+    attribute ``RENAMED`` (old key → new key) lets configurations written before a rename load;
+    ``MOVED`` (``"section.key"`` → ``"other.key"``) those written before a key moved to another
+    section.
 
     Raises:
         ConfigError: On an unknown key or a value of the wrong type (the message names it).
@@ -34,6 +37,9 @@ def from_dict(cls: type[T], data: Mapping[str, Any] | None, where: str = "") -> 
         data = {}
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where or cls.__name__}: expected a mapping, got {data!r}")
+    moved: Mapping[str, str] = getattr(cls, "MOVED", {})
+    if moved:
+        data = move_keys(data, moved, where)
     renamed: Mapping[str, str] = getattr(cls, "RENAMED", {})
     if renamed:  # a configuration written before a key was renamed still loads
         for old, new in renamed.items():
@@ -60,6 +66,31 @@ def from_dict(cls: type[T], data: Mapping[str, Any] | None, where: str = "") -> 
         raise
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{where or cls.__name__}: {exc}") from exc
+
+
+def move_keys(data: Mapping[str, Any], moved: Mapping[str, str], where: str) -> dict[str, Any]:
+    """``data`` with each key of ``moved`` (``"section.key"`` → ``"other.key"``) moved to its
+    new place.
+
+    Raises:
+        ConfigError: A key given in both places (named).
+    """
+    out = {k: dict(v) if isinstance(v, Mapping) else v for k, v in data.items()}
+    for old, new in moved.items():
+        (section, key), (target, new_key) = old.split("."), new.split(".")
+        source = out.get(section)
+        if not isinstance(source, dict) or key not in source:
+            continue
+        into = out.setdefault(target, {})
+        if not isinstance(into, dict):
+            continue  # a malformed section: from_dict names it
+        if new_key in into:
+            prefix = where + "." if where else ""
+            raise ConfigError(f"{prefix}{old} moved to {prefix}{new}: give one")
+        into[new_key] = source.pop(key)
+        if not source:  # emptied by the move (an empty mapping would replace a base's whole)
+            del out[section]
+    return out
 
 
 def _convert(hint: Any, value: Any, where: str) -> Any:
@@ -127,6 +158,66 @@ def to_dict(config: Any) -> Any:
     return config
 
 
+@dataclasses.dataclass(frozen=True)
+class Bounds:
+    """A number's allowed range, declared on its field: ``x: Annotated[float, Bounds(0, 1)]``
+    (``None`` passes when the type allows it; a finite number is required).
+
+    Attributes:
+        low: Smallest allowed value (``None``: no lower bound).
+        high: Largest allowed value (``None``: no upper bound).
+        low_open: ``low`` itself is not allowed.
+        high_open: ``high`` itself is not allowed.
+        unit: Shown after the range in messages and the reference (e.g. ``"s"``).
+    """
+
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    unit: str = ""
+
+    def holds(self, value: float) -> bool:
+        if not math.isfinite(value):
+            return False
+        if self.low is not None and (value <= self.low if self.low_open else value < self.low):
+            return False
+        return self.high is None or (value < self.high if self.high_open else value <= self.high)
+
+    def describe(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        if self.high is None:
+            return f"must be {'>' if self.low_open else '>='} {self.low:g}{unit}"
+        if self.low is None:
+            return f"must be {'<' if self.high_open else '<='} {self.high:g}{unit}"
+        return (
+            f"must be in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}"
+            f"{')' if self.high_open else ']'}{unit}"
+        )
+
+
+def bounds_of(cls: type, name: str) -> Bounds | None:
+    """The :class:`Bounds` declared on field ``name`` of ``cls``, if any."""
+    hint = typing.get_type_hints(cls, include_extras=True)[name]
+    found = [m for m in getattr(hint, "__metadata__", ()) if isinstance(m, Bounds)]
+    return found[0] if found else None
+
+
+def check_bounds(config: Any, owner: str) -> None:
+    """Check every field of ``config`` that declares :class:`Bounds` (in a ``__post_init__``).
+
+    Raises:
+        ConfigError: Naming ``owner.field``, its value and the range.
+    """
+    for f in dataclasses.fields(config):
+        bounds = bounds_of(type(config), f.name)
+        value = getattr(config, f.name)
+        if bounds is None or value is None:
+            continue
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        check(number and bounds.holds(value), owner, f.name, value, bounds.describe())
+
+
 def check(condition: bool, owner: str, name: str, value: Any, requirement: str) -> None:
     """Raise :class:`ConfigError` naming ``owner.name`` and its value unless ``condition``."""
     if not condition:
@@ -192,7 +283,11 @@ def fields_of(cls: type) -> list[Field]:
             default = "(required)"
         shown = default if isinstance(default, str) and default.startswith("(") else repr(default)
         shown = {"None": "null", "True": "true", "False": "false"}.get(shown, shown)
-        out.append(Field(f.name, _type_name(hints[f.name]), shown, described.get(f.name, "")))
+        description = described.get(f.name, "")
+        bounds = bounds_of(cls, f.name)
+        if bounds is not None:
+            description = f"{description} ({bounds.describe().removeprefix('must be ')})"
+        out.append(Field(f.name, _type_name(hints[f.name]), shown, description))
     return out
 
 

@@ -1,4 +1,4 @@
-"""Tanh with numpy's kernel in the forward pass (``ppo.fast_tanh``, ours).
+"""Tanh with numpy's kernel in the forward pass (``policy.fast_tanh``, ours).
 
 The CPU build of torch this project pins evaluates ``torch.tanh`` element by element: 0.68 ms
 for a 2,048 × 128 minibatch against 0.10 ms for ``numpy.tanh`` on the same memory (one thread),

@@ -12,12 +12,20 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import gymnasium as gym
 import yaml
 
-from safeswitch.core.config import ConfigError, check, from_dict, to_dict
+from safeswitch.core.config import (
+    Bounds,
+    ConfigError,
+    check,
+    check_bounds,
+    from_dict,
+    move_keys,
+    to_dict,
+)
 from safeswitch.core.registry import logic_names, logic_params
 from safeswitch.evaluation.planner import PlannerConfig
 from safeswitch.evaluation.traffic_planner import GapPlannerConfig
@@ -26,12 +34,11 @@ from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig, TrafficCo
 
 @dataclass(frozen=True)
 class PPOConfig:
-    """PPO hyper-parameters (paper Table II unless marked).
+    """PPO hyper-parameters: the paper's Table II, nothing else (our departures from it are
+    the ``policy`` section; the learning-only reward terms the ``shaping`` section).
 
     Attributes:
         learning_rate: Adam step size.
-        learning_rate_final: The step size is annealed linearly from ``learning_rate`` at the
-            start to this at the end of the run (ours; ``null``: constant, Table II).
         n_steps: Horizon: ticks collected per environment per update.
         n_minibatches: Minibatches per epoch (SB3's ``batch_size = n_steps · n_envs / this``).
         n_epochs: Passes over each rollout.
@@ -44,97 +51,131 @@ class PPOConfig:
         net_arch: Hidden units per layer, for the policy and (separately) the value network.
         activation: Hidden-layer non-linearity (Table II: Tanh; the text's "ReLU" is the
             alternative).
-        fast_tanh: With ``activation: tanh``, compute it with numpy's kernel in the forward
-            pass (the same function to float32 rounding; a PPO update about a fifth faster on
-            this CPU build of torch; ours, off by default so that earlier runs reproduce; see
-            :mod:`safeswitch.training.activations`).
         normalize_observations: Running observation normalisation (``VecNormalize``).
         normalize_rewards: Running return-based reward scaling (``VecNormalize``).
-        log_std_init: Initial log standard deviation of the Gaussian policy (not in Table II;
-            SB3's default 0 makes the first actions mostly noise on a [-1, 1] throttle).
+    """
+
+    learning_rate: Annotated[float, Bounds(0, 1, low_open=True, high_open=True)] = 2.5e-4
+    n_steps: Annotated[int, Bounds(2)] = 128
+    n_minibatches: Annotated[int, Bounds(1)] = 4
+    n_epochs: Annotated[int, Bounds(1)] = 4
+    gamma: Annotated[float, Bounds(0, 1, low_open=True)] = 0.99
+    gae_lambda: Annotated[float, Bounds(0, 1, low_open=True)] = 0.9
+    clip_range: Annotated[float, Bounds(0)] = 0.2
+    ent_coef: Annotated[float, Bounds(0)] = 0.01
+    vf_coef: Annotated[float, Bounds(0)] = 0.5
+    max_grad_norm: Annotated[float, Bounds(0)] = 0.5
+    net_arch: tuple[int, ...] = (128, 128, 128)
+    activation: Literal["tanh", "relu"] = "tanh"
+    normalize_observations: bool = True
+    normalize_rewards: bool = True
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "ppo")
+        check(
+            len(self.net_arch) >= 1 and all(n >= 1 for n in self.net_arch),
+            "ppo",
+            "net_arch",
+            self.net_arch,
+            "must list one or more positive layer sizes",
+        )
+        if self.activation not in ("tanh", "relu"):
+            raise ConfigError(f"ppo.activation={self.activation!r} is not 'tanh' or 'relu'")
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    """How the policy and its optimiser depart from Table II (all ours; the defaults are SB3's
+    and Table II's, so an empty section is the paper's PPO).
+
+    Attributes:
+        learning_rate_final: The step size is annealed linearly from ``ppo.learning_rate`` at
+            the start to this at the end of the run (``null``: constant, Table II).
+        fast_tanh: With ``ppo.activation: tanh``, compute it with numpy's kernel in the forward
+            pass (the same function to float32 rounding; a PPO update about a fifth faster on
+            this CPU build of torch; off by default so that earlier runs reproduce; see
+            :mod:`safeswitch.training.activations`).
+        log_std_init: Initial log standard deviation of the Gaussian policy (SB3's default 0
+            makes the first actions mostly noise on a [-1, 1] throttle).
         learn_log_std: Learn the log standard deviation (SB3's default); ``false`` keeps the
-            exploration noise at ``log_std_init`` (ours, for a warm-started actor).
+            exploration noise at ``log_std_init`` (for a warm-started actor).
         log_std_final: With ``learn_log_std: false``, the exploration noise is annealed: its
             log standard deviation falls linearly from ``log_std_init`` at the start to this at
-            the end of the run, set before each rollout (ours; ``null``: a constant noise).
-        actor_learning_rate: The actor's own learning rate (``null``: ``learning_rate`` for
-            everything, as in Table II). See :mod:`safeswitch.training.ppo`.
+            the end of the run, set before each rollout (``null``: a constant noise).
+        actor_learning_rate: The actor's own learning rate (``null``: ``ppo.learning_rate``
+            for everything, as in Table II). See :mod:`safeswitch.training.ppo`.
         actor_frozen_steps: Timesteps before the actor starts learning (value function only).
         actor_ramp_steps: Timesteps over which the actor's rate then rises from 0.
         initial_action: The policy's mean action at the start (the bias of its output layer;
-            ``null``: SB3's initialisation, a mean near 0). Ours: an untrained policy whose mean
-            is 0 on a throttle action asks for half throttle everywhere; starting at a gentle
-            cruise (-0.3) keeps early training out of the timid and the careless basins
+            ``null``: SB3's initialisation, a mean near 0). An untrained policy whose mean is 0
+            on a throttle action asks for half throttle everywhere; starting at a gentle cruise
+            (-0.3) keeps early training out of the timid and the careless basins
             (docs/learning_experiments.md).
+    """
+
+    learning_rate_final: Annotated[float | None, Bounds(0, 1, high_open=True)] = None
+    fast_tanh: bool = False
+    log_std_init: Annotated[float, Bounds(-5, 2)] = 0.0
+    learn_log_std: bool = True
+    log_std_final: Annotated[float | None, Bounds(-5, 2)] = None
+    actor_learning_rate: Annotated[float | None, Bounds(0, 1, True, True)] = None
+    actor_frozen_steps: Annotated[int, Bounds(0)] = 0
+    actor_ramp_steps: Annotated[int, Bounds(0)] = 0
+    initial_action: Annotated[float | None, Bounds(-1, 1)] = None
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "policy")
+        if self.log_std_final is not None:
+            check(not self.learn_log_std, "policy", "log_std_final", self.log_std_final,
+                  "anneals a fixed noise: needs learn_log_std: false")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ShapingConfig:
+    """Terms added to the reward PPO learns from, and only to it: the task's reward, every
+    evaluation and every figure stay the paper's (all ours; off by default; the left turn's
+    records are what they read, so the generic ``--env`` training has no such section).
+
+    Attributes:
         progress_shaping: Potential-based shaping on the ego's route progress [reward per
-            metre] added to the reward PPO learns from (ours; 0: off). It leaves the optimal
-            policies unchanged; see :mod:`safeswitch.training.shaping`.
+            metre] (0: off). It leaves the optimal policies unchanged; see
+            :mod:`safeswitch.training.shaping`.
         progress_shaping_final: With ``progress_shaping`` on, ``k`` is annealed linearly
-            from it at the start to this at the end of the run, one value per rollout (ours;
-            ``null``: a constant ``k``).
+            from it at the start to this at the end of the run, one value per rollout
+            (``null``: a constant ``k``).
         reason_penalties: Reason of the switching logic → reward per tick on which that
-            reason's safety action ran, added to the reward PPO learns from only (ours; empty:
-            none). It changes what PPO optimises: ``{"guard:backup_clear:overrules_primary":
-            -50}`` under ``guarded`` charges the filter overruling the paper logic's braking
-            about what the collision it prevents would forfeit; see
-            :class:`safeswitch.training.shaping.ReasonPenalty`.
+            reason's safety action ran (empty: none). It changes what PPO optimises:
+            ``{"guard:backup_clear:overrules_primary": -50}`` under ``guarded`` charges the
+            filter overruling the paper logic's braking about what the collision it prevents
+            would forfeit; see :class:`safeswitch.training.shaping.ReasonPenalty`.
         reason_penalties_initial_scale: The reason penalties are ramped linearly from this
             share of their values at the start to all of them at the end of the run, one
-            value per rollout (ours; 1: no ramp). A charge for the filter's rescues is paid
-            mostly for exploration noise early on; ramped in as the noise is annealed out
-            it charges the policy's own behaviour (docs/learning_experiments.md).
-        clear_time_penalty: A cost per second until the ego has left its conflict zone,
-            added to the reward PPO learns from only (ours; 0: off): the paper's reward is
-            all but indifferent to when the crossing is cleared; see
-            :class:`safeswitch.training.shaping.ClearTimePenalty`.
+            value per rollout (1: no ramp). A charge for the filter's rescues is paid mostly
+            for exploration noise early on; ramped in as the noise is annealed out it charges
+            the policy's own behaviour (docs/learning_experiments.md).
+        clear_time_penalty: A cost per second until the ego has left its conflict zone (0:
+            off): the paper's reward is all but indifferent to when the crossing is cleared;
+            see :class:`safeswitch.training.shaping.ClearTimePenalty`.
         counterfactual_penalty: Under ``guarded``: reward added to each step on which the
             guard starts intervening if the episode, rolled forward from that step under the
             deployed logic alone (``deploy_switching``) with the learned action held,
-            collides (ours; 0: off). It charges the collisions the paper logic alone
-            would let through, and only those; see
+            collides (0: off). It charges the collisions the paper logic alone would let
+            through, and only those; see
             :class:`safeswitch.training.shaping.CounterfactualPenalty`.
         counterfactual_horizon_s: How far that counterfactual is rolled [s].
     """
 
-    learning_rate: float = 2.5e-4
-    learning_rate_final: float | None = None
-    n_steps: int = 128
-    n_minibatches: int = 4
-    n_epochs: int = 4
-    gamma: float = 0.99
-    gae_lambda: float = 0.9
-    clip_range: float = 0.2
-    ent_coef: float = 0.01
-    vf_coef: float = 0.5
-    max_grad_norm: float = 0.5
-    net_arch: tuple[int, ...] = (128, 128, 128)
-    activation: Literal["tanh", "relu"] = "tanh"
-    fast_tanh: bool = False
-    normalize_observations: bool = True
-    normalize_rewards: bool = True
-    log_std_init: float = 0.0
-    learn_log_std: bool = True
-    log_std_final: float | None = None
-    actor_learning_rate: float | None = None
-    actor_frozen_steps: int = 0
-    actor_ramp_steps: int = 0
-    initial_action: float | None = None
-    progress_shaping: float = 0.0
-    progress_shaping_final: float | None = None
+    progress_shaping: Annotated[float, Bounds(0, 100, unit="per metre")] = 0.0
+    progress_shaping_final: Annotated[float | None, Bounds(0, 100, unit="per metre")] = None
     reason_penalties: dict[str, float] = field(default_factory=dict)
-    reason_penalties_initial_scale: float = 1.0
-    clear_time_penalty: float = 0.0
-    counterfactual_penalty: float = 0.0
-    counterfactual_horizon_s: float = 4.0
+    reason_penalties_initial_scale: Annotated[float, Bounds(0, 1)] = 1.0
+    clear_time_penalty: Annotated[float, Bounds(0, 1000, unit="per second")] = 0.0
+    counterfactual_penalty: Annotated[float, Bounds(-100_000, 0)] = 0.0
+    counterfactual_horizon_s: Annotated[float, Bounds(0.1, 30, unit="s")] = 4.0
 
     def __post_init__(self) -> None:
-        o = "ppo"
-        check(math.isfinite(self.counterfactual_penalty)
-              and -100_000 <= self.counterfactual_penalty <= 0, o, "counterfactual_penalty",
-              self.counterfactual_penalty, "must be in [-100000, 0]")  # fmt: skip
-        check(math.isfinite(self.counterfactual_horizon_s)
-              and 0.1 <= self.counterfactual_horizon_s <= 30, o, "counterfactual_horizon_s",
-              self.counterfactual_horizon_s, "must be in [0.1, 30] s")  # fmt: skip
+        o = "shaping"
+        check_bounds(self, o)
         penalties = self.reason_penalties
         check(isinstance(penalties, dict) and all(isinstance(k, str) for k in penalties), o,
               "reason_penalties", penalties, "must map reason names to numbers")  # fmt: skip
@@ -143,66 +184,24 @@ class PPOConfig:
             ok = number and math.isfinite(value) and -1000 <= value <= 0
             check(ok, o, f"reason_penalties[{name!r}]", value, "must be in [-1000, 0] per tick")
         scale = self.reason_penalties_initial_scale
-        check(math.isfinite(scale) and 0 <= scale <= 1, o, "reason_penalties_initial_scale",
-              scale, "must be in [0, 1]")  # fmt: skip
         check(scale == 1 or bool(penalties), o, "reason_penalties_initial_scale", scale,
               "ramps the reason penalties: needs reason_penalties")  # fmt: skip
-        check(math.isfinite(self.clear_time_penalty) and 0 <= self.clear_time_penalty <= 1000,
-              o, "clear_time_penalty", self.clear_time_penalty,
-              "must be in [0, 1000] per second")  # fmt: skip
-        shaping, final = self.progress_shaping, self.progress_shaping_final
-        check(math.isfinite(shaping) and 0 <= shaping <= 100, o, "progress_shaping", shaping,
-              "must be in [0, 100] per metre")  # fmt: skip
-        if final is not None:
-            check(math.isfinite(final) and 0 <= final <= 100, o, "progress_shaping_final",
-                  final, "must be in [0, 100] per metre or null")  # fmt: skip
-            check(shaping > 0, o, "progress_shaping_final", final,
+        if self.progress_shaping_final is not None:
+            check(self.progress_shaping > 0, o, "progress_shaping_final",
+                  self.progress_shaping_final,
                   "anneals the shaping: needs progress_shaping > 0")  # fmt: skip
-        if self.initial_action is not None:
-            check(-1 <= self.initial_action <= 1, o, "initial_action", self.initial_action,
-                  "must be in [-1, 1] or null")  # fmt: skip
-        if self.actor_learning_rate is not None:
-            check(
-                0 < self.actor_learning_rate < 1,
-                o,
-                "actor_learning_rate",
-                self.actor_learning_rate,
-                "must be in (0, 1) or null",
-            )
-        for name in ("actor_frozen_steps", "actor_ramp_steps"):
-            check(getattr(self, name) >= 0, o, name, getattr(self, name), "must be >= 0")
-        check(
-            -5 <= self.log_std_init <= 2, o, "log_std_init", self.log_std_init, "must be in [-5, 2]"
-        )
-        if self.log_std_final is not None:
-            check(-5 <= self.log_std_final <= 2, o, "log_std_final", self.log_std_final,
-                  "must be in [-5, 2] or null")  # fmt: skip
-            check(not self.learn_log_std, o, "log_std_final", self.log_std_final,
-                  "anneals a fixed noise: needs learn_log_std: false")  # fmt: skip
-        check(
-            0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
-        )
-        if self.learning_rate_final is not None:
-            check(0 <= self.learning_rate_final < 1, o, "learning_rate_final",
-                  self.learning_rate_final, "must be in [0, 1) or null")  # fmt: skip
-        check(self.n_steps >= 2, o, "n_steps", self.n_steps, "must be >= 2")
-        check(self.n_minibatches >= 1, o, "n_minibatches", self.n_minibatches, "must be >= 1")
-        check(self.n_epochs >= 1, o, "n_epochs", self.n_epochs, "must be >= 1")
-        for name in ("gamma", "gae_lambda"):
-            value = getattr(self, name)
-            check(0 < value <= 1, o, name, value, "must be in (0, 1]")
-        for name in ("clip_range", "ent_coef", "vf_coef", "max_grad_norm"):
-            value = getattr(self, name)
-            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
-        check(
-            len(self.net_arch) >= 1 and all(n >= 1 for n in self.net_arch),
-            o,
-            "net_arch",
-            self.net_arch,
-            "must list one or more positive layer sizes",
-        )
-        if self.activation not in ("tanh", "relu"):
-            raise ConfigError(f"ppo.activation={self.activation!r} is not 'tanh' or 'relu'")
+
+
+#: Where the keys that left ``ppo`` went (configurations written before load unchanged).
+MOVED_FROM_PPO: dict[str, str] = {
+    **{f"ppo.{k}": f"policy.{k}" for k in (
+        "learning_rate_final", "fast_tanh", "log_std_init", "learn_log_std", "log_std_final",
+        "actor_learning_rate", "actor_frozen_steps", "actor_ramp_steps", "initial_action")},
+    **{f"ppo.{k}": f"shaping.{k}" for k in (
+        "progress_shaping", "progress_shaping_final", "reason_penalties",
+        "reason_penalties_initial_scale", "clear_time_penalty", "counterfactual_penalty",
+        "counterfactual_horizon_s")},
+}  # fmt: skip
 
 
 #: Values of ``warm_start.teacher``.
@@ -481,7 +480,9 @@ class TrainConfig:
             share of the horizon, so that the environments' episodes do not all start and
             end together (ours; off: the paper's setting). See
             :class:`~safeswitch.leftturn.vec_env.LeftTurnVecEnv`'s ``stagger``.
-        ppo: PPO hyper-parameters.
+        ppo: PPO hyper-parameters (Table II).
+        policy: How the policy and its optimiser depart from Table II (ours).
+        shaping: Learning-only reward terms (ours; none by default).
         warm_start: Behaviour cloning of the planner before PPO (off by default).
         validation: Selection of the run's policy on a validation set (off by default).
         constraints: Constrained PPO: costs with self-adjusting multipliers (off by default).
@@ -508,12 +509,16 @@ class TrainConfig:
     deploy_switching: str | None = None
     stagger_starts: bool = False
     ppo: PPOConfig = field(default_factory=PPOConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    shaping: ShapingConfig = field(default_factory=ShapingConfig)
     warm_start: WarmStartConfig = field(default_factory=WarmStartConfig)
     validation: ValidationConfig = field(default_factory=ValidationConfig)
     constraints: ConstraintsConfig = field(default_factory=ConstraintsConfig)
     env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
     traffic: str | dict[str, Any] | None = None
     train_only: dict[str, Any] | None = None
+
+    MOVED: ClassVar[dict[str, str]] = MOVED_FROM_PPO
 
     def __post_init__(self) -> None:
         o = "train"
@@ -541,9 +546,9 @@ class TrainConfig:
             check(self.deploy_switching in logic_names(), o, "deploy_switching",
                   self.deploy_switching,
                   f"must be null or a registered switching logic ({known})")  # fmt: skip
-        if self.ppo.counterfactual_penalty:
-            check(self.deploy_switching is not None and self.traffic is None, "ppo",
-                  "counterfactual_penalty", self.ppo.counterfactual_penalty,
+        if self.shaping.counterfactual_penalty:
+            check(self.deploy_switching is not None and self.traffic is None, "shaping",
+                  "counterfactual_penalty", self.shaping.counterfactual_penalty,
                   "rolls the single-car scene under deploy_switching: needs deploy_switching "
                   "and no traffic")  # fmt: skip
         clear = self.constraints.clear_time
@@ -699,7 +704,9 @@ def read_config(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, An
             comes back to a file already in it (each names the file and the value).
     """
     path = Path(path)
-    data = _read_yaml(path)
+    # each file in the layout of today before the merge: a file written before the ``ppo``
+    # split may start from one written after it
+    data = move_keys(_read_yaml(path), MOVED_FROM_PPO, str(path))
     base = data.pop(BASE_KEY, None)
     if base is None:
         return data
@@ -749,6 +756,7 @@ class EnvTrainConfig:
         eval_episodes: Episodes of the final evaluation.
         eval_seed: Seed of the final evaluation's episodes (never used in training).
         ppo: PPO hyper-parameters (the paper's Table II by default).
+        policy: How the policy and its optimiser depart from Table II (ours).
     """
 
     env_id: str
@@ -764,6 +772,11 @@ class EnvTrainConfig:
     eval_episodes: int = 20
     eval_seed: int = 1_000_003
     ppo: PPOConfig = field(default_factory=PPOConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+
+    MOVED: ClassVar[dict[str, str]] = {
+        k: v for k, v in MOVED_FROM_PPO.items() if v.startswith("policy.")
+    }
 
     def __post_init__(self) -> None:
         o = "train"
@@ -787,18 +800,6 @@ class EnvTrainConfig:
             check(math.isfinite(self.penalty) and self.penalty <= 0, o, "penalty", self.penalty,
                   "must be a finite number <= 0 (a bonus for needing the Safety controller "
                   "would teach the policy to need it)")  # fmt: skip
-        check(self.ppo.progress_shaping == 0, "ppo", "progress_shaping",
-              self.ppo.progress_shaping, "shapes the left turn's reward only: must be 0 for "
-              f"env_id {self.env_id!r}")  # fmt: skip
-        check(not self.ppo.reason_penalties, "ppo", "reason_penalties",
-              self.ppo.reason_penalties, "are read from the left turn's records: must be empty "
-              f"for env_id {self.env_id!r}")  # fmt: skip
-        check(self.ppo.counterfactual_penalty == 0, "ppo", "counterfactual_penalty",
-              self.ppo.counterfactual_penalty, "is read from the left turn's records: must be "
-              f"0 for env_id {self.env_id!r}")  # fmt: skip
-        check(self.ppo.clear_time_penalty == 0, "ppo", "clear_time_penalty",
-              self.ppo.clear_time_penalty, "is read from the left turn's records: must be 0 "
-              f"for env_id {self.env_id!r}")  # fmt: skip
         check_run_shape(self.n_envs, self.ppo, self.seed, self.eval_seed)
 
     @property

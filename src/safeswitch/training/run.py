@@ -42,7 +42,7 @@ from safeswitch.training.callbacks import ProgressLines, TrainingMonitor
 from safeswitch.training.config import (
     ConstraintsConfig,
     EnvTrainConfig,
-    PPOConfig,
+    ShapingConfig,
     TrainConfig,
     dump_config,
     load_config,
@@ -81,36 +81,43 @@ class LearningEnv:
 
     Args:
         vec: The batched left-turn environment.
-        ppo: The configuration's ``ppo`` section (its learning-only settings and ``gamma``).
+        shaping: The configuration's ``shaping`` section.
+        gamma: PPO's discount (the progress shaping's potential is discounted with it).
         constraints: The configuration's ``constraints`` section (default: none).
         deploy_switching: The logic the policy is deployed under (the counterfactual
-            penalty's; needed only with ``ppo.counterfactual_penalty``).
+            penalty's; needed only with ``shaping.counterfactual_penalty``).
     """
 
     def __init__(
         self,
         vec: LeftTurnVecEnv,
-        ppo: PPOConfig,
+        shaping: ShapingConfig,
+        gamma: float,
         constraints: ConstraintsConfig | None = None,
         deploy_switching: str | None = None,
     ) -> None:
-        self.ppo = ppo
+        self.shaping = shaping
         self.shaped = (
-            ProgressShaping(vec, ppo.progress_shaping, ppo.gamma) if ppo.progress_shaping else None
+            ProgressShaping(vec, shaping.progress_shaping, gamma)
+            if shaping.progress_shaping
+            else None
         )
         env: VecEnv = vec if self.shaped is None else self.shaped
         self.charged = None
-        if ppo.reason_penalties:
-            env = self.charged = ReasonPenalty(env, ppo.reason_penalties)
+        if shaping.reason_penalties:
+            env = self.charged = ReasonPenalty(env, shaping.reason_penalties)
         self.counterfactual = None
-        if ppo.counterfactual_penalty:
+        if shaping.counterfactual_penalty:
             if deploy_switching is None:
-                raise ValueError("ppo.counterfactual_penalty needs deploy_switching")
+                raise ValueError("shaping.counterfactual_penalty needs deploy_switching")
             env = self.counterfactual = CounterfactualPenalty(
-                env, ppo.counterfactual_penalty, ppo.counterfactual_horizon_s, deploy_switching
+                env,
+                shaping.counterfactual_penalty,
+                shaping.counterfactual_horizon_s,
+                deploy_switching,
             )
-        if ppo.clear_time_penalty:
-            env = ClearTimePenalty(env, ppo.clear_time_penalty)
+        if shaping.clear_time_penalty:
+            env = ClearTimePenalty(env, shaping.clear_time_penalty)
         self.constrained = None
         if constraints is not None and constraints.active():
             env = self.constrained = ConstraintCosts(env, constraints)
@@ -118,14 +125,16 @@ class LearningEnv:
 
     def schedules(self) -> list[BaseCallback]:
         """Callbacks that move the shaping and the charge over the run, as configured."""
-        ppo = self.ppo
+        shaping = self.shaping
         out: list[BaseCallback] = []
-        if self.shaped is not None and ppo.progress_shaping_final is not None:
+        if self.shaped is not None and shaping.progress_shaping_final is not None:
             out.append(
-                ShapingSchedule(self.shaped, ppo.progress_shaping, ppo.progress_shaping_final)
+                ShapingSchedule(
+                    self.shaped, shaping.progress_shaping, shaping.progress_shaping_final
+                )
             )
-        if self.charged is not None and ppo.reason_penalties_initial_scale != 1.0:
-            out.append(PenaltySchedule(self.charged, ppo.reason_penalties_initial_scale))
+        if self.charged is not None and shaping.reason_penalties_initial_scale != 1.0:
+            out.append(PenaltySchedule(self.charged, shaping.reason_penalties_initial_scale))
         if self.counterfactual is not None:
             out.append(CounterfactualLog(self.counterfactual))
         if self.constrained is not None:
@@ -146,15 +155,15 @@ def build_model(
     config: TrainConfig | EnvTrainConfig, env: VecNormalize, tensorboard_log: Path | None
 ) -> SwitchPPO:
     """PPO with the configured hyper-parameters (Table II by default)."""
-    ppo = config.ppo
+    ppo, policy = config.ppo, config.policy
     arch = list(ppo.net_arch)
     model = SwitchPPO(
         "MlpPolicy",
         env,
         learning_rate=(
             ppo.learning_rate
-            if ppo.learning_rate_final is None
-            else LinearSchedule(ppo.learning_rate, ppo.learning_rate_final, 1.0)
+            if policy.learning_rate_final is None
+            else LinearSchedule(ppo.learning_rate, policy.learning_rate_final, 1.0)
         ),
         n_steps=ppo.n_steps,
         batch_size=config.batch_size,
@@ -169,22 +178,22 @@ def build_model(
         device="cpu",
         policy_kwargs={
             "net_arch": {"pi": arch, "vf": arch},
-            "activation_fn": _activation(ppo.activation, ppo.fast_tanh),
-            "log_std_init": ppo.log_std_init,
+            "activation_fn": _activation(ppo.activation, policy.fast_tanh),
+            "log_std_init": policy.log_std_init,
         },
         tensorboard_log=str(tensorboard_log) if tensorboard_log else None,
         verbose=0,
-        actor_learning_rate=ppo.actor_learning_rate,
-        actor_frozen_steps=ppo.actor_frozen_steps,
-        actor_ramp_steps=ppo.actor_ramp_steps,
-        learn_log_std=ppo.learn_log_std,
-        log_std_final=ppo.log_std_final,
+        actor_learning_rate=policy.actor_learning_rate,
+        actor_frozen_steps=policy.actor_frozen_steps,
+        actor_ramp_steps=policy.actor_ramp_steps,
+        learn_log_std=policy.learn_log_std,
+        log_std_final=policy.log_std_final,
     )
-    if ppo.initial_action is not None:
+    if policy.initial_action is not None:
         with torch.no_grad():
             head = model.policy.action_net
             assert isinstance(head, torch.nn.Linear)
-            head.bias.fill_(ppo.initial_action)
+            head.bias.fill_(policy.initial_action)
     return model
 
 
@@ -389,7 +398,9 @@ def train(
         start_run(run, dump_config(config))
     if checkpoint is not None:
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
-    learning = LearningEnv(vec, config.ppo, config.constraints, config.deploy_switching)
+    learning = LearningEnv(
+        vec, config.shaping, config.ppo.gamma, config.constraints, config.deploy_switching
+    )
     if checkpoint is not None:
         learning.restore(checkpoint)
     env = normalized(learning.env, config, checkpoint)

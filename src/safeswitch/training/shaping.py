@@ -1,6 +1,6 @@
 """Potential-based reward shaping on the ego's progress along its route (ours, opt-in).
 
-``ppo.progress_shaping: k`` adds ``F = γ·Φ(s') − Φ(s)`` with ``Φ(s) = k · (the ego's path
+``shaping.progress_shaping: k`` adds ``F = γ·Φ(s') − Φ(s)`` with ``Φ(s) = k · (the ego's path
 distance along its route) [per metre]`` to the reward PPO learns from, with PPO's own ``γ``
 per environment step (one decision). Shaping of this form leaves the optimal policies of the
 discounted task unchanged (Ng, Harada & Russell, *Policy invariance under reward
@@ -12,7 +12,7 @@ throttle" pays off in ``R_v`` only through a transient that ``R_a_lon`` charges 
 The environment's own reward, its episode returns, ``progress.csv`` and every evaluation stay
 the paper's: the shaping term is added here, between the environment and ``VecNormalize``.
 
-``ppo.progress_shaping_final`` anneals ``k`` linearly over the run to that value, one value per
+``shaping.progress_shaping_final`` anneals ``k`` linearly over the run to that value, one value per
 rollout (:class:`ShapingSchedule`): strong shaping while PPO explores, the paper's reward alone
 (or nearly) while it refines. Each step uses one ``k`` for ``Φ(s)`` and ``Φ(s')``; an episode
 that spans a change of ``k`` telescopes piecewise.
@@ -115,7 +115,7 @@ class RolloutSchedule(BaseCallback):
 
 class ReasonPenalty(VecEnvWrapper):
     """A learning-only penalty per tick on which a named reason's safety action ran, added to
-    the reward PPO learns from (ours; ``ppo.reason_penalties``).
+    the reward PPO learns from (ours; ``shaping.reason_penalties``).
 
     Unlike the progress shaping this changes what PPO optimises, on purpose: under the
     ``guarded`` logic the certified filter overrules the paper logic's own braking
@@ -167,14 +167,14 @@ class ReasonPenalty(VecEnvWrapper):
 
 
 class ShapingSchedule(RolloutSchedule):
-    """``ppo.progress_shaping_final``: the shaping's ``k`` from ``start`` to ``final``."""
+    """``shaping.progress_shaping_final``: the shaping's ``k`` from ``start`` to ``final``."""
 
     def __init__(self, shaping: ProgressShaping, start: float, final: float) -> None:
         super().__init__(shaping, "per_metre", start, final, "train/progress_shaping")
 
 
 class PenaltySchedule(RolloutSchedule):
-    """``ppo.reason_penalties_initial_scale``: the reason penalties scaled from ``start`` of
+    """``shaping.reason_penalties_initial_scale``: the reason penalties scaled from ``start`` of
     their configured values at the beginning of the run to all of them at its end."""
 
     def __init__(self, penalty: ReasonPenalty, start: float) -> None:
@@ -183,7 +183,7 @@ class PenaltySchedule(RolloutSchedule):
 
 class ClearTimePenalty(VecEnvWrapper):
     """A learning-only cost per second until the ego has left its conflict zone, added to the
-    reward PPO learns from (ours; ``ppo.clear_time_penalty``).
+    reward PPO learns from (ours; ``shaping.clear_time_penalty``).
 
     The paper's reward is all but indifferent to *when* the ego clears the crossing: a yield
     that crawls up to the zone and one that arrives just behind the north car at speed score
@@ -232,12 +232,12 @@ class ClearTimePenalty(VecEnvWrapper):
 
 class CounterfactualPenalty(VecEnvWrapper):
     """A learning-only charge for the collisions the deployed logic *alone* would have let
-    happen (ours; ``ppo.counterfactual_penalty``).
+    happen (ours; ``shaping.counterfactual_penalty``).
 
     Under ``guarded`` the certified filter beneath the paper logic keeps training
     collision-free, so the policy never meets the collisions the paper logic alone lets
     through (it brakes an ego that has started across, to a stop inside the north car's
-    path). Charging every tick on which the filter intervened (``ppo.reason_penalties``) is a
+    path). Charging every tick on which the filter intervened (``shaping.reason_penalties``) is a
     broad proxy: a constant throttle of 0.6 meets such an overrule in 1,077 of 2,000 random
     scenarios and collides under the paper logic alone in 1 (``benchmarks/overrule_trace.py
     --throttle``).

@@ -1,0 +1,70 @@
+"""A configuration per concern: ``ppo`` holds the paper's Table II and nothing else; our
+departures from it (``policy``) and the learning-only reward terms (``shaping``) have sections
+of their own, declared bounds are checked by one checker, and configurations written before
+the split load unchanged."""
+
+import dataclasses
+
+import pytest
+
+from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.training.config import (
+    EnvTrainConfig,
+    PolicyConfig,
+    PPOConfig,
+    ShapingConfig,
+    TrainConfig,
+)
+
+TABLE_II = {
+    "learning_rate", "n_steps", "n_minibatches", "n_epochs", "gamma", "gae_lambda",
+    "clip_range", "ent_coef", "vf_coef", "max_grad_norm", "net_arch", "activation",
+    "normalize_observations", "normalize_rewards",
+}  # fmt: skip
+
+
+def test_ppo_is_table_two_and_its_defaults_are_the_papers():
+    assert {f.name for f in dataclasses.fields(PPOConfig)} == TABLE_II
+    ppo = PPOConfig()
+    assert (ppo.learning_rate, ppo.gamma, ppo.gae_lambda, ppo.clip_range) == (
+        2.5e-4,
+        0.99,
+        0.9,
+        0.2,
+    )
+    assert ppo.net_arch == (128, 128, 128) and ppo.activation == "tanh"
+
+
+def test_a_configuration_written_before_the_split_loads_unchanged():
+    old = {"ppo": {"gamma": 0.98, "progress_shaping": 15.0, "initial_action": -0.3,
+                   "reason_penalties": {"guard:x": -50.0}}}  # fmt: skip
+    shaping = {"progress_shaping": 15.0, "reason_penalties": {"guard:x": -50.0}}
+    new = {"ppo": {"gamma": 0.98}, "policy": {"initial_action": -0.3}, "shaping": shaping}
+    assert to_dict(from_dict(TrainConfig, old)) == to_dict(from_dict(TrainConfig, new))
+    loaded = from_dict(TrainConfig, old)
+    assert loaded.shaping.progress_shaping == 15.0 and loaded.policy.initial_action == -0.3
+    with pytest.raises(ConfigError, match=r"ppo\.progress_shaping moved to shaping\.progress_"):
+        from_dict(TrainConfig, {"ppo": {"progress_shaping": 1.0},
+                                "shaping": {"progress_shaping": 2.0}})  # fmt: skip
+
+
+def test_declared_bounds_are_checked_and_named():
+    with pytest.raises(ConfigError, match=r"ppo\.learning_rate must be in \(0, 1\), got 2"):
+        PPOConfig(learning_rate=2.0)
+    with pytest.raises(ConfigError, match=r"ppo\.n_steps must be >= 2, got 1"):
+        PPOConfig(n_steps=1)
+    with pytest.raises(ConfigError, match=r"shaping\.counterfactual_horizon_s must be in "
+                                          r"\[0\.1, 30\] s, got 31"):  # fmt: skip
+        ShapingConfig(counterfactual_horizon_s=31.0)
+    with pytest.raises(ConfigError, match=r"policy\.initial_action must be in \[-1, 1\], got nan"):
+        PolicyConfig(initial_action=float("nan"))
+    assert PolicyConfig(initial_action=None).initial_action is None  # null passes
+
+
+def test_the_generic_training_has_no_shaping_section():
+    with pytest.raises(ConfigError, match=r"unknown configuration key 'shaping'"):
+        from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "shaping": {}})
+    with pytest.raises(ConfigError, match=r"unknown configuration key ppo\.'progress_shaping'"):
+        from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"progress_shaping": 1.0}})
+    moved = from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"fast_tanh": True}})
+    assert moved.policy.fast_tanh is True
