@@ -126,3 +126,23 @@ def test_no_package_has_an_import_cycle_among_its_modules():
     for node in sorted(graph):
         if node not in state:
             visit(node, [node])
+
+
+def test_the_configuration_imports_no_task_logic_planner_or_learner():
+    """Reading a training configuration needs the configuration classes, not the code they
+    configure: the task, its logics, the planners, torch and SB3 stay unimported."""
+    import subprocess
+    import sys
+
+    heavy = (
+        "safeswitch.leftturn.task", "safeswitch.leftturn.logics", "safeswitch.evaluation.planner",
+        "safeswitch.evaluation.traffic_planner", "torch", "stable_baselines3",
+    )  # fmt: skip
+    code = (
+        "import sys, safeswitch.training.config\n"
+        f"heavy = {heavy!r}\n"
+        "print(' '.join(m for m in sys.modules if any(m == h or m.startswith(h + '.') "
+        "for h in heavy)))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == []

@@ -30,82 +30,18 @@ paper logic, not a deployable controller.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.config import check
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
+from safeswitch.evaluation.planner_config import PlannerConfig
 from safeswitch.leftturn.logics.paper import PaperSwitching, firing_distance
 from safeswitch.leftturn.spaces import speed_tracking_action
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class PlannerConfig:
-    """Tuning of the planner (all ours; measured on 1,000 random scenarios, see the README).
-
-    Attributes:
-        top_speed_kmh: Speed on the straight when passing first [km/h] (the end of ``R_v``'s
-            tolerated speeding).
-        accel_lat: Lateral acceleration the turn is planned for [m/s²] (the plant's measured
-            lateral acceleration runs ~5 % above ``v² κ`` with ``PID_lka`` steering; 2.85
-            already exceeds the 3 m/s² comfort limit on 4 % of ticks).
-        curve_decel: Deceleration the speed target assumes when slowing for the turn [m/s²]
-            (a closed throttle gives 1.2–1.6). Slowing early costs: at 1.0 the pass-first
-            drive reached the zone's far end too late in 44 of the README's 1,000 scenarios,
-            and the planner yielded where it could have passed (8.03 s on average instead of
-            7.84 s, with ``ttr_margin_s`` 0.05 and ``preview_s`` 0.3). Much more than
-            1.7 comes into the turn faster than the oracle's point-mass model allows: the
-            plant's lateral acceleration lags the route's curvature, so the car stays within
-            3 m/s², but it then beats the oracle (at 2.5, in 8 % of the scenarios), which
-            would no longer be a limit.
-        preview_s: The speed target is read this far ahead along the route [s].
-        speed_gain: Throttle per m/s of speed error.
-        ttr_margin_s: Added to the switching logic's TTR threshold in the pass-first check (the
-            check simulates the very drive the planner then makes, north car included, so none
-            is needed: 0 safety actions on 3,000 scenarios without one).
-        stop_extra_m: Added to the switching logic's stop margin when yielding [m].
-        yield_margin_s: Arrive at the firing point this long after the north car left its zone.
-        yield_speed: Speed at which a yield arrives at the firing point [m/s] (3.5–4 is the
-            fastest on the README's scenarios; 5.0 costs 0.05 s, the 6.8 of an arrival at the
-            turn's speed 0.15 s).
-        coast_decel: The deceleration a yield may count on to slow down to ``yield_speed``
-            [m/s²] (a closed throttle gives 1.2–1.6; at 1.5 the switching logic fires in 5 %
-            of the scenarios).
-        creep: While waiting, never slower than this fraction of the constant speed that would
-            arrive on time (keeps the car rolling instead of stopping early).
-        recheck_ticks: Ticks between two pass-first checks (the decision holds in between).
-    """
-
-    top_speed_kmh: float = 30.0
-    accel_lat: float = 2.8
-    curve_decel: float = 1.7
-    preview_s: float = 0.1
-    speed_gain: float = 0.6
-    ttr_margin_s: float = 0.0
-    stop_extra_m: float = 0.3
-    yield_margin_s: float = 0.1
-    yield_speed: float = 4.0
-    coast_decel: float = 1.0
-    creep: float = 0.5
-    recheck_ticks: int = 5
-
-    def __post_init__(self) -> None:
-        o = "planner"
-        positive = ("top_speed_kmh", "accel_lat", "curve_decel", "speed_gain", "yield_speed")
-        for name in (*positive, "coast_decel"):
-            value = getattr(self, name)
-            check(math.isfinite(value) and value > 0, o, name, value, "must be > 0")
-        for name in ("preview_s", "ttr_margin_s", "stop_extra_m", "yield_margin_s", "creep"):
-            value = getattr(self, name)
-            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
-        check(self.recheck_ticks >= 1, o, "recheck_ticks", self.recheck_ticks, "must be >= 1")
 
 
 class Planner:

@@ -30,77 +30,16 @@ collision-free by the filter's guarantee whatever it does; what it adds is that 
 from __future__ import annotations
 
 import dataclasses
-import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.config import check
 from safeswitch.evaluation.planner import FastDrive, drive_passes
+from safeswitch.evaluation.planner_config import GapPlannerConfig
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 
 FloatArray = NDArray[np.float64]
-#: What the gap planner's go check may know of the other vehicles (:class:`GapPlannerConfig`).
-FORESIGHTS = ("full", "observed")
-
-
-@dataclass(frozen=True)
-class GapPlannerConfig:
-    """Tuning of the gap planner (all ours).
-
-    Attributes:
-        top_speed_kmh: Speed on the straight [km/h] (the end of ``R_v``'s tolerated speeding).
-        accel_lat: Lateral acceleration the turn is planned for [m/s²] (as the planner's).
-        curve_decel: Deceleration the speed target assumes when slowing for the turn [m/s²].
-        preview_s: The speed target is read this far ahead along the route [s].
-        speed_gain: Throttle per m/s of speed error.
-        stop_extra_m: Where a wait aims to stop, before the first crossing movement's conflict
-            zone (the certified margin already included) [m].
-        coast_decel: The deceleration a wait may count on to stop there [m/s²]. A closed
-            throttle gives 1.2–1.6 above walking pace but little below it: aimed at 1 m before
-            the zone at 1.0 m/s², the car crept the last metre and the filter's stop backup
-            held it at the zone in 159 of 200 ``test`` scenes; at 3 m and 0.6 m/s², in none.
-        coast_band_m: Within this distance of where it would stop, a wait closes the throttle
-            instead of tracking its ever slower target (the throttle of a walking pace is
-            above the one that holds the car still, and a clone of it creeps on into the
-            filter's stop).
-        go_margin_s: Go only if the fast drive would also pass when begun this much later
-            [s] (a clone of the planner, which cannot see everything the check does, goes a
-            little late or a little slowly; a gap that would just pass labels it wrong).
-        recheck_ticks: Ticks between two go checks (the decision holds in between).
-        foresight: What the go check knows of the other vehicles. ``full``: everything the
-            simulation holds, their drivers' yielding and the vehicles still to come included
-            (a reference no onboard controller could be). ``observed``: only what a car could
-            see, the vehicles on the approaches now, each assumed never to yield (the
-            certified filter's own assumption); a teacher whose decisions a policy observing
-            the traffic can learn.
-    """
-
-    top_speed_kmh: float = 30.0
-    accel_lat: float = 2.8
-    curve_decel: float = 1.7
-    preview_s: float = 0.1
-    speed_gain: float = 0.6
-    stop_extra_m: float = 4.0
-    coast_decel: float = 0.6
-    coast_band_m: float = 10.0
-    go_margin_s: float = 0.0
-    recheck_ticks: int = 5
-    foresight: str = "full"
-
-    def __post_init__(self) -> None:
-        o = "gap_planner"
-        for name in ("top_speed_kmh", "accel_lat", "curve_decel", "speed_gain", "coast_decel"):
-            value = getattr(self, name)
-            check(math.isfinite(value) and value > 0, o, name, value, "must be > 0")
-        for name in ("preview_s", "stop_extra_m", "coast_band_m", "go_margin_s"):
-            value = getattr(self, name)
-            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
-        check(self.recheck_ticks >= 1, o, "recheck_ticks", self.recheck_ticks, "must be >= 1")
-        check(self.foresight in FORESIGHTS, o, "foresight", self.foresight,
-              f"must be one of {', '.join(FORESIGHTS)}")  # fmt: skip
 
 
 class GapPlanner:

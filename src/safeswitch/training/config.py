@@ -27,8 +27,7 @@ from safeswitch.core.config import (
     to_dict,
 )
 from safeswitch.core.registry import logic_names, logic_params
-from safeswitch.evaluation.planner import PlannerConfig
-from safeswitch.evaluation.traffic_planner import GapPlannerConfig
+from safeswitch.evaluation.planner_config import GapPlannerConfig, PlannerConfig
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig, TrafficConfig, traffic_config
 
 
