@@ -318,6 +318,25 @@ def test_the_cheap_screen_only_passes_states_the_full_certificate_accepts(logic,
         assert accepted[settled].all()
 
 
+def test_the_quick_curve_bound_only_passes_states_the_full_curve_certificate_accepts(logic):
+    """``_stable_quick`` (the screen's, and the filter's first try after the learned tick)
+    must be sufficient for ``_stable``: every state it passes, with the lag phase's worst
+    speed gain on top of the speed, is one the full curve certificate accepts."""
+    from safeswitch.leftturn.logics.certified import _stable, _stable_quick
+
+    rng = np.random.default_rng(5)
+    c, envelope = logic.bounds.c, logic.envelope
+    route = envelope.spacing * envelope.curve.shape[0]
+    passed = 0
+    for _ in range(20_000):
+        progress, speed = rng.uniform(0, route), rng.uniform(0, 15)
+        throttle, brake = rng.uniform(0, 1), rng.choice([0.0, rng.uniform(0, 1)])
+        if _stable_quick(progress, speed + c.lag_gain_worst, c, envelope):
+            passed += 1
+            assert _stable(progress, speed, throttle, brake, logic.bounds, envelope)
+    assert 0.3 < passed / 20_000 < 0.99  # it decides a real share
+
+
 def test_the_quick_stop_bound_never_undercuts_the_exact_one_nor_the_plant(logic):
     rng = np.random.default_rng(4)
     n = 20_000

@@ -263,11 +263,18 @@ def _stable(
     cc = c.drive_max / c.mass * throttle
     f, dt = c.progress_factor, c.dt
     low, high, v = progress - c.progress_jump, progress + c.progress_jump, speed
+    # The smallest curve speed over [low, high], kept as ``high`` grows: each segment is read
+    # once (the same minimum as _envelope_window's, which would re-read the stretch each tick).
+    segments = e.curve.shape[0]
+    i, lowest_curve = _segment(low, e.spacing, segments), math.inf
     for k in range(rho_t.shape[0]):
         v_next = max(v - dt * (a - b * rho_b[k] - cc * rho_t[k]), 0.0)
         high += f * dt * 0.5 * (v + v_next)
         top = max(v, v_next)
-        lowest_curve, _ = _envelope_window(low, high, e.spacing, e.decel, e.curve, e.node)
+        last = min(_segment(high, e.spacing, segments), segments - 1)
+        while i <= last:
+            lowest_curve = min(lowest_curve, e.curve[i])
+            i += 1
         if top * top > lowest_curve:
             return False
         v = v_next
@@ -566,17 +573,27 @@ def _decide(
             if s <= phantom_zones[p, 1]:
                 first = min(first, phantom_zones[p, 0])
         top = speed + c.accel_max * c.dt  # after a tick of the hardest acceleration
-        if _settled(s, speed, first, c) and _stable_quick(
+        settled = _settled(s, speed, first, c)
+        if settled and _stable_quick(
             s + top * step + c.progress_jump, top + c.lag_gain_worst, c, envelope
         ):
             continue
         low, high, v1, th1, br1 = _predict(
             s, speed, throttle, brake, learned[b, 0], learned[b, 1], c, k
         )
-        # The vehicles may arrive one tick sooner after the learned tick.
-        stop1, clear1 = _safe(low, high, v1, th1, br1, present, zones, arrivals, b, c.dt,
-                              phantom_zones, phantom_entry, t)  # fmt: skip
-        if (stop1 or clear1) and _stable(high, v1, th1, br1, t, envelope):
+        # A settled state stays free of conflicts whatever the learned tick: only its curves
+        # are left to certify. Else the vehicles may arrive one tick sooner after that tick.
+        conflicts_ok = settled
+        if not settled:
+            stop1, clear1 = _safe(low, high, v1, th1, br1, present, zones, arrivals, b, c.dt,
+                                  phantom_zones, phantom_entry, t)  # fmt: skip
+            conflicts_ok = stop1 or clear1
+        # The quick curve bound first (sufficient for _stable, as in the screen), now with the
+        # speed the learned tick gives rather than the hardest acceleration's.
+        if conflicts_ok and (
+            _stable_quick(high, v1 + c.lag_gain_worst, c, envelope)
+            or _stable(high, v1, th1, br1, t, envelope)
+        ):
             continue
         stop0, clear0 = _safe(s, s, speed, throttle, brake, present, zones, arrivals, b, 0.0,
                               phantom_zones, phantom_entry, t)  # fmt: skip
