@@ -976,12 +976,12 @@ class ControllerOutputs(NamedTuple):
 
     @classmethod
     def empty(cls, batch: int) -> ControllerOutputs:
-        pair = (batch, 2)
+        """Uninitialised outputs for ``batch`` episodes (an array each: cheaper than views of
+        a few blocks at the batch of a single ``Env``)."""
+        e, pair, three, flag = np.empty, (batch, 2), (3, batch), np.bool_
         return cls(
-            np.empty(batch), np.empty(batch), np.empty(batch), np.empty((3, batch)),
-            np.empty((3, batch)), np.empty((3, batch)), np.empty(pair), np.empty((3, *pair)),
-            np.empty(pair), np.empty(pair), np.empty(pair), np.empty(batch, dtype=np.bool_),
-            np.empty(batch, dtype=np.bool_),
+            e(batch), e(batch), e(batch), e(three), e(three), e(three), e(pair),
+            e((3, batch, 2)), e(pair), e(pair), e(pair), e(batch, flag), e(batch, flag),
         )  # fmt: skip
 
 
@@ -1128,16 +1128,12 @@ class Bookkeeping(NamedTuple):
 
     @classmethod
     def empty(cls, batch: int) -> Bookkeeping:
-        def flag() -> BoolArray:
-            return np.empty(batch, dtype=np.bool_)
-
-        def code() -> NDArray[np.int8]:
-            return np.empty(batch, dtype=np.int8)
-
+        """Uninitialised outputs for ``batch`` episodes."""
+        e, flag, code = np.empty, np.bool_, np.int8
         return cls(
-            (np.empty(batch), np.empty(batch), np.empty(batch), np.empty(batch), np.empty(batch)),
-            np.empty(batch), np.empty(batch, dtype=np.int64), flag(), flag(), flag(), flag(),
-            flag(), code(), code(), code(), np.empty((batch, 6), dtype=np.float32),
+            (e(batch), e(batch), e(batch), e(batch), e(batch)), e(batch), e(batch, np.int64),
+            e(batch, flag), e(batch, flag), e(batch, flag), e(batch, flag), e(batch, flag),
+            e(batch, code), e(batch, code), e(batch, code), e((batch, 6), np.float32),
         )  # fmt: skip
 
 
