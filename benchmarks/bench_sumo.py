@@ -53,8 +53,9 @@ ADVERSARIES = ("uniform", "bang_bang", "full_throttle", "zero_throttle", "enter_
 COMPARED = (("learned", "shipped"), ("learned", "certified"), ("learned", "paper-scratch"),
             ("rule", None))  # fmt: skip
 TRAFFIC_PRESETS = ("light", "medium", "heavy", "test")
-KEYS = ("collisions", "safety_activation_episodes", "cleared_episodes", "mean_time_to_clear_s",
-        "comfort_violation_fraction", "mean_efficiency")  # fmt: skip
+KEYS = ("failures", "collisions", "lost_control_episodes", "safety_activation_episodes",
+        "cleared_episodes", "mean_time_to_clear_s", "comfort_violation_fraction",
+        "mean_efficiency")  # fmt: skip
 
 
 def steps_per_s(env: Any, steps: int) -> float:
@@ -182,6 +183,7 @@ def patience_check(episodes: int, traffic: str = "medium") -> list[dict[str, obj
         scenes, _ = scenario_set(task, "random", episodes, 7)
         result, _ = run_controller(task, rule, scenes, trace=False)
         rows.append({"patience_s": patience, "collisions": int((result.collision > 0).sum()),
+                     "lost_control": int(result.lost_control.sum()),
                      "cleared_episodes": int(np.isfinite(result.time_to_clear).sum())})  # fmt: skip
         print(f"  rule / paper, embedded, patience {patience:g} s: {rows[-1]}", file=sys.stderr)
     return rows
