@@ -10,9 +10,9 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
-from safeswitch.core.config import ConfigError, check, from_dict, to_dict
+from safeswitch.core.config import Bounds, ConfigError, check, check_bounds, from_dict, to_dict
 from safeswitch.core.pid import PIDGains
 from safeswitch.core.registry import logic_names, logic_params
 from safeswitch.sim.road import IntersectionGeometry
@@ -45,7 +45,7 @@ class ControllerConfig:
             11.75 m turn at 25 km/h; 4 m and 7 m give 0.78 m and 0.97 m).
         emergency_decel: ``a_max_lon``, the deceleration ``PID_b`` tracks and Eq. 3 uses
             [m/s²] (ours: above the 5 m/s² comfort limit — the Safety controller may sacrifice
-            comfort — and well inside the tyres' 8.3 m/s²).
+            comfort — and well inside the tyres' μ·g = 8.8 m/s²).
         learned_speed_limiter_kmh: A speed limiter on the learned controller's throttle [km/h]
             (ours, off by default; the paper has none): above ``cap = clip(u_ss(v_cap) +
             gain · (v_cap − v), 0, 1)`` — ``u_ss`` the throttle that holds ``v_cap`` on a level
@@ -57,55 +57,19 @@ class ControllerConfig:
             limit (ours).
     """
 
-    speed_limit_kmh: float = 25.0
+    speed_limit_kmh: Annotated[float, Bounds(0, 130, low_open=True, unit="km/h")] = 25.0
     throttle_pid: PIDGains = field(default_factory=lambda: PIDGains(1.5, 0.05, 0.002, 0.0, 0.7))
     brake_pid: PIDGains = field(
         default_factory=lambda: PIDGains(0.3, 0.40, 0.100, 0.0, 1.0, derivative_filter_s=0.2)
     )
     lane_pid: PIDGains = field(default_factory=lambda: PIDGains(0.2, 0.01, 0.020, -1.0, 1.0))
-    lane_lookahead_m: float = 5.0
-    emergency_decel: float = 6.0
-    learned_speed_limiter_kmh: float | None = None
-    learned_speed_limiter_gain: float = 1.0
+    lane_lookahead_m: Annotated[float, Bounds(0, 30, low_open=True, unit="m")] = 5.0
+    emergency_decel: Annotated[float, Bounds(0, 9, low_open=True, unit="m/s²")] = 6.0
+    learned_speed_limiter_kmh: Annotated[float | None, Bounds(5, 130, unit="km/h")] = None
+    learned_speed_limiter_gain: Annotated[float, Bounds(0, 10, low_open=True, unit="per m/s")] = 1.0
 
     def __post_init__(self) -> None:
-        o = "controllers"
-        limit = self.learned_speed_limiter_kmh
-        check(
-            limit is None or 5 <= limit <= 130,
-            o,
-            "learned_speed_limiter_kmh",
-            limit,
-            "must be None or in [5, 130] km/h",
-        )
-        check(
-            0 < self.learned_speed_limiter_gain <= 10,
-            o,
-            "learned_speed_limiter_gain",
-            self.learned_speed_limiter_gain,
-            "must be in (0, 10] per m/s",
-        )
-        check(
-            0 < self.speed_limit_kmh <= 130,
-            o,
-            "speed_limit_kmh",
-            self.speed_limit_kmh,
-            "must be in (0, 130]",
-        )
-        check(
-            0 < self.lane_lookahead_m <= 30,
-            o,
-            "lane_lookahead_m",
-            self.lane_lookahead_m,
-            "must be in (0, 30]",
-        )
-        check(
-            0 < self.emergency_decel <= 9.0,
-            o,
-            "emergency_decel",
-            self.emergency_decel,
-            "must be in (0, 9] m/s²",
-        )
+        check_bounds(self, "controllers")
 
     @property
     def speed_limit(self) -> float:
@@ -133,29 +97,13 @@ class PaperSwitchingConfig:
             [m/s] (ours).
     """
 
-    ttr_threshold_s: float = 2.0
-    stop_margin_m: float = 1.5
-    latency_s: float = 0.1
-    min_speed: float = 0.1
+    ttr_threshold_s: Annotated[float, Bounds(0, 20, unit="s")] = 2.0
+    stop_margin_m: Annotated[float, Bounds(0, 20, unit="m")] = 1.5
+    latency_s: Annotated[float, Bounds(0, 2, unit="s")] = 0.1
+    min_speed: Annotated[float, Bounds(0, 5, low_open=True, unit="m/s")] = 0.1
 
     def __post_init__(self) -> None:
-        o = "paper"
-        check(
-            0 <= self.ttr_threshold_s <= 20,
-            o,
-            "ttr_threshold_s",
-            self.ttr_threshold_s,
-            "must be in [0, 20] s",
-        )
-        check(
-            0 <= self.stop_margin_m <= 20,
-            o,
-            "stop_margin_m",
-            self.stop_margin_m,
-            "must be in [0, 20] m",
-        )
-        check(0 <= self.latency_s <= 2, o, "latency_s", self.latency_s, "must be in [0, 2] s")
-        check(0 < self.min_speed <= 5, o, "min_speed", self.min_speed, "must be in (0, 5] m/s")
+        check_bounds(self, "paper")
 
 
 @dataclass(frozen=True)
