@@ -659,15 +659,16 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         # switching logic sees (one compiled loop, see _controllers).
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
         v = world.vehicles
-        pids = (state.pid_throttle, state.pid_brake, state.pid_north)
+        th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
         out = ControllerOutputs.empty(batch)
         _controllers(
             self._controller_constants,
             ControllerInputs(
                 learned_throttle, v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress,
                 state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
-                tuple(a for pid in pids for a in (pid.integral, pid.prev_error, pid.derivative)),
-                (state.pid_lane.integral, state.pid_lane.prev_error, state.pid_lane.derivative),
+                (th.integral, th.prev_error, th.derivative, br.integral, br.prev_error,
+                 br.derivative, no.integral, no.prev_error, no.derivative),
+                (la.integral, la.prev_error, la.derivative),
             ),
             out,
         )  # fmt: skip
@@ -676,9 +677,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             out.north_throttle,
             out.north_brake,
         )
-        pid_throttle, pid_brake, pid_north, pid_lane = (
-            PIDState(*p) for p in (out.pid_throttle, out.pid_brake, out.pid_north, out.pid_lane)
-        )
+        pid_throttle, pid_brake = PIDState(*out.pid_throttle), PIDState(*out.pid_brake)
+        pid_north, pid_lane = PIDState(*out.pid_north), PIDState(*out.pid_lane)
         steer, proposed, safe, fallback = out.steer, out.proposed, out.safe, out.fallback
         both, in_charge = out.both, out.in_charge
         cut_over_range = None
