@@ -58,9 +58,13 @@ def timed(cell: Cell, episodes: int, workers: int, seed: int) -> dict[str, float
         "ray_startup_s": s["ray_startup_s"],
         "work_s": work,
         "episodes_per_s": episodes / work,
-        "collisions": s["cells"][cell.key]["collisions"],
-        "mean_efficiency": s["cells"][cell.key]["mean_efficiency"],
+        **{k: s["cells"][cell.key][k] for k in SHOWN},
     }
+
+
+#: What a campaign's summary must show beside its speed (failures, and what could hide one).
+SHOWN = ("failures", "collisions", "lost_control_episodes", "speeding_episodes", "max_speed_kmh",
+         "cleared_episodes", "mean_efficiency")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -93,7 +97,9 @@ def main(argv: list[str] | None = None) -> int:
         result["million_shipped" if args.model == "shipped" else "million"] = million
         print(
             f"1,000,000 episodes of {args.model}, 2 workers: {million['wall_time_s']:.0f} s "
-            f"({million['episodes_per_s']:,.0f} episodes/s), {million['collisions']} collisions",
+            f"({million['episodes_per_s']:,.0f} episodes/s), {million['failures']} failures "
+            f"({million['collisions']} collisions, {million['lost_control_episodes']} lost "
+            f"control), {million['speeding_episodes']:,} speeding",
             file=sys.stderr,
         )
     name = "campaign.json" if args.controller == "rule" else f"campaign_{args.controller}.json"
