@@ -196,11 +196,24 @@ class Bounds:
         )
 
 
+_DECLARED: dict[type, dict[str, Bounds]] = {}
+
+
+def _declared(cls: type) -> dict[str, Bounds]:
+    """Every field of ``cls`` that declares :class:`Bounds`, read once per class."""
+    if cls not in _DECLARED:
+        hints = typing.get_type_hints(cls, include_extras=True)
+        _DECLARED[cls] = {
+            name: found[0]
+            for name, hint in hints.items()
+            if (found := [m for m in getattr(hint, "__metadata__", ()) if isinstance(m, Bounds)])
+        }
+    return _DECLARED[cls]
+
+
 def bounds_of(cls: type, name: str) -> Bounds | None:
     """The :class:`Bounds` declared on field ``name`` of ``cls``, if any."""
-    hint = typing.get_type_hints(cls, include_extras=True)[name]
-    found = [m for m in getattr(hint, "__metadata__", ()) if isinstance(m, Bounds)]
-    return found[0] if found else None
+    return _declared(cls).get(name)
 
 
 def check_bounds(config: Any, owner: str) -> None:
@@ -209,13 +222,12 @@ def check_bounds(config: Any, owner: str) -> None:
     Raises:
         ConfigError: Naming ``owner.field``, its value and the range.
     """
-    for f in dataclasses.fields(config):
-        bounds = bounds_of(type(config), f.name)
-        value = getattr(config, f.name)
-        if bounds is None or value is None:
+    for name, bounds in _declared(type(config)).items():
+        value = getattr(config, name)
+        if value is None:
             continue
         number = isinstance(value, int | float) and not isinstance(value, bool)
-        check(number and bounds.holds(value), owner, f.name, value, bounds.describe())
+        check(number and bounds.holds(value), owner, name, value, bounds.describe())
 
 
 def check(condition: bool, owner: str, name: str, value: Any, requirement: str) -> None:
