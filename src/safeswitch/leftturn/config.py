@@ -567,39 +567,16 @@ class EpisodeConfig:
             outcome it would meet deployed under ``paper``, without the crash.
     """
 
-    dt: float = 0.02
-    horizon_s: float = 12.0
-    approach_distance_m: float = 30.0
+    dt: Annotated[float, Bounds(0, 0.1, low_open=True, unit="s")] = 0.02
+    horizon_s: Annotated[float, Bounds(1, 120, unit="s")] = 12.0
+    approach_distance_m: Annotated[float, Bounds(5, 100, unit="m")] = 30.0
     learned_scope: LearnedScope = "window"
-    conflict_margin_m: float = 0.3
-    decision_interval: int = 1
+    conflict_margin_m: Annotated[float, Bounds(0, 2, unit="m")] = 0.3
+    decision_interval: Annotated[int, Bounds(1, 50, unit="ticks")] = 1
     end_on_reasons: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        o = "episode"
-        check(0 < self.dt <= 0.1, o, "dt", self.dt, "must be in (0, 0.1] s")
-        check(1 <= self.horizon_s <= 120, o, "horizon_s", self.horizon_s, "must be in [1, 120] s")
-        check(
-            5 <= self.approach_distance_m <= 100,
-            o,
-            "approach_distance_m",
-            self.approach_distance_m,
-            "must be in [5, 100] m",
-        )
-        check(
-            0 <= self.conflict_margin_m <= 2,
-            o,
-            "conflict_margin_m",
-            self.conflict_margin_m,
-            "must be in [0, 2] m",
-        )
-        check(
-            1 <= self.decision_interval <= 50,
-            o,
-            "decision_interval",
-            self.decision_interval,
-            "must be in [1, 50] ticks",
-        )
+        check_bounds(self, "episode")
 
     @property
     def horizon_ticks(self) -> int:
