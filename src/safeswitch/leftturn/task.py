@@ -993,50 +993,48 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
     who proposes the ego's pedals (``scope`` codes :data:`LEARNED_SCOPES`: the learned throttle
     while in charge, else ``PID_th``'s) and the fallback for an invalid learned action (the
     actual pedals held)."""
-    pid, lane, g = i.pids, i.lane, c.gains
-    for b in range(i.x.shape[0]):
-        error = c.speed_limit - i.speed[b, 0]
+    # The tuples' arrays taken out once (see jit: read through a tuple inside the loop, each
+    # is fetched and reference-counted on every access).
+    pid, lane, g, layout = i.pids, i.lane, c.gains, c.layout
+    learned, x, y, cos_yaw, sin_yaw = i.learned_throttle, i.x, i.y, i.cos_yaw, i.sin_yaw
+    speed, progress, accel_lon, target = i.speed, i.progress, i.accel_lon, i.north_target
+    held_throttle, held_brake = i.throttle, i.brake
+    pid_th, pid_b, pid_n, pid_lka = out.pid_throttle, out.pid_brake, out.pid_north, out.pid_lane
+    safety_brake, north_throttle, north_brake = (
+        out.safety_brake,
+        out.north_throttle,
+        out.north_brake,
+    )
+    steer, proposed, safe, fallback = out.steer, out.proposed, out.safe, out.fallback
+    both, charge = out.both, out.in_charge
+    for b in range(x.shape[0]):
+        error = c.speed_limit - speed[b, 0]
         rule, integral, derivative = pid_tick(g.throttle, c.dt, error, pid[0][b], pid[1][b],
                                               pid[2][b])  # fmt: skip
-        out.pid_throttle[0, b], out.pid_throttle[1, b], out.pid_throttle[2, b] = (
-            integral,
-            error,
-            derivative,
-        )
-        error = c.emergency_decel + i.accel_lon[b]
+        pid_th[0, b], pid_th[1, b], pid_th[2, b] = integral, error, derivative
+        error = c.emergency_decel + accel_lon[b]
         brake, integral, derivative = pid_tick(g.brake, c.dt, error, pid[3][b], pid[4][b],
                                                pid[5][b])  # fmt: skip
-        out.safety_brake[b] = brake
-        out.pid_brake[0, b], out.pid_brake[1, b], out.pid_brake[2, b] = (
-            integral,
-            error,
-            derivative,
+        safety_brake[b] = brake
+        pid_b[0, b], pid_b[1, b], pid_b[2, b] = integral, error, derivative
+        north_throttle[b], north_brake[b], pid_n[0, b], pid_n[1, b], pid_n[2, b] = autopilot_tick(
+            g.north_speed, c.dt, c.plant, speed[b, 1], target[b], pid[6][b], pid[7][b], pid[8][b]
         )
-        (out.north_throttle[b], out.north_brake[b], out.pid_north[0, b], out.pid_north[1, b],
-         out.pid_north[2, b]) = autopilot_tick(
-            g.north_speed, c.dt, c.plant, i.speed[b, 1], i.north_target[b], pid[6][b],
-            pid[7][b], pid[8][b],
-        )  # fmt: skip
         for j in range(2):
             error = preview(
-                c.tables, c.spacing, c.k_max, c.base[j], i.progress[b, j], i.x[b, j], i.y[b, j],
-                i.cos_yaw[b, j], i.sin_yaw[b, j], c.lookahead,
+                c.tables, c.spacing, c.k_max, c.base[j], progress[b, j], x[b, j], y[b, j],
+                cos_yaw[b, j], sin_yaw[b, j], c.lookahead,
             )  # fmt: skip
-            steer, integral, derivative = pid_tick(
+            steer[b, j], integral, derivative = pid_tick(
                 g.lane, c.dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
-            out.steer[b, j] = steer
-            out.pid_lane[0, b, j], out.pid_lane[1, b, j], out.pid_lane[2, b, j] = (
-                integral,
-                error,
-                derivative,
-            )
-        at = at_intersection(i.progress[b, 0], i.progress[b, 1], c.layout)
+            pid_lka[0, b, j], pid_lka[1, b, j], pid_lka[2, b, j] = integral, error, derivative
+        at = at_intersection(progress[b, 0], progress[b, 1], layout)
         in_charge = at if c.scope == 0 else c.scope == 1
-        out.both[b], out.in_charge[b] = at, in_charge
-        out.proposed[b, 0], out.proposed[b, 1] = (i.learned_throttle[b] if in_charge else rule), 0.0
-        out.safe[b, 0], out.safe[b, 1] = 0.0, brake
-        out.fallback[b, 0], out.fallback[b, 1] = i.throttle[b, 0], i.brake[b, 0]
+        both[b], charge[b] = at, in_charge
+        proposed[b, 0], proposed[b, 1] = (learned[b] if in_charge else rule), 0.0
+        safe[b, 0], safe[b, 1] = 0.0, brake
+        fallback[b, 0], fallback[b, 1] = held_throttle[b, 0], held_brake[b, 0]
 
 
 class BookkeepingConstants(NamedTuple):
@@ -1146,49 +1144,70 @@ def _after_plant(c: BookkeepingConstants, i: AfterPlant, out: Bookkeeping) -> No
     a valid action, else the rule, whose reason code then replaces the supervision's), and the
     observation. A failure — a collision or a loss of control — ends the episode and gets
     ``collision_penalty``."""
-    limits, terms = c.limits, out.terms
-    for b in range(i.x.shape[0]):
+    # The tuples' arrays taken out once (see jit).
+    limits, (t0, t1, t2, t3, t4) = c.limits, out.terms
+    safety_active, use_safety, valid, in_charge = (
+        i.safety_active,
+        i.use_safety,
+        i.valid,
+        i.in_charge,
+    )
+    separation, x, y, speed, progress = i.separation, i.x, i.y, i.speed, i.progress
+    given = i.reason
+    lateral, accel_lon, accel_lat, tick, outcome = (
+        i.lateral,
+        i.accel_lon,
+        i.accel_lat,
+        i.tick,
+        i.outcome,
+    )
+    reward, new_tick, collided, terminated = out.reward, out.tick, out.collision, out.terminated
+    truncated, ego_cleared, lost_control = out.truncated, out.ego_cleared, out.lost_control
+    new_outcome, controller, reason, observation = (
+        out.outcome, out.controller, out.reason, out.observation
+    )  # fmt: skip
+    for b in range(x.shape[0]):
         adas, lka, v, lon, lat = tick_terms(
-            c.tables, c.adas_penalty, i.safety_active[b], i.lateral[b, 0], i.speed[b, 0],
-            i.accel_lon[b, 0], i.accel_lat[b, 0],
+            c.tables, c.adas_penalty, safety_active[b], lateral[b, 0], speed[b, 0],
+            accel_lon[b, 0], accel_lat[b, 0],
         )  # fmt: skip
-        terms[0][b], terms[1][b], terms[2][b], terms[3][b], terms[4][b] = adas, lka, v, lon, lat
-        collision = i.separation[b] <= 0.0
-        lost = abs(i.lateral[b, 0]) > limits.lost_control_m
+        t0[b], t1[b], t2[b], t3[b], t4[b] = adas, lka, v, lon, lat
+        collision = separation[b] <= 0.0
+        lost = abs(lateral[b, 0]) > limits.lost_control_m
         failed = collision or lost
         total = adas + lka + v + lon + lat
         if c.collision_penalty != 0.0:
             total = total + (c.collision_penalty if failed else 0.0)
-        out.reward[b] = total
-        t = i.tick[b] + 1
-        out.tick[b] = t
-        out.collision[b] = collision
-        out.terminated[b] = failed
-        out.truncated[b] = (not failed) and (
-            t >= limits.horizon_ticks or i.progress[b, 0] >= limits.ego_route_end
+        reward[b] = total
+        t = tick[b] + 1
+        new_tick[b] = t
+        collided[b] = collision
+        terminated[b] = failed
+        truncated[b] = (not failed) and (
+            t >= limits.horizon_ticks or progress[b, 0] >= limits.ego_route_end
         )
-        cleared = i.progress[b, 0] > limits.ego_zone_exit
-        out.ego_cleared[b] = cleared
-        out.lost_control[b] = lost
-        if i.outcome[b] != 0:
-            out.outcome[b] = i.outcome[b]
+        cleared = progress[b, 0] > limits.ego_zone_exit
+        ego_cleared[b] = cleared
+        lost_control[b] = lost
+        if outcome[b] != 0:
+            new_outcome[b] = outcome[b]
         elif cleared:  # decided as the ego clears: before the north car left its zone, or after
-            out.outcome[b] = 2 if i.progress[b, 1] > limits.north_zone_exit else 1
+            new_outcome[b] = 2 if progress[b, 1] > limits.north_zone_exit else 1
         else:
-            out.outcome[b] = 0
-        out.reason[b] = i.reason[b]
-        if i.use_safety[b]:
-            out.controller[b] = 2
-        elif i.in_charge[b] and i.valid[b]:
-            out.controller[b] = 0
+            new_outcome[b] = 0
+        reason[b] = given[b]
+        if use_safety[b]:
+            controller[b] = 2
+        elif in_charge[b] and valid[b]:
+            controller[b] = 0
         else:
-            out.controller[b] = 1
-            if not i.in_charge[b]:
-                out.reason[b] = c.rule_code
+            controller[b] = 1
+            if not in_charge[b]:
+                reason[b] = c.rule_code
         for j in range(2):
-            out.observation[b, 3 * j] = i.x[b, j]
-            out.observation[b, 3 * j + 1] = i.y[b, j]
-            out.observation[b, 3 * j + 2] = i.speed[b, j]
+            observation[b, 3 * j] = x[b, j]
+            observation[b, 3 * j + 1] = y[b, j]
+            observation[b, 3 * j + 2] = speed[b, j]
 
 
 @jit
