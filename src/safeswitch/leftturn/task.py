@@ -47,7 +47,13 @@ from safeswitch.leftturn.scenarios import (
     sample_scenarios,
     scenario_uniforms,
 )
-from safeswitch.leftturn.views import ConflictView, NorthConflict, Phantoms, north_view
+from safeswitch.leftturn.views import (
+    ConflictView,
+    NorthConflict,
+    Phantoms,
+    approaching,
+    north_view,
+)
 from safeswitch.sim.autopilot import AutopilotParams, autopilot_tick
 from safeswitch.sim.conflict import ConflictGeometry, conflict_geometry
 from safeswitch.sim.geometry import FloatArray, IntArray, preview
@@ -569,11 +575,11 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
                 arrays = [np.empty(shape, dtype=np.bool_) for _ in range(3)]
                 arrays += [np.empty(shape) for _ in range(5)]
             present, inside, window, entry, exit_, point, distance, speed = arrays
-            in_reach = view.other_progress <= view.other_zone[..., 1]
+            s, zone = view.other_progress, view.other_zone
             present[:, tick] = view.present
-            distance[:, tick] = view.other_point - view.other_progress
-            inside[:, tick] = (view.other_progress >= view.other_zone[..., 0]) & in_reach
-            window[:, tick] = (distance[:, tick] <= approach) & in_reach
+            distance[:, tick] = view.other_point - s
+            inside[:, tick] = (s >= zone[..., 0]) & (s <= zone[..., 1])
+            window[:, tick] = approaching(s, view.other_point, zone[..., 1], approach)
             entry[:, tick] = view.ego_zone[..., 0]
             exit_[:, tick] = view.ego_zone[..., 1]
             point[:, tick] = view.ego_point
@@ -1217,9 +1223,7 @@ def at_intersection(
     """Algorithm 1's While condition: both cars within the approach distance of their conflict
     point and not yet out of their conflict zone; a bool array for arrays, a bool for
     scalars."""
-    return (
-        (layout.ego_point - ego_progress <= layout.approach_distance)
-        & (ego_progress <= layout.ego_zone_exit)
-        & (layout.north_point - north_progress <= layout.approach_distance)
-        & (north_progress <= layout.north_zone_exit)
+    d = layout.approach_distance
+    return approaching(ego_progress, layout.ego_point, layout.ego_zone_exit, d) & approaching(
+        north_progress, layout.north_point, layout.north_zone_exit, d
     )

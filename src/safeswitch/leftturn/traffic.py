@@ -37,7 +37,7 @@ from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.logics.certified import CertifiedSwitching, certified_logic
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
-from safeswitch.leftturn.views import ConflictView, Phantoms
+from safeswitch.leftturn.views import ConflictView, Phantoms, approaching
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.idm import IDMParams
 from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
@@ -609,11 +609,10 @@ def _conflict_view(
         s_e = ego_progress[b]
         for k in range(present.shape[1]):
             s_k = other[0, b, k]
-            window[b, k] = present[b, k] and (
-                points[0, b, k] - s_e <= approach
-                and s_e <= zones[0, b, k, 1]
-                and points[1, b, k] - s_k <= approach
-                and s_k <= zones[2, b, k, 1]
+            window[b, k] = (
+                present[b, k]
+                and approaching(s_e, points[0, b, k], zones[0, b, k, 1], approach)
+                and approaching(s_k, points[1, b, k], zones[2, b, k, 1], approach)
             )
 
 

@@ -12,16 +12,27 @@ hooks, no probing).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
+
+from safeswitch.core.arrays import jit
 
 if TYPE_CHECKING:
     from safeswitch.leftturn.config import LeftTurnConfig
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+
+
+@jit
+def approaching(progress: Any, point: Any, exit_: Any, approach: float) -> Any:
+    """One car's half of Algorithm 1's While condition: within ``approach`` of its conflict
+    point and not yet past its conflict zone's exit (arrays or scalars). A pair is "at the
+    intersection" when both cars are; every scene, the tick and the logic-aware limit read the
+    condition from here."""
+    return (point - progress <= approach) & (progress <= exit_)
 
 
 class ConflictView(NamedTuple):
@@ -129,12 +140,8 @@ class NorthConflict(NamedTuple):
     def window(self, ego_progress: FloatArray, north_progress: FloatArray) -> BoolArray:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
         d = self.approach_distance
-        return (
-            (self.ego_point - ego_progress <= d)
-            & (ego_progress <= self.ego_zone[1])
-            & (self.north_point - north_progress <= d)
-            & (north_progress <= self.north_zone[1])
-        )
+        ego = approaching(ego_progress, self.ego_point, self.ego_zone[1], d)
+        return ego & approaching(north_progress, self.north_point, self.north_zone[1], d)
 
 
 class _NorthColumns(NamedTuple):
