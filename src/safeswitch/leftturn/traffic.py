@@ -369,11 +369,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
         state = self.initial(scenarios)
         return replace(state, ghost_ego=np.ones(state.batch_size, dtype=np.bool_))
 
+    @cached_property
+    def _zones_with_ego(self) -> FloatArray:
+        """Each movement's own conflict zone with the ego's route, on its route [m] ``[R, 2]``."""
+        return np.ascontiguousarray(self.network.conflicts[:, self.ego_route])
+
     def mark_occupied(self, state: TaskState, tick: int, occupied: BoolArray) -> None:
         assert isinstance(state, TrafficTaskState)
         tr = state.traffic
-        zones = np.ascontiguousarray(self.network.conflicts[:, self.ego_route])
-        _occupied(tr.route, tr.progress, tr.active, zones, tick, occupied)
+        _occupied(tr.route, tr.progress, tr.active, self._zones_with_ego, tick, occupied)
 
     def phantoms(self) -> Phantoms:
         """Every movement whose route crosses the ego's, with the certified margin: the ego's
