@@ -52,6 +52,7 @@ from safeswitch.leftturn.views import (
     NorthConflict,
     Phantoms,
     approaching,
+    at_intersection,
     north_view,
 )
 from safeswitch.sim.autopilot import AutopilotParams, autopilot_tick
@@ -333,10 +334,6 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         self._reward_tables = reward_tables(r)
         ep = config.episode
         self._scope_code = LEARNED_SCOPES.index(ep.learned_scope)
-        self._layout = ConflictLayout(
-            geo.s_point_a, geo.s_point_b, geo.zone_a[0], geo.zone_a[1], geo.zone_b[1],
-            ep.approach_distance_m,
-        )  # fmt: skip
         self._limits = EpisodeLimits(
             ep.horizon_ticks, self._ego_route_end, geo.zone_a[1], geo.zone_b[1],
             config.geometry.lane_width / 2.0,
@@ -346,7 +343,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         self._controller_constants = ControllerConstants(
             self._gains, ep.dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
             self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
-            self._layout, self._scope_code,
+            self.north_conflict, self._scope_code,
         )  # fmt: skip
         #: The learned controller's speed limiter (``None`` if off): its speed [m/s], the
         #: throttle that holds that speed and the gain (see ControllerConfig).
@@ -489,7 +486,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
 
     def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
-        return at_intersection(ego_progress, north_progress, self._layout)
+        return at_intersection(ego_progress, north_progress, self.north_conflict)
 
     def view(self, state: TaskState, window: BoolArray | None = None) -> ConflictView:
         """What the switching logics see of ``state``: the ego and its conflicts (here one, the
@@ -834,27 +831,6 @@ class ControllerGains(NamedTuple):
     north_speed: PIDKernel
 
 
-class ConflictLayout(NamedTuple):
-    """Arc lengths of the conflict geometry [m], as the compiled tick reads them.
-
-    Attributes:
-        ego_point: Conflict point on the ego's route.
-        north_point: Conflict point on the north car's route.
-        ego_zone_entry: Entry of the ego's conflict zone (its stopping point).
-        ego_zone_exit: Exit of the ego's conflict zone.
-        north_zone_exit: Exit of the north car's conflict zone.
-        approach_distance: A car is "at the intersection" from this far before its conflict
-            point.
-    """
-
-    ego_point: float
-    north_point: float
-    ego_zone_entry: float
-    ego_zone_exit: float
-    north_zone_exit: float
-    approach_distance: float
-
-
 class EpisodeLimits(NamedTuple):
     """When an episode ends and when a car has left its zone, as the compiled tick reads them.
 
@@ -892,7 +868,7 @@ class ControllerConstants(NamedTuple):
         spacing: Waypoint spacing [m].
         k_max: Last waypoint segment index.
         base: Each car's route row in ``tables`` ``[2]``.
-        layout: The conflict geometry.
+        north: The geometry of the conflict with the north car.
         scope: Who drives (:data:`LEARNED_SCOPES` code).
     """
 
@@ -906,7 +882,7 @@ class ControllerConstants(NamedTuple):
     spacing: float
     k_max: int
     base: IntArray
-    layout: ConflictLayout
+    north: NorthConflict
     scope: int
 
 
@@ -1001,7 +977,7 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
     actual pedals held)."""
     # The tuples' arrays taken out once (see jit: read through a tuple inside the loop, each
     # is fetched and reference-counted on every access).
-    pid, lane, g, layout = i.pids, i.lane, c.gains, c.layout
+    pid, lane, g, north = i.pids, i.lane, c.gains, c.north
     learned, x, y, cos_yaw, sin_yaw = i.learned_throttle, i.x, i.y, i.cos_yaw, i.sin_yaw
     speed, progress, accel_lon, target = i.speed, i.progress, i.accel_lon, i.north_target
     held_throttle, held_brake = i.throttle, i.brake
@@ -1035,7 +1011,7 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
                 g.lane, c.dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
             pid_lka[0, b, j], pid_lka[1, b, j], pid_lka[2, b, j] = integral, error, derivative
-        at = at_intersection(progress[b, 0], progress[b, 1], layout)
+        at = at_intersection(progress[b, 0], progress[b, 1], north)
         in_charge = at if c.scope == 0 else c.scope == 1
         both[b], charge[b] = at, in_charge
         proposed[b, 0], proposed[b, 1] = (learned[b] if in_charge else rule), 0.0
@@ -1214,16 +1190,3 @@ def _after_plant(c: BookkeepingConstants, i: AfterPlant, out: Bookkeeping) -> No
             observation[b, 3 * j] = x[b, j]
             observation[b, 3 * j + 1] = y[b, j]
             observation[b, 3 * j + 2] = speed[b, j]
-
-
-@jit
-def at_intersection(
-    ego_progress: FloatArray | float, north_progress: FloatArray | float, layout: ConflictLayout
-) -> Any:
-    """Algorithm 1's While condition: both cars within the approach distance of their conflict
-    point and not yet out of their conflict zone; a bool array for arrays, a bool for
-    scalars."""
-    d = layout.approach_distance
-    return approaching(ego_progress, layout.ego_point, layout.ego_zone_exit, d) & approaching(
-        north_progress, layout.north_point, layout.north_zone_exit, d
-    )

@@ -139,9 +139,17 @@ class NorthConflict(NamedTuple):
 
     def window(self, ego_progress: FloatArray, north_progress: FloatArray) -> BoolArray:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
-        d = self.approach_distance
-        ego = approaching(ego_progress, self.ego_point, self.ego_zone[1], d)
-        return ego & approaching(north_progress, self.north_point, self.north_zone[1], d)
+        return at_intersection(ego_progress, north_progress, self)
+
+
+@jit
+def at_intersection(ego_progress: Any, north_progress: Any, north: NorthConflict) -> Any:
+    """Algorithm 1's While condition for the ego and the north car: both within the approach
+    distance of their conflict point and not yet out of their conflict zone; a bool array for
+    arrays, a bool for scalars."""
+    d = north.approach_distance
+    ego = approaching(ego_progress, north.ego_point, north.ego_zone[1], d)
+    return ego & approaching(north_progress, north.north_point, north.north_zone[1], d)
 
 
 class _NorthColumns(NamedTuple):
