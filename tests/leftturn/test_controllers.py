@@ -105,3 +105,31 @@ def test_a_bad_speed_limiter_is_named(bad):
         ControllerConfig(learned_speed_limiter_kmh=bad)
     with pytest.raises(ConfigError, match="learned_speed_limiter_gain"):
         ControllerConfig(learned_speed_limiter_gain=0.0)
+
+
+def _same(a, b):
+    """Equal trees of (named) tuples, arrays and numbers, field by field."""
+    if isinstance(a, tuple):
+        assert type(a) is type(b) and len(a) == len(b)
+        return all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return np.array_equal(a, b)
+
+
+def test_the_kernels_plain_constants_are_named_again_field_for_field(task):
+    # The tick hands its compiled kernels plain tuples (numba types a NamedTuple by spelling
+    # every field's name on each call); the entry names them again. A field added or moved
+    # in one place and not the other would swap two constants silently.
+    from safeswitch.core.arrays import plain
+    from safeswitch.leftturn import task as module
+
+    controllers = task._controller_constants
+    original = module.ControllerConstants(*controllers)  # the outer names; the nested below
+    named = module.named_controller_constants(controllers)
+    assert _same(plain(named), controllers)
+    assert type(named) is type(original)
+    assert type(named.gains.lane) is module.PIDKernel
+    assert named.gains.lane == task._gains.lane and named.plant == task._plant
+    assert named.north == task.north_conflict
+    book = module.named_bookkeeping_constants(task._bookkeeping_constants)
+    assert _same(plain(book), task._bookkeeping_constants)
+    assert book.limits == task._limits

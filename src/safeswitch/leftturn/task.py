@@ -34,7 +34,7 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import columns, jit, take_rows
+from safeswitch.core.arrays import columns, jit, plain, take_rows
 from safeswitch.core.pid import PIDKernel, PIDState, pid_tick
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
@@ -339,12 +339,13 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             config.geometry.lane_width / 2.0,
         )  # fmt: skip
         routes = self.world.route_set
-        #: Everything the compiled controllers read that stays fixed for the task.
-        self._controller_constants = ControllerConstants(
+        #: Everything the compiled controllers read that stays fixed for the task (plain
+        #: tuples at the kernel's entry, see plain).
+        self._controller_constants = plain(ControllerConstants(
             self._gains, ep.dt, ctrl.speed_limit, ctrl.emergency_decel, ctrl.lane_lookahead_m,
             self._plant, routes.tables, routes.spacing, routes.size - 2, self.world.route_base,
             self.north_conflict, self._scope_code,
-        )  # fmt: skip
+        ))  # fmt: skip
         #: The learned controller's speed limiter (``None`` if off): its speed [m/s], the
         #: throttle that holds that speed and the gain (see ControllerConfig).
         self._limiter: tuple[float, float, float] | None = None
@@ -356,14 +357,14 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
     # -- the switching logic, built once the whole scene (a subclass's too) is ---------------
 
     @cached_property
-    def _bookkeeping_constants(self) -> BookkeepingConstants:
-        """Everything the compiled bookkeeping reads that stays fixed for the task (the rule's
-        reason code comes from the logic, so it is built on first use)."""
+    def _bookkeeping_constants(self) -> tuple[Any, ...]:
+        """Everything the compiled bookkeeping reads that stays fixed for the task, as plain
+        tuples (the rule's reason code comes from the logic, so it is built on first use)."""
         r = self.config.rewards
-        return BookkeepingConstants(
+        return plain(BookkeepingConstants(
             self._reward_tables, r.adas_penalty if self.config.adas_penalty else 0.0,
             r.collision_penalty, self._limits, len(self.reasons) - 1,
-        )  # fmt: skip
+        ))  # fmt: skip
 
     @cached_property
     def switching(self) -> SwitchingLogic[ConflictView]:
@@ -664,16 +665,16 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         v = world.vehicles
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
         out = ControllerOutputs.empty(batch)
-        _controllers(
+        _controllers_entry(
             self._controller_constants,
-            ControllerInputs(
+            tuple(ControllerInputs(
                 learned_throttle, v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress,
                 state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
                 (th.integral, th.prev_error, th.derivative, br.integral, br.prev_error,
                  br.derivative, no.integral, no.prev_error, no.derivative),
                 (la.integral, la.prev_error, la.derivative),
-            ),
-            out,
+            )),
+            tuple(out),
         )  # fmt: skip
         safety_brake, north_throttle, north_brake = (
             out.safety_brake,
@@ -711,14 +712,14 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         nv = new_world.vehicles
         speed = nv.speed
         book = Bookkeeping.empty(batch)
-        _after_plant(
+        _after_plant_entry(
             self._bookkeeping_constants,
-            AfterPlant(
+            tuple(AfterPlant(
                 sup.safety_active, sup.use_safety, sup.valid, in_charge, sup.reason, separation,
                 nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
                 outputs.accel_lat, state.tick, state.outcome,
-            ),
-            book,
+            )),
+            tuple(book),
         )  # fmt: skip
         terms_out, reward, tick = book.terms, book.reward, book.tick
         outcome, controller, reason, observation = (
@@ -968,6 +969,23 @@ class ControllerOutputs(NamedTuple):
 
 
 @jit
+def named_controller_constants(c: tuple[Any, ...]) -> ControllerConstants:
+    """The inverse of ``plain`` for :class:`ControllerConstants` (in compiled code)."""
+    g = c[0]
+    gains = ControllerGains(PIDKernel(*g[0]), PIDKernel(*g[1]), PIDKernel(*g[2]),
+                            PIDKernel(*g[3]))  # fmt: skip
+    return ControllerConstants(gains, c[1], c[2], c[3], c[4], VehicleConstants(*c[5]), c[6],
+                               c[7], c[8], c[9], NorthConflict(*c[10]), c[11])  # fmt: skip
+
+
+@jit
+def _controllers_entry(c: tuple[Any, ...], i: tuple[Any, ...], out: tuple[Any, ...]) -> None:
+    """:func:`_controllers` called with plain tuples (see :func:`~safeswitch.core.arrays.plain`),
+    named again here."""
+    _controllers(named_controller_constants(c), ControllerInputs(*i), ControllerOutputs(*out))
+
+
+@jit
 def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOutputs) -> None:
     """Step 1 of the tick for every episode: ``PID_th`` on ``v_lim − v``, ``PID_b`` on
     ``a_max + a_lon``, ``PID_lka`` of both cars on the look-ahead offset of their route, the
@@ -1115,6 +1133,19 @@ class Bookkeeping(NamedTuple):
             e(batch, flag), e(batch, flag), e(batch, flag), e(batch, flag), e(batch, flag),
             e(batch, code), e(batch, code), e(batch, code), e((batch, 6), np.float32),
         )  # fmt: skip
+
+
+@jit
+def named_bookkeeping_constants(c: tuple[Any, ...]) -> BookkeepingConstants:
+    """The inverse of ``plain`` for :class:`BookkeepingConstants` (in compiled code)."""
+    return BookkeepingConstants(c[0], c[1], c[2], EpisodeLimits(*c[3]), c[4])
+
+
+@jit
+def _after_plant_entry(c: tuple[Any, ...], i: tuple[Any, ...], out: tuple[Any, ...]) -> None:
+    """:func:`_after_plant` called with plain tuples (see
+    :func:`~safeswitch.core.arrays.plain`), named again here."""
+    _after_plant(named_bookkeeping_constants(c), AfterPlant(*i), Bookkeeping(*out))
 
 
 @jit
