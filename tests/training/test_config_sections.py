@@ -8,6 +8,13 @@ import dataclasses
 import pytest
 
 from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.leftturn.config import (
+    CertifiedConfig,
+    LeftTurnConfig,
+    ScenarioConfig,
+    TrafficConfig,
+)
+from safeswitch.sim.vehicle import VehicleParams
 from safeswitch.training.config import (
     EnvTrainConfig,
     PolicyConfig,
@@ -59,6 +66,27 @@ def test_declared_bounds_are_checked_and_named():
     with pytest.raises(ConfigError, match=r"policy\.initial_action must be in \[-1, 1\], got nan"):
         PolicyConfig(initial_action=float("nan"))
     assert PolicyConfig(initial_action=None).initial_action is None  # null passes
+
+
+def test_declared_bounds_hold_each_end_of_a_range_and_its_order():
+    reversed_range = (r"traffic\.speed_kmh must be \(low, high\) with low <= high, "
+                      r"each in \[5, 80\] km/h, got \(40\.0, 30\.0\)")  # fmt: skip
+    with pytest.raises(ConfigError, match=reversed_range):
+        TrafficConfig(speed_kmh=(40.0, 30.0))
+    with pytest.raises(ConfigError, match=r"traffic\.main_flow_veh_h .* got \(0\.0, 4000\.0\)"):
+        TrafficConfig(main_flow_veh_h=(0.0, 4000.0))
+    with pytest.raises(ConfigError, match=r"scenarios\.north_speed_kmh .* each in \(0, 100\]"):
+        ScenarioConfig(north_speed_kmh=(0.0, 20.0))
+    with pytest.raises(ConfigError, match=r"scenarios\.arrival_offset_s .* got \(nan, 1\.0\)"):
+        ScenarioConfig(arrival_offset_s=(float("nan"), 1.0))
+    assert ScenarioConfig(ego_speed_kmh=(0.0, 0.0)).ego_speed_kmh == (0.0, 0.0)  # low == high
+    # the cross-field rules stay where the fields meet
+    with pytest.raises(ConfigError, match=r"certified\.zone_margin_m must be at least 2"):
+        CertifiedConfig(ego_max_lateral_m=1.0, zone_margin_m=1.5)
+    with pytest.raises(ConfigError, match=r"certified\.curve_lateral_accel must be below the "
+                                          r"tyres' μ·g \(4\.91 m/s²\)"):  # fmt: skip
+        LeftTurnConfig(certified=CertifiedConfig(curve_lateral_accel=6.0),
+                       vehicle=VehicleParams(friction_coefficient=0.5))  # fmt: skip
 
 
 def test_the_generic_training_has_no_shaping_section():

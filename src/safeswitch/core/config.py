@@ -161,7 +161,8 @@ def to_dict(config: Any) -> Any:
 @dataclasses.dataclass(frozen=True)
 class Bounds:
     """A number's allowed range, declared on its field: ``x: Annotated[float, Bounds(0, 1)]``
-    (``None`` passes when the type allows it; a finite number is required).
+    (``None`` passes when the type allows it; a finite number is required). On a field that
+    holds a ``(low, high)`` range, each end must be in the bounds and ``low <= high``.
 
     Attributes:
         low: Smallest allowed value (``None``: no lower bound).
@@ -176,6 +177,13 @@ class Bounds:
     low_open: bool = False
     high_open: bool = False
     unit: str = ""
+
+    def accepts(self, value: Any) -> bool:
+        """``value`` (a number, or a ``(low, high)`` range) is within the bounds."""
+        if isinstance(value, tuple):
+            return len(value) == 2 and all(self.accepts(v) for v in value) and value[0] <= value[1]
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        return number and self.holds(value)
 
     def holds(self, value: float) -> bool:
         if not math.isfinite(value):
@@ -226,8 +234,10 @@ def check_bounds(config: Any, owner: str) -> None:
         value = getattr(config, name)
         if value is None:
             continue
-        number = isinstance(value, int | float) and not isinstance(value, bool)
-        check(number and bounds.holds(value), owner, name, value, bounds.describe())
+        requirement = bounds.describe()
+        if isinstance(value, tuple):
+            requirement = f"must be (low, high) with low <= high, each {requirement[8:]}"
+        check(bounds.accepts(value), owner, name, value, requirement)
 
 
 def check(condition: bool, owner: str, name: str, value: Any, requirement: str) -> None:

@@ -16,7 +16,7 @@ from safeswitch.core.config import Bounds, ConfigError, check, check_bounds, fro
 from safeswitch.core.pid import PIDGains
 from safeswitch.core.registry import logic_names, logic_params
 from safeswitch.sim.road import IntersectionGeometry
-from safeswitch.sim.vehicle import VehicleParams
+from safeswitch.sim.vehicle import GRAVITY, VehicleParams
 
 LearnedScope = Literal["window", "episode", "never"]
 ScenarioName = Literal["cut", "yield1", "yield2"]
@@ -150,75 +150,20 @@ class CertifiedConfig:
         "north_max_speed_kmh": "other_max_speed_kmh",
     }
 
-    other_max_accel: float = 2.5
-    other_max_speed_kmh: float = 50.0
-    ego_max_lateral_m: float = 0.6
-    zone_margin_m: float = 1.2
-    progress_factor: float = 1.05
-    time_margin_s: float = 0.1
-    lag_ticks: int = 10
-    clear_speed_cap: float = 20.0
-    curve_lateral_accel: float = 5.0
+    other_max_accel: Annotated[float, Bounds(0, 10, low_open=True, unit="m/s²")] = 2.5
+    other_max_speed_kmh: Annotated[float, Bounds(0, 200, low_open=True, unit="km/h")] = 50.0
+    ego_max_lateral_m: Annotated[float, Bounds(0, 2, unit="m")] = 0.6
+    zone_margin_m: Annotated[float, Bounds(0, 5, unit="m")] = 1.2
+    progress_factor: Annotated[float, Bounds(1, 1.5)] = 1.05
+    time_margin_s: Annotated[float, Bounds(0, 5, unit="s")] = 0.1
+    lag_ticks: Annotated[int, Bounds(1, 100)] = 10
+    clear_speed_cap: Annotated[float, Bounds(5, 60, unit="m/s")] = 20.0
+    curve_lateral_accel: Annotated[float, Bounds(0, 10, low_open=True, unit="m/s²")] = 5.0
 
     def __post_init__(self) -> None:
-        o = "certified"
-        check(
-            0 < self.other_max_accel <= 10,
-            o,
-            "other_max_accel",
-            self.other_max_accel,
-            "must be in (0, 10] m/s²",
-        )
-        check(
-            0 < self.other_max_speed_kmh <= 200,
-            o,
-            "other_max_speed_kmh",
-            self.other_max_speed_kmh,
-            "must be in (0, 200] km/h",
-        )
-        check(
-            0 <= self.ego_max_lateral_m <= 2,
-            o,
-            "ego_max_lateral_m",
-            self.ego_max_lateral_m,
-            "must be in [0, 2] m",
-        )
-        check(
-            2 * self.ego_max_lateral_m <= self.zone_margin_m <= 5,
-            o,
-            "zone_margin_m",
-            self.zone_margin_m,
-            "must be at least 2 · ego_max_lateral_m and at most 5 m",
-        )
-        check(
-            1 <= self.progress_factor <= 1.5,
-            o,
-            "progress_factor",
-            self.progress_factor,
-            "must be in [1, 1.5]",
-        )
-        check(
-            0 <= self.time_margin_s <= 5,
-            o,
-            "time_margin_s",
-            self.time_margin_s,
-            "must be in [0, 5] s",
-        )
-        check(1 <= self.lag_ticks <= 100, o, "lag_ticks", self.lag_ticks, "must be in [1, 100]")
-        check(
-            5 <= self.clear_speed_cap <= 60,
-            o,
-            "clear_speed_cap",
-            self.clear_speed_cap,
-            "must be in [5, 60] m/s",
-        )
-        check(
-            0 < self.curve_lateral_accel <= 10,
-            o,
-            "curve_lateral_accel",
-            self.curve_lateral_accel,
-            "must be in (0, 10] m/s² (and below the tyres' μ·g)",
-        )
+        check_bounds(self, "certified")
+        check(2 * self.ego_max_lateral_m <= self.zone_margin_m, "certified", "zone_margin_m",
+              self.zone_margin_m, "must be at least 2 · ego_max_lateral_m")  # fmt: skip
 
 
 def _check_piecewise(
@@ -269,7 +214,7 @@ class RewardConfig:
         comfort_accel_lat: Comfort limit on ``|a_lat|`` [m/s²] (paper).
     """
 
-    adas_penalty: float = -25.0
+    adas_penalty: Annotated[float, Bounds(high=0)] = -25.0
     speed_points_kmh: tuple[float, ...] = (0.0, 5.0, 25.0, 30.0, 35.0, 45.0)
     speed_values: tuple[float, ...] = (-1.0, 0.0, 1.0, 1.0, 0.0, -1.0)
     lateral_points_m: tuple[float, ...] = (0.0, 1.5, 3.0)
@@ -278,40 +223,13 @@ class RewardConfig:
     accel_lon_values: tuple[float, ...] = (1.0, 0.0, -2.0)
     accel_lat_points: tuple[float, ...] = (0.0, 3.0, 4.5)
     accel_lat_values: tuple[float, ...] = (1.0, 0.0, -2.0)
-    collision_penalty: float = 0.0
-    comfort_accel_lon: float = 5.0
-    comfort_accel_lat: float = 3.0
+    collision_penalty: Annotated[float, Bounds(high=0)] = 0.0
+    comfort_accel_lon: Annotated[float, Bounds(0, low_open=True, unit="m/s²")] = 5.0
+    comfort_accel_lat: Annotated[float, Bounds(0, low_open=True, unit="m/s²")] = 3.0
 
     def __post_init__(self) -> None:
         o = "rewards"
-        check(
-            self.comfort_accel_lon > 0,
-            o,
-            "comfort_accel_lon",
-            self.comfort_accel_lon,
-            "must be > 0",
-        )
-        check(
-            self.comfort_accel_lat > 0,
-            o,
-            "comfort_accel_lat",
-            self.comfort_accel_lat,
-            "must be > 0",
-        )
-        check(
-            math.isfinite(self.adas_penalty) and self.adas_penalty <= 0,
-            o,
-            "adas_penalty",
-            self.adas_penalty,
-            "must be <= 0",
-        )
-        check(
-            math.isfinite(self.collision_penalty) and self.collision_penalty <= 0,
-            o,
-            "collision_penalty",
-            self.collision_penalty,
-            "must be <= 0",
-        )
+        check_bounds(self, o)
         _check_piecewise(o, "speed_points_kmh", self.speed_points_kmh, self.speed_values)
         _check_piecewise(o, "lateral_points_m", self.lateral_points_m, self.lateral_values)
         _check_piecewise(o, "accel_lon_points", self.accel_lon_points, self.accel_lon_values)
@@ -349,48 +267,21 @@ class ScenarioConfig:
         focus_arrival_offset_s: The focused range of the arrival offset [s].
     """
 
-    ego_start_distance_m: tuple[float, float] = (32.0, 40.0)
-    ego_speed_kmh: tuple[float, float] = (18.0, 25.0)
-    north_speed_kmh: tuple[float, float] = (20.0, 32.0)
-    arrival_offset_s: tuple[float, float] = (-3.0, 5.0)
-    focus_share: float = 0.0
-    focus_arrival_offset_s: tuple[float, float] = (1.8, 3.0)
+    ego_start_distance_m: Annotated[tuple[float, float], Bounds(20, unit="m")] = (32.0, 40.0)
+    ego_speed_kmh: Annotated[tuple[float, float], Bounds(0, 100, unit="km/h")] = (18.0, 25.0)
+    north_speed_kmh: Annotated[tuple[float, float], Bounds(0, 100, True, unit="km/h")] = (
+        20.0,
+        32.0,
+    )
+    arrival_offset_s: Annotated[tuple[float, float], Bounds(-60, 60, unit="s")] = (-3.0, 5.0)
+    focus_share: Annotated[float, Bounds(0, 1)] = 0.0
+    focus_arrival_offset_s: Annotated[tuple[float, float], Bounds(-60, 60, unit="s")] = (
+        1.8,
+        3.0,
+    )
 
     def __post_init__(self) -> None:
-        check(0.0 <= self.focus_share <= 1.0, "scenarios", "focus_share", self.focus_share,
-              "must be in [0, 1]")  # fmt: skip
-        for f in fields(self):
-            if isinstance(getattr(self, f.name), int | float):
-                continue  # a share (checked above); every other field is a range
-            low, high = getattr(self, f.name)
-            check(
-                math.isfinite(low) and math.isfinite(high) and low <= high,
-                "scenarios",
-                f.name,
-                (low, high),
-                "must be finite (low, high) with low <= high",
-            )
-        check(
-            self.ego_start_distance_m[0] >= 20,
-            "scenarios",
-            "ego_start_distance_m",
-            self.ego_start_distance_m,
-            "must start at least 20 m before the conflict point",
-        )
-        check(
-            self.north_speed_kmh[0] > 0,
-            "scenarios",
-            "north_speed_kmh",
-            self.north_speed_kmh,
-            "must be > 0",
-        )
-        check(
-            self.ego_speed_kmh[0] >= 0,
-            "scenarios",
-            "ego_speed_kmh",
-            self.ego_speed_kmh,
-            "must be >= 0",
-        )
+        check_bounds(self, "scenarios")
 
 
 @dataclass(frozen=True)
@@ -440,50 +331,35 @@ class TrafficConfig:
             them, in seconds; ours, :data:`~safeswitch.leftturn.traffic.MARGIN_FEATURES`).
     """
 
-    main_flow_veh_h: tuple[float, float] = (300.0, 450.0)
-    minor_flow_veh_h: tuple[float, float] = (150.0, 250.0)
-    non_yielding_share: tuple[float, float] = (0.0, 0.5)
-    speed_kmh: tuple[float, float] = (25.0, 40.0)
+    main_flow_veh_h: Annotated[tuple[float, float], Bounds(0, 3000, unit="veh/h")] = (
+        300.0,
+        450.0,
+    )
+    minor_flow_veh_h: Annotated[tuple[float, float], Bounds(0, 3000, unit="veh/h")] = (
+        150.0,
+        250.0,
+    )
+    non_yielding_share: Annotated[tuple[float, float], Bounds(0, 1)] = (0.0, 0.5)
+    speed_kmh: Annotated[tuple[float, float], Bounds(5, 80, unit="km/h")] = (25.0, 40.0)
     turn_shares: tuple[float, float, float] = (0.7, 0.2, 0.1)
-    min_headway_s: float = 1.5
-    patience_s: float = 2.0
-    action_step_s: float = 0.1
-    exit_distance_m: float = 40.0
-    horizon_s: float | None = 30.0
-    max_vehicles: int = 12
-    observed: int = 4
-    observe: str = "nearest"
+    min_headway_s: Annotated[float, Bounds(0.5, 10, unit="s")] = 1.5
+    patience_s: Annotated[float, Bounds(0, 60, unit="s")] = 2.0
+    action_step_s: Annotated[float, Bounds(0, 1, low_open=True, unit="s")] = 0.1
+    exit_distance_m: Annotated[float, Bounds(10, 100, unit="m")] = 40.0
+    horizon_s: Annotated[float | None, Bounds(1, 120, unit="s")] = 30.0
+    max_vehicles: Annotated[int, Bounds(1, 32)] = 12
+    observed: Annotated[int, Bounds(0)] = 4
+    observe: Literal["nearest", "conflicts", "margins"] = "nearest"
 
     def __post_init__(self) -> None:
         o = "traffic"
-        for name in ("main_flow_veh_h", "minor_flow_veh_h"):
-            low, high = getattr(self, name)
-            check(0 <= low <= high <= 3000, o, name, (low, high),
-                  "must be 0 <= low <= high <= 3000 veh/h")  # fmt: skip
-        low, high = self.non_yielding_share
-        check(0 <= low <= high <= 1, o, "non_yielding_share", (low, high),
-              "must be 0 <= low <= high <= 1")  # fmt: skip
-        low, high = self.speed_kmh
-        check(5 <= low <= high <= 80, o, "speed_kmh", (low, high), "must be within [5, 80] km/h")
+        check_bounds(self, o)
         check(
             len(self.turn_shares) == 3 and min(self.turn_shares) >= 0
             and abs(sum(self.turn_shares) - 1.0) < 1e-6,
             o, "turn_shares", self.turn_shares, "must be 3 non-negative shares summing to 1",
         )  # fmt: skip
-        check(0.5 <= self.min_headway_s <= 10, o, "min_headway_s", self.min_headway_s,
-              "must be in [0.5, 10] s")  # fmt: skip
-        check(0 <= self.patience_s <= 60, o, "patience_s", self.patience_s,
-              "must be in [0, 60] s")  # fmt: skip
-        check(0 < self.action_step_s <= 1.0, o, "action_step_s", self.action_step_s,
-              "must be in (0, 1] s")  # fmt: skip
-        if self.horizon_s is not None:
-            check(1 <= self.horizon_s <= 120, o, "horizon_s", self.horizon_s,
-                  "must be in [1, 120] s or null")  # fmt: skip
-        check(10 <= self.exit_distance_m <= 100, o, "exit_distance_m", self.exit_distance_m,
-              "must be in [10, 100] m")  # fmt: skip
-        check(1 <= self.max_vehicles <= 32, o, "max_vehicles", self.max_vehicles,
-              "must be in [1, 32]")  # fmt: skip
-        check(0 <= self.observed <= self.max_vehicles + 1, o, "observed", self.observed,
+        check(self.observed <= self.max_vehicles + 1, o, "observed", self.observed,
               f"must be in [0, max_vehicles + 1 = {self.max_vehicles + 1}]")  # fmt: skip
         check(self.observe in OBSERVATIONS, o, "observe", self.observe,
               f"must be one of {OBSERVATIONS}")  # fmt: skip
@@ -634,6 +510,11 @@ class LeftTurnConfig:
             )
         if not isinstance(self.adas_penalty, bool):
             raise ConfigError(f"adas_penalty={self.adas_penalty!r} must be True or False")
+        grip = self.vehicle.friction_coefficient * GRAVITY
+        check(self.certified.curve_lateral_accel < grip, "certified", "curve_lateral_accel",
+              self.certified.curve_lateral_accel,
+              f"must be below the tyres' μ·g ({grip:.2f} m/s²): the filter's braking in a "
+              "curve needs the rest")  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> LeftTurnConfig:

@@ -203,6 +203,9 @@ MOVED_FROM_PPO: dict[str, str] = {
 }  # fmt: skip
 
 
+#: The largest seed (NumPy's legacy seeding, which SB3 uses, takes 32 bits).
+SEED_MAX = 2**32 - 1
+
 #: Values of ``warm_start.teacher``.
 TEACHERS = ("planner", "gap_planner")
 
@@ -233,24 +236,19 @@ class WarmStartConfig:
             1.2 M-step run went from 21 to 205 episodes with a safety action).
     """
 
-    episodes: int = 0
-    rounds: int = 2
-    epochs: int = 8
-    learning_rate: float = 1e-3
-    teacher: str = "planner"
+    episodes: Annotated[int, Bounds(0)] = 0
+    rounds: Annotated[int, Bounds(0)] = 2
+    epochs: Annotated[int, Bounds(1)] = 8
+    learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-3
+    teacher: Literal["planner", "gap_planner"] = "planner"
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     gap_planner: GapPlannerConfig = field(default_factory=GapPlannerConfig)
     freeze_obs_stats: bool = True
 
     def __post_init__(self) -> None:
-        o = "warm_start"
-        check(self.episodes >= 0, o, "episodes", self.episodes, "must be >= 0")
-        check(self.rounds >= 0, o, "rounds", self.rounds, "must be >= 0")
-        check(self.epochs >= 1, o, "epochs", self.epochs, "must be >= 1")
-        check(self.teacher in TEACHERS, o, "teacher", self.teacher, f"must be one of {TEACHERS}")
-        check(
-            0 < self.learning_rate < 1, o, "learning_rate", self.learning_rate, "must be in (0, 1)"
-        )
+        check_bounds(self, "warm_start")
+        check(self.teacher in TEACHERS, "warm_start", "teacher", self.teacher,
+              f"must be one of {TEACHERS}")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -277,12 +275,12 @@ class StressConfig:
             defaults, not the environment's).
     """
 
-    episodes: int = 20_000
-    seed: int = 5_000_011
+    episodes: Annotated[int, Bounds(1)] = 20_000
+    seed: Annotated[int, Bounds(0, SEED_MAX)] = 5_000_011
     scenarios: ScenarioConfig = field(default_factory=ScenarioConfig)
 
     def __post_init__(self) -> None:
-        check(self.episodes >= 1, "validation.stress", "episodes", self.episodes, "must be >= 1")
+        check_bounds(self, "validation.stress")
 
 
 @dataclass(frozen=True)
@@ -316,10 +314,10 @@ class ValidationConfig:
             collisions (``null``: none; see :class:`StressConfig`).
     """
 
-    every: int = 0
-    episodes: int = 500
-    seed: int = 2_000_003
-    start: int = 0
+    every: Annotated[int, Bounds(0)] = 0
+    episodes: Annotated[int, Bounds(1)] = 500
+    seed: Annotated[int, Bounds(0, SEED_MAX)] = 2_000_003
+    start: Annotated[int, Bounds(0)] = 0
     switching: str | None = None
     criterion: Literal["return", "collisions_then_return", "constraints_then_return"] = "return"
     stress: StressConfig | None = None
@@ -330,9 +328,7 @@ class ValidationConfig:
             known = ", ".join(logic_names())
             check(self.switching in logic_names(), o, "switching", self.switching,
                   f"must be null or a registered switching logic ({known})")  # fmt: skip
-        check(self.every >= 0, o, "every", self.every, "must be >= 0 (0: no validation)")
-        check(self.episodes >= 1, o, "episodes", self.episodes, "must be >= 1")
-        check(self.start >= 0, o, "start", self.start, "must be >= 0")
+        check_bounds(self, o)
 
 
 @dataclass(frozen=True)
@@ -359,29 +355,21 @@ class ConstraintConfig:
             policy meets deployed under ``paper``.
     """
 
-    budget: float
-    integral_gain: float = 1.0
-    proportional_gain: float = 0.0
-    max_multiplier: float = 100.0
-    initial_multiplier: float = 0.0
-    start: int = 0
-    validation_budget: float | None = None
+    budget: Annotated[float, Bounds(0, low_open=True)]
+    integral_gain: Annotated[float, Bounds(0)] = 1.0
+    proportional_gain: Annotated[float, Bounds(0)] = 0.0
+    max_multiplier: Annotated[float, Bounds(0)] = 100.0
+    initial_multiplier: Annotated[float, Bounds(0)] = 0.0
+    start: Annotated[int, Bounds(0)] = 0
+    validation_budget: Annotated[float | None, Bounds(0, low_open=True)] = None
     reasons: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         o = "constraints.<cost>"
-        check(math.isfinite(self.budget) and self.budget > 0, o, "budget", self.budget,
-              "must be > 0")  # fmt: skip
-        for name in ("integral_gain", "proportional_gain", "max_multiplier"):
-            value = getattr(self, name)
-            check(math.isfinite(value) and value >= 0, o, name, value, "must be >= 0")
+        check_bounds(self, o)
         most = self.max_multiplier
-        check(0 <= self.initial_multiplier <= most, o, "initial_multiplier",
+        check(self.initial_multiplier <= most, o, "initial_multiplier",
               self.initial_multiplier, f"must be in [0, max_multiplier={most}]")  # fmt: skip
-        check(self.start >= 0, o, "start", self.start, "must be >= 0")
-        if self.validation_budget is not None:
-            check(math.isfinite(self.validation_budget) and self.validation_budget > 0, o,
-                  "validation_budget", self.validation_budget, "must be > 0 or null")  # fmt: skip
 
     @property
     def selection_budget(self) -> float:
@@ -439,16 +427,11 @@ class ConstraintsConfig:
 #: The configuration ``safeswitch train`` uses without ``--config``: the paper's recipe.
 DEFAULT_CONFIG = "paper_scratch"
 
-#: The largest seed (NumPy's legacy seeding, which SB3 uses, takes 32 bits).
-SEED_MAX = 2**32 - 1
 
-
-def check_run_shape(n_envs: int, ppo: PPOConfig, seed: int, eval_seed: int) -> None:
-    """What every training configuration must satisfy: seeds in ``[0, 2**32 - 1]``, and a
-    rollout (``n_envs`` × ``ppo.n_steps``) that splits into ``ppo.n_minibatches`` equal
-    minibatches (each value named)."""
-    for name, value in (("seed", seed), ("eval_seed", eval_seed)):
-        check(0 <= value <= SEED_MAX, "train", name, value, "must be in [0, 2**32 - 1]")
+def check_run_shape(n_envs: int, ppo: PPOConfig) -> None:
+    """What every training configuration must satisfy: a rollout (``n_envs`` ×
+    ``ppo.n_steps``) that splits into ``ppo.n_minibatches`` equal minibatches (each value
+    named)."""
     rollout = n_envs * ppo.n_steps
     if rollout % ppo.n_minibatches:
         raise ConfigError(
@@ -498,13 +481,13 @@ class TrainConfig:
             to start from one).
     """
 
-    timesteps: int = 1_200_000
-    n_envs: int = 16
-    seed: int = 0
-    torch_threads: int = 2
-    checkpoint_every: int = 200_000
-    eval_episodes: int = 1000
-    eval_seed: int = 1_000_003
+    timesteps: Annotated[int, Bounds(1)] = 1_200_000
+    n_envs: Annotated[int, Bounds(1)] = 16
+    seed: Annotated[int, Bounds(0, SEED_MAX)] = 0
+    torch_threads: Annotated[int, Bounds(1)] = 2
+    checkpoint_every: Annotated[int, Bounds(1)] = 200_000
+    eval_episodes: Annotated[int, Bounds(0)] = 1000
+    eval_seed: Annotated[int, Bounds(0, SEED_MAX)] = 1_000_003
     deploy_switching: str | None = None
     stagger_starts: bool = False
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -521,14 +504,8 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         o = "train"
+        check_bounds(self, o)
         traffic_config(self.traffic)  # validates, naming a bad value
-        check(self.timesteps >= 1, o, "timesteps", self.timesteps, "must be >= 1")
-        check(self.n_envs >= 1, o, "n_envs", self.n_envs, "must be >= 1")
-        check(self.torch_threads >= 1, o, "torch_threads", self.torch_threads, "must be >= 1")
-        check(
-            self.checkpoint_every >= 1, o, "checkpoint_every", self.checkpoint_every, "must be >= 1"
-        )
-        check(self.eval_episodes >= 0, o, "eval_episodes", self.eval_episodes, "must be >= 0")
         check(
             self.eval_seed != self.seed,
             o,
@@ -536,7 +513,7 @@ class TrainConfig:
             self.eval_seed,
             "must differ from the training seed",
         )
-        check_run_shape(self.n_envs, self.ppo, self.seed, self.eval_seed)
+        check_run_shape(self.n_envs, self.ppo)
         if self.warm_start.episodes and self.warm_start.teacher == "gap_planner":
             check(self.traffic is not None, "warm_start", "teacher", self.warm_start.teacher,
                   "needs traffic (the single-car scene has teacher: planner)")  # fmt: skip
@@ -763,13 +740,13 @@ class EnvTrainConfig:
     logic_params: dict[str, Any] | None = None
     penalty: float | None = None
     env_kwargs: dict[str, Any] = field(default_factory=dict)
-    timesteps: int = 100_000
-    n_envs: int = 4
-    seed: int = 0
-    torch_threads: int = 1
-    checkpoint_every: int = 20_000
-    eval_episodes: int = 20
-    eval_seed: int = 1_000_003
+    timesteps: Annotated[int, Bounds(1)] = 100_000
+    n_envs: Annotated[int, Bounds(1)] = 4
+    seed: Annotated[int, Bounds(0, SEED_MAX)] = 0
+    torch_threads: Annotated[int, Bounds(1)] = 1
+    checkpoint_every: Annotated[int, Bounds(1)] = 20_000
+    eval_episodes: Annotated[int, Bounds(0)] = 20
+    eval_seed: Annotated[int, Bounds(0, SEED_MAX)] = 1_000_003
     ppo: PPOConfig = field(default_factory=PPOConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
 
@@ -779,11 +756,7 @@ class EnvTrainConfig:
 
     def __post_init__(self) -> None:
         o = "train"
-        check(self.timesteps >= 1, o, "timesteps", self.timesteps, "must be >= 1")
-        check(self.n_envs >= 1, o, "n_envs", self.n_envs, "must be >= 1")
-        check(self.torch_threads >= 1, o, "torch_threads", self.torch_threads, "must be >= 1")
-        check(self.checkpoint_every >= 1, o, "checkpoint_every", self.checkpoint_every, ">= 1")
-        check(self.eval_episodes >= 0, o, "eval_episodes", self.eval_episodes, "must be >= 0")
+        check_bounds(self, o)
         if self.env_id not in gym.registry:
             raise ConfigError(f"env_id={self.env_id!r} is not a registered Gymnasium id")
         if self.switching is not None and self.switching not in logic_names():
@@ -799,7 +772,7 @@ class EnvTrainConfig:
             check(math.isfinite(self.penalty) and self.penalty <= 0, o, "penalty", self.penalty,
                   "must be a finite number <= 0 (a bonus for needing the Safety controller "
                   "would teach the policy to need it)")  # fmt: skip
-        check_run_shape(self.n_envs, self.ppo, self.seed, self.eval_seed)
+        check_run_shape(self.n_envs, self.ppo)
 
     @property
     def batch_size(self) -> int:
