@@ -11,7 +11,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from safeswitch.core.pid import PIDGains, PIDState, pid_step
+from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.core.pid_gains import PIDGains
 
 
 def time_per_call(fn: Callable[[], object], min_seconds: float = 1.0, warmup: int = 3) -> float:

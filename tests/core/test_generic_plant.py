@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from safeswitch.core.pid import PIDGains, PIDState, pid_step
+from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.core.pid_gains import PIDGains
 from safeswitch.core.switching import Decision, reason_names, supervise
 
 DT = 0.1

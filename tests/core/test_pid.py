@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from safeswitch.core.pid import PIDGains, PIDState, pid_step
+from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.core.pid_gains import PIDGains
 
 DT = 0.02
 

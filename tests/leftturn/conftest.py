@@ -4,7 +4,7 @@ import pytest
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.spaces import speed_tracking_action
 from safeswitch.leftturn.task import LeftTurnTask
-from safeswitch.sim.vehicle import VehicleParams
+from safeswitch.sim.params import VehicleParams
 
 
 @pytest.fixture(scope="session")

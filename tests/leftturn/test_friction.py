@@ -12,8 +12,8 @@ from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.sim.params import GRAVITY
 from safeswitch.sim.streams import TURN_LATERAL_ACCEL
-from safeswitch.sim.vehicle import GRAVITY
 
 EPISODE = {"episode": {"learned_scope": "episode"}}
 MU_G = 0.9 * GRAVITY  # the default tyres

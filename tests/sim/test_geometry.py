@@ -11,7 +11,8 @@ from safeswitch.sim.geometry import (
     pose_axes,
     resample_polyline,
 )
-from safeswitch.sim.road import Intersection, IntersectionGeometry
+from safeswitch.sim.params import IntersectionGeometry
+from safeswitch.sim.road import Intersection
 
 
 def arc_route(radius=10.0, spacing=0.5):

@@ -3,7 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from safeswitch.sim.road import LEG_DIRECTIONS, Intersection, IntersectionGeometry
+from safeswitch.sim.params import IntersectionGeometry
+from safeswitch.sim.road import LEG_DIRECTIONS, Intersection
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from safeswitch.core.pid import PIDGains, PIDState, pid_step
+from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.core.pid_gains import PIDGains
 from safeswitch.sim.autopilot import AutopilotParams, autopilot_pedals
 from safeswitch.sim.conflict import conflict_geometry
 from safeswitch.sim.road import Intersection

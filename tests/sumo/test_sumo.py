@@ -24,7 +24,7 @@ from safeswitch.leftturn.config import ConfigError  # noqa: E402
 from safeswitch.leftturn.make import build_task  # noqa: E402
 from safeswitch.leftturn.scenarios import named_scenarios  # noqa: E402
 from safeswitch.leftturn.task import LeftTurnTask  # noqa: E402
-from safeswitch.sim.road import IntersectionGeometry  # noqa: E402
+from safeswitch.sim.params import IntersectionGeometry  # noqa: E402
 from safeswitch.sumo import network  # noqa: E402
 from safeswitch.sumo.task import (  # noqa: E402
     LeftTurnSumoTrafficTask,

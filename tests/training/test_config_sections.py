@@ -14,7 +14,7 @@ from safeswitch.leftturn.config import (
     ScenarioConfig,
     TrafficConfig,
 )
-from safeswitch.sim.vehicle import VehicleParams
+from safeswitch.sim.params import VehicleParams
 from safeswitch.training.config import (
     EnvTrainConfig,
     PolicyConfig,

@@ -13,10 +13,9 @@ from dataclasses import dataclass, field, fields
 from typing import Annotated, Any, ClassVar, Literal
 
 from safeswitch.core.config import Bounds, ConfigError, check, check_bounds, from_dict, to_dict
-from safeswitch.core.pid import PIDGains
+from safeswitch.core.pid_gains import PIDGains
 from safeswitch.core.registry import logic_names, logic_params
-from safeswitch.sim.road import IntersectionGeometry
-from safeswitch.sim.vehicle import GRAVITY, VehicleParams
+from safeswitch.sim.params import GRAVITY, IntersectionGeometry, VehicleParams
 
 LearnedScope = Literal["window", "episode", "never"]
 ScenarioName = Literal["cut", "yield1", "yield2"]

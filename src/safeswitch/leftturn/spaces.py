@@ -10,7 +10,8 @@ from numpy.typing import NDArray
 
 from safeswitch.leftturn.task import OBSERVATION_HIGH, OBSERVATION_LOW
 from safeswitch.sim.geometry import FloatArray
-from safeswitch.sim.vehicle import VehicleParams, steady_state_throttle
+from safeswitch.sim.params import VehicleParams
+from safeswitch.sim.vehicle import steady_state_throttle
 
 
 def observation_space(task: Any = None) -> spaces.Box:

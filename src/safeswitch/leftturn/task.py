@@ -35,7 +35,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import columns, jit, plain, take_rows
-from safeswitch.core.pid import PIDKernel, PIDState, pid_tick
+from safeswitch.core.pid import PIDState, pid_tick
+from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.config import LeftTurnConfig

@@ -41,6 +41,7 @@ from safeswitch.leftturn.views import ConflictView, Phantoms, approaching
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.idm import IDMParams
 from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
+from safeswitch.sim.params import GRAVITY
 from safeswitch.sim.road import LEG_DIRECTIONS
 from safeswitch.sim.streams import (
     ArrivalSchedule,
@@ -52,7 +53,6 @@ from safeswitch.sim.streams import (
     spawn,
     traffic_tick,
 )
-from safeswitch.sim.vehicle import GRAVITY
 from safeswitch.sim.world import WorldState
 
 BoolArray = NDArray[np.bool_]

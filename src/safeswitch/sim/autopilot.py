@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from safeswitch.core.arrays import flat, jit
-from safeswitch.core.pid import PIDGains, PIDKernel, PIDState, pid_tick
+from safeswitch.core.pid import PIDState, pid_tick
+from safeswitch.core.pid_gains import PIDGains, PIDKernel
 from safeswitch.sim.geometry import FloatArray
 from safeswitch.sim.vehicle import (
     VehicleConstants,
@@ -70,7 +71,7 @@ def autopilot_tick(
     integral: float, prev_error: float, derivative: float,
 ) -> tuple[float, float, float, float, float]:  # fmt: skip
     """:func:`autopilot_pedals` for one car (``gains``: the speed PID's
-    :attr:`~safeswitch.core.pid.PIDGains.kernel`, ``plant``: its vehicle constants). Returns
+    :attr:`~safeswitch.core.pid_gains.PIDGains.kernel`, ``plant``: its vehicle constants). Returns
     throttle, brake and the PID's new integral, error and derivative."""
     error = target - speed
     correction, integral, derivative = pid_tick(gains, dt, error, integral, prev_error, derivative)

@@ -29,7 +29,10 @@ import numpy as np
 
 from safeswitch.sim.collision import rectangle_separation
 from safeswitch.sim.geometry import FloatArray, Route, RouteSet
-from safeswitch.sim.road import LEG_DIRECTIONS, Intersection, IntersectionGeometry
+
+#: Legs of the main (priority) road.
+from safeswitch.sim.params import IntersectionGeometry
+from safeswitch.sim.road import LEG_DIRECTIONS, Intersection
 
 #: Legs of the main (priority) road.
 MAIN_ROAD = ("north", "south")

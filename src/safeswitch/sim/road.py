@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
 from functools import cached_property
 
 import networkx as nx
 import numpy as np
 
 from safeswitch.sim.geometry import FloatArray, Route
+from safeswitch.sim.params import IntersectionGeometry
 
 #: Unit vector pointing from the centre outwards along each leg.
 LEG_DIRECTIONS: dict[str, tuple[float, float]] = {
@@ -33,42 +33,6 @@ LEG_DIRECTIONS: dict[str, tuple[float, float]] = {
 def _right_of(direction: FloatArray) -> FloatArray:
     """Unit vector to the right of a driving direction."""
     return np.array([direction[1], -direction[0]])
-
-
-@dataclass(frozen=True)
-class IntersectionGeometry:
-    """Dimensions of the four-leg intersection.
-
-    Attributes:
-        lane_width: Width of every lane [m].
-        box_half_size: Distance from the centre to each leg's stop line [m]. Larger than the
-            road's half width (one lane each way = 3.5 m) because real junctions set stop lines
-            back behind corner radii and crossings; it also sets the turn radii (left turn:
-            ``box_half_size + lane_width / 2`` = 11.75 m by default).
-        approach_length: Length of each leg from the stop line outwards [m]. At the default
-            120 m a car starting from rest reaches 25 km/h long before the stop line.
-        waypoint_spacing: Largest distance between route waypoints [m].
-    """
-
-    lane_width: float = 3.5
-    box_half_size: float = 10.0
-    approach_length: float = 120.0
-    waypoint_spacing: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name in ("lane_width", "box_half_size", "approach_length", "waypoint_spacing"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"IntersectionGeometry.{name} must be > 0, got {value!r}")
-        if self.box_half_size < self.lane_width:
-            raise ValueError(
-                f"IntersectionGeometry.box_half_size ({self.box_half_size}) must be at least "
-                f"the road's half width ({self.lane_width})"
-            )
-        if self.waypoint_spacing > 1.0:
-            raise ValueError(
-                f"IntersectionGeometry.waypoint_spacing must be <= 1 m, got {self.waypoint_spacing}"
-            )
 
 
 class Intersection:

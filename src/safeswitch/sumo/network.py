@@ -1,4 +1,4 @@
-"""The intersection of :class:`~safeswitch.sim.road.IntersectionGeometry` as a SUMO network.
+"""The intersection of :class:`~safeswitch.sim.params.IntersectionGeometry` as a SUMO network.
 
 Generated at run time with SUMO's ``netconvert`` from a plain description (nodes and edges), not
 checked in: one lane each way per leg, lanes ``lane_width`` wide, the junction a square of
@@ -18,7 +18,8 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from safeswitch.sim.road import LEG_DIRECTIONS, IntersectionGeometry
+from safeswitch.sim.params import IntersectionGeometry
+from safeswitch.sim.road import LEG_DIRECTIONS
 from safeswitch.sim.streams import TURN_LATERAL_ACCEL
 
 #: Speed limit on every edge [m/s] (50 km/h; the vehicles' own top speeds are lower).
