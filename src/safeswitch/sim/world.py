@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
-from safeswitch.core.arrays import flat, jit
+from safeswitch.core.arrays import flat, jit, plain
 from safeswitch.sim.collision import separation
 from safeswitch.sim.geometry import FloatArray, IntArray, Route, RouteSet, locate, wrap_angle
 from safeswitch.sim.vehicle import (
@@ -68,6 +69,13 @@ class World:
         self.route_base = self.route_set.base_index(self.slots)  # broadcasts against [B, V]
         #: The vehicle model's constants for this world's parameters and tick.
         self.vehicle_constants = vehicle_constants(self.params, self.dt)
+        routes = self.route_set
+        #: What the compiled tick reads that stays fixed (plain tuples at its entry, see
+        #: :func:`~safeswitch.core.arrays.plain`).
+        self._tick_constants = plain(WorldConstants(
+            self.vehicle_constants, routes.tables, routes.spacing, routes.size - 2,
+            routes.WALK_STEPS, self.route_base, self.params.length, self.params.width,
+        ))  # fmt: skip
 
     @property
     def num_vehicles(self) -> int:
@@ -108,22 +116,27 @@ class World:
         """
         shape = state.progress.shape
         n = state.progress.size
-        out = tuple(np.empty(n) for _ in range(8))
-        outputs = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-        progress, lateral, gap = np.empty(n), np.empty(n), np.empty(shape[0])
-        routes, p, v = self.route_set, self.params, state.vehicles
-        _world_tick(
-            (v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, v.throttle, v.brake, v.steer),
-            flat(throttle, shape), flat(brake, shape), flat(steer, shape),
-            self.vehicle_constants, routes.tables, routes.spacing, routes.size - 2,
-            routes.WALK_STEPS, self.route_base, state.progress, p.length, p.width,
-            out, outputs, progress, lateral, gap,
+        e = np.empty
+        out = WorldOutputs(
+            (e(n), e(n), e(n), e(n), e(n), e(n), e(n), e(n)), (e(n), e(n), e(n), e(n)), e(n),
+            e(n), e(shape[0]),
         )  # fmt: skip
-        vehicles = VehicleState(*(a.reshape(shape) for a in out))
+        v = state.vehicles
+        _world_tick_entry(
+            self._tick_constants,
+            tuple(WorldInputs(
+                (v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, v.throttle, v.brake, v.steer),
+                flat(throttle, shape), flat(brake, shape), flat(steer, shape), state.progress,
+            )),
+            tuple(out),
+        )  # fmt: skip
+        vehicles = VehicleState(*(a.reshape(shape) for a in out.vehicles))
         new = WorldState(
-            vehicles, progress.reshape(shape), lateral.reshape(shape), state.time + self.dt
-        )
-        return new, VehicleOutputs(*(a.reshape(shape) for a in outputs)), gap
+            vehicles, out.progress.reshape(shape), out.lateral.reshape(shape),
+            state.time + self.dt,
+        )  # fmt: skip
+        measured = VehicleOutputs(*(a.reshape(shape) for a in out.outputs))
+        return new, measured, out.separation
 
     def ego_separation(self, vehicles: VehicleState) -> FloatArray:
         """Separation between the ego's footprint and the nearest other vehicle's [m], ``[B]``
@@ -154,33 +167,103 @@ def heading_errors(world: World, state: WorldState) -> FloatArray:
     return wrap_angle(state.vehicles.yaw - route_heading)
 
 
+class WorldConstants(NamedTuple):
+    """What the compiled tick reads that stays fixed for a world.
+
+    Attributes:
+        vehicle: The vehicle model's constants.
+        tables: The routes' waypoint tables (see :class:`~safeswitch.sim.geometry.RouteSet`).
+        spacing: Waypoint spacing [m].
+        k_max: Last waypoint segment index.
+        walk_steps: Segments the route tracking may walk per tick.
+        base: Each slot's route row in ``tables`` ``[V]``.
+        length: Vehicle footprint length [m].
+        width: Vehicle footprint width [m].
+    """
+
+    vehicle: VehicleConstants
+    tables: FloatArray
+    spacing: float
+    k_max: int
+    walk_steps: int
+    base: IntArray
+    length: float
+    width: float
+
+
+class WorldInputs(NamedTuple):
+    """The state the compiled tick reads.
+
+    Attributes:
+        vehicles: The ``[B, V]`` fields of :class:`VehicleState`, in its order.
+        throttle: Commanded throttle, flat ``[B·V]``.
+        brake: Commanded brake, flat ``[B·V]``.
+        steer: Commanded steering, flat ``[B·V]``.
+        progress: Each vehicle's arc length along its route ``[B, V]`` [m].
+    """
+
+    vehicles: tuple[FloatArray, ...]
+    throttle: FloatArray
+    brake: FloatArray
+    steer: FloatArray
+    progress: FloatArray
+
+
+class WorldOutputs(NamedTuple):
+    """What the compiled tick writes (flat ``[B·V]`` unless noted).
+
+    Attributes:
+        vehicles: The new fields of :class:`VehicleState`, in its order.
+        outputs: The fields of :class:`VehicleOutputs`, in its order.
+        progress: The new arc lengths along the routes [m].
+        lateral: The new signed lateral deviations [m].
+        separation: Each scene's separation between the ego and its nearest other vehicle
+            ``[B]`` [m].
+    """
+
+    vehicles: tuple[FloatArray, ...]
+    outputs: tuple[FloatArray, ...]
+    progress: FloatArray
+    lateral: FloatArray
+    separation: FloatArray
+
+
 @jit
-def _world_tick(
-    state: tuple[FloatArray, ...], throttle: FloatArray, brake: FloatArray, steer: FloatArray,
-    k: VehicleConstants, tables: FloatArray, spacing: float, k_max: int, walk_steps: int,
-    base: IntArray, progress: FloatArray, length: float, width: float,
-    out: tuple[FloatArray, ...], outputs: tuple[FloatArray, ...], progress_out: FloatArray,
-    lateral_out: FloatArray, separation_out: FloatArray,
-) -> None:  # fmt: skip
+def named_world_constants(c: tuple[object, ...]) -> WorldConstants:
+    """The inverse of ``plain`` for :class:`WorldConstants` (in compiled code)."""
+    return WorldConstants(VehicleConstants(*c[0]), c[1], c[2], c[3], c[4], c[5], c[6], c[7])
+
+
+@jit
+def _world_tick_entry(c: tuple[object, ...], i: tuple[object, ...], o: tuple[object, ...]) -> None:
+    """:func:`_world_tick` called with plain tuples, named again here."""
+    _world_tick(named_world_constants(c), WorldInputs(*i), WorldOutputs(*o))
+
+
+@jit
+def _world_tick(c: WorldConstants, i: WorldInputs, o: WorldOutputs) -> None:
     """:meth:`World.step` in one loop: every vehicle's tick (:func:`vehicle_tick`) and route
     tracking (:func:`locate`), then each scene's separation between the ego (slot 0) and its
-    nearest other vehicle. ``state`` holds the ``[B, V]`` fields of :class:`VehicleState`, the
-    outputs are flat ``[B·V]`` (``separation_out``: ``[B]``)."""
+    nearest other vehicle."""
+    # The tuples' arrays taken out once (see jit).
+    state, throttle, brake, steer, progress = i.vehicles, i.throttle, i.brake, i.steer, i.progress
+    out, outputs, progress_out, lateral_out = o.vehicles, o.outputs, o.progress, o.lateral
+    separation_out, tables, base, k = o.separation, c.tables, c.base, c.vehicle
     scenes, slots = progress.shape
     for b in range(scenes):
         for j in range(slots):
-            i = b * slots + j
+            n = b * slots + j
             r = vehicle_tick(
                 state[0][b, j], state[1][b, j], state[2][b, j], state[3][b, j], state[4][b, j],
-                state[5][b, j], state[6][b, j], state[7][b, j], throttle[i], brake[i], steer[i],
+                state[5][b, j], state[6][b, j], state[7][b, j], throttle[n], brake[n], steer[n],
                 k,
             )  # fmt: skip
-            store_tick(out, outputs, i, r)
-            _, progress_out[i], _, lateral_out[i] = locate(
-                tables, spacing, k_max, walk_steps, base[j], r[0], r[1], progress[b, j]
+            store_tick(out, outputs, n, r)
+            _, progress_out[n], _, lateral_out[n] = locate(
+                tables, c.spacing, c.k_max, c.walk_steps, base[j], r[0], r[1], progress[b, j]
             )
         separation_out[b] = nearest_gap(
-            out[0], out[1], out[2], out[3], b * slots, slots, length, width
+            out[0], out[1], out[2], out[3], b * slots, slots, c.length, c.width
         )
 
 
