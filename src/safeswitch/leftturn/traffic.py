@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import jit
+from safeswitch.core.arrays import jit, plain
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.logics.certified import CertifiedSwitching, certified_logic
@@ -44,14 +44,18 @@ from safeswitch.sim.network import MAIN_ROAD, RoadNetwork, turn_of
 from safeswitch.sim.params import GRAVITY
 from safeswitch.sim.road import LEG_DIRECTIONS
 from safeswitch.sim.streams import (
+    Arrivals,
     ArrivalSchedule,
+    Drivers,
+    Externals,
     RightOfWay,
+    StreamConstants,
     TrafficState,
     network_tables,
     npc_separations,
     place,
-    spawn,
-    traffic_tick,
+    spawn_entry,
+    traffic_tick_entry,
 )
 from safeswitch.sim.world import WorldState
 
@@ -153,9 +157,14 @@ class LeftTurnTrafficTask(LeftTurnTask):
             )
         self._point = _zone_middles(self.network)
         #: Where a vehicle leaves the scene, per movement [m].
-        self._exit_at = np.minimum(
+        exit_at = np.minimum(
             self.network.box_exits + traffic.exit_distance_m, self.network.lengths - 1.0
         )
+        #: What the compiled streams read that stays fixed (plain tuples at their entry, see
+        #: :func:`~safeswitch.core.arrays.plain`).
+        self._streams = plain(StreamConstants(
+            self.tables, self.rules, self.idm.kernel, config.episode.dt, exit_at
+        ))  # fmt: skip
         # Per ordered pair of movements: the first's zone, its certified zone (the logic view's
         # table, [2, R, R, 2]).
         self._pair_zones = np.ascontiguousarray(
@@ -401,22 +410,18 @@ class LeftTurnTrafficTask(LeftTurnTask):
         top[:, 1] = state.scenarios.north_speed
         new = tr.copy(overwritten=_TICK_WRITES)
         ext_progress = _ghost(np.ascontiguousarray(world.progress), state.ghost_ego)
-        traffic_tick(
-            self.tables, self.rules, self.idm.kernel, self.config.episode.dt, tr.route,
-            tr.progress, tr.speed, tr.desired, tr.yields, tr.active, tr.waited, externals,
-            ext_progress, np.ascontiguousarray(v.speed), top,
-            self._ext_is_ego, state.tick % self._action_ticks == 0, tr.accel, new.progress,
-            new.speed, new.waited, new.accel,
-        )  # fmt: skip
-        spawn(
-            self.tables, self.rules, self.idm.kernel,
-            (state.tick + 1).astype(np.float64) * self.config.episode.dt,
-            tr.schedule.time, tr.schedule.route, tr.schedule.desired, tr.schedule.yields,
-            new.entered, new.next_arrival, self._exit_at, new.route, new.progress, new.speed,
-            new.desired, new.yields, new.active, new.waited, new.accel, externals,
-            _ghost(np.ascontiguousarray(new_world.progress), state.ghost_ego),
-            np.ascontiguousarray(new_world.vehicles.speed),
-        )  # fmt: skip
+        ext = Externals(externals, ext_progress, np.ascontiguousarray(v.speed), top,
+                        self._ext_is_ego)  # fmt: skip
+        decide = state.tick % self._action_ticks == 0
+        traffic_tick_entry(self._streams, tuple(Drivers.of(tr)), tuple(ext), decide,
+                           tuple(Drivers.of(new)))  # fmt: skip
+        now = (state.tick + 1).astype(np.float64) * self.config.episode.dt
+        moved = ext._replace(
+            progress=_ghost(np.ascontiguousarray(new_world.progress), state.ghost_ego),
+            speed=np.ascontiguousarray(new_world.vehicles.speed),
+        )
+        spawn_entry(self._streams, now, tuple(Arrivals.of(tr.schedule)), new.entered,
+                    new.next_arrival, tuple(Drivers.of(new)), tuple(moved))  # fmt: skip
         place(self.tables, new)
         return self.with_separations(state, new, new_world, separation)
 

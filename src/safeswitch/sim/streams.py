@@ -254,6 +254,82 @@ class TrafficState:
         return TrafficState(**values, schedule=plan)
 
 
+class StreamConstants(NamedTuple):
+    """What the compiled streams read that stays fixed for a scene's traffic.
+
+    Attributes:
+        tables: The network's per-movement tables.
+        rules: The drivers' right-of-way rules.
+        idm: The drivers' car-following model.
+        dt: Tick [s].
+        exit_at: Where a vehicle leaves the scene, per movement [m] ``[R]``.
+    """
+
+    tables: NetworkTables
+    rules: RightOfWay
+    idm: IDMKernel
+    dt: float
+    exit_at: FloatArray
+
+
+class Drivers(NamedTuple):
+    """The other vehicles' arrays ``[B, N]`` the compiled streams read and write (the fields
+    of :class:`TrafficState` of the same names)."""
+
+    route: IntArray
+    progress: FloatArray
+    speed: FloatArray
+    desired: FloatArray
+    yields: BoolArray
+    active: BoolArray
+    waited: FloatArray
+    accel: FloatArray
+
+    @classmethod
+    def of(cls, state: TrafficState) -> Drivers:
+        return cls(state.route, state.progress, state.speed, state.desired, state.yields,
+                   state.active, state.waited, state.accel)  # fmt: skip
+
+
+class Externals(NamedTuple):
+    """The vehicles driven by the plant — the ego, the paper's north car — as the drivers see
+    them, arrays ``[B, E]``.
+
+    Attributes:
+        route: Their movements.
+        progress: Their arc lengths [m].
+        speed: Their speeds [m/s].
+        top: Their top speeds [m/s] (for their earliest arrival).
+        is_ego: ``[E]``: the automated ego (a non-yielding driver ignores it at conflicts;
+            every other one is given way to by the rules).
+    """
+
+    route: IntArray
+    progress: FloatArray
+    speed: FloatArray
+    top: FloatArray
+    is_ego: BoolArray
+
+
+class Arrivals(NamedTuple):
+    """An :class:`ArrivalSchedule`'s arrays, as the compiled :func:`spawn` reads them."""
+
+    time: FloatArray
+    route: IntArray
+    desired: FloatArray
+    yields: BoolArray
+
+    @classmethod
+    def of(cls, schedule: ArrivalSchedule) -> Arrivals:
+        return cls(schedule.time, schedule.route, schedule.desired, schedule.yields)
+
+
+@jit
+def named_stream_constants(c: tuple[object, ...]) -> StreamConstants:
+    """The inverse of ``plain`` for :class:`StreamConstants` (in compiled code)."""
+    return StreamConstants(NetworkTables(*c[0]), RightOfWay(*c[1]), IDMKernel(*c[2]), c[3], c[4])
+
+
 def place(tables: NetworkTables, state: TrafficState) -> None:
     """Fill the poses of ``state``'s active vehicles from their routes and arc lengths (in
     place; an empty slot keeps whatever it held)."""
@@ -307,22 +383,34 @@ def _leader(t: NetworkTables, ri: int, si: float, rj: int, sj: float) -> float:
 
 
 @jit
-def traffic_tick(
-    t: NetworkTables, rules: RightOfWay, idm: IDMKernel, dt: float,
-    route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
-    yields: BoolArray, active: BoolArray, waited: FloatArray,
-    ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
-    ext_top: FloatArray, ext_is_ego: BoolArray, decide: BoolArray, held: FloatArray,
-    new_progress: FloatArray, new_speed: FloatArray, new_waited: FloatArray,
-    accel_out: FloatArray,
+def traffic_tick_entry(
+    c: tuple[object, ...], old: tuple[object, ...], ext: tuple[object, ...], decide: BoolArray,
+    new: tuple[object, ...],
 ) -> None:  # fmt: skip
-    """One tick of every other vehicle of every scene (see the module docstring). The
-    ``ext_*`` arrays ``[B, E]`` are vehicles driven by the plant — the ego, the paper's north
-    car — seen by the drivers as they are: their route, arc length, speed and top speed
-    [m/s]; ``ext_is_ego`` ``[E]`` marks the automated ego (a non-yielding driver ignores it at
-    conflicts; every other one is given way to by the rules). Where ``decide`` ``[B]`` is
-    false the drivers of that scene hold their last accelerations ``held`` ``[B, N]``;
-    ``accel_out`` gets each vehicle's acceleration over the tick."""
+    """:func:`traffic_tick` called with plain tuples (see
+    :func:`~safeswitch.core.arrays.plain`), named again here."""
+    traffic_tick(named_stream_constants(c), Drivers(*old), Externals(*ext), decide, Drivers(*new))
+
+
+@jit
+def traffic_tick(
+    c: StreamConstants, old: Drivers, ext: Externals, decide: BoolArray, new: Drivers
+) -> None:
+    """One tick of every other vehicle of every scene (see the module docstring), from
+    ``old`` into ``new``'s progress, speed, waiting time and acceleration. ``ext`` are the
+    vehicles driven by the plant, seen by the drivers as they are. Where ``decide`` ``[B]``
+    is false the drivers of that scene hold their last accelerations (``old.accel``);
+    ``new.accel`` gets each vehicle's acceleration over the tick."""
+    # The tuples' arrays taken out once (see jit).
+    t, rules, idm, dt = c.tables, c.rules, c.idm, c.dt
+    route, progress, speed, desired, yields, active, waited, held = (
+        old.route, old.progress, old.speed, old.desired, old.yields, old.active, old.waited,
+        old.accel,
+    )  # fmt: skip
+    ext_route, ext_progress, ext_speed, ext_top, ext_is_ego = (
+        ext.route, ext.progress, ext.speed, ext.top, ext.is_ego,
+    )  # fmt: skip
+    new_progress, new_speed, new_waited, accel_out = new.progress, new.speed, new.waited, new.accel
     scenes, slots = route.shape
     externals = ext_route.shape[1]
     # On a decision tick a scene's active vehicles are gathered first: the pair loops below
@@ -510,18 +598,34 @@ def npc_separations(
 
 
 @jit
-def spawn(
-    t: NetworkTables, rules: RightOfWay, idm: IDMKernel, now: FloatArray,
-    arrive_time: FloatArray, arrive_route: IntArray, arrive_desired: FloatArray,
-    arrive_yields: BoolArray, entered: IntArray, next_arrival: FloatArray, exit_at: FloatArray,
-    route: IntArray, progress: FloatArray, speed: FloatArray, desired: FloatArray,
-    yields: BoolArray, active: BoolArray, waited: FloatArray, accel: FloatArray,
-    ext_route: IntArray, ext_progress: FloatArray, ext_speed: FloatArray,
+def spawn_entry(
+    c: tuple[object, ...], now: FloatArray, arrivals: tuple[object, ...], entered: IntArray,
+    next_arrival: FloatArray, drivers: tuple[object, ...], ext: tuple[object, ...],
 ) -> None:  # fmt: skip
-    """Retire the vehicles past their exit (``exit_at`` per movement [m]) and let in the
-    scheduled ones whose time ``now`` ``[B]`` has come (see the module docstring), in place;
-    ``next_arrival`` ``[B]`` is kept at the soonest time a scene's schedule has anything due
-    (scenes with nothing due skip their schedule: reading it is a cache miss per leg)."""
+    """:func:`spawn` called with plain tuples, named again here."""
+    spawn(named_stream_constants(c), now, Arrivals(*arrivals), entered, next_arrival,
+          Drivers(*drivers), Externals(*ext))  # fmt: skip
+
+
+@jit
+def spawn(
+    c: StreamConstants, now: FloatArray, arrivals: Arrivals, entered: IntArray,
+    next_arrival: FloatArray, drivers: Drivers, ext: Externals,
+) -> None:  # fmt: skip
+    """Retire the vehicles past their exit (``c.exit_at``) and let in the scheduled ones whose
+    time ``now`` ``[B]`` has come (see the module docstring), in place; ``next_arrival``
+    ``[B]`` is kept at the soonest time a scene's schedule has anything due (scenes with
+    nothing due skip their schedule: reading it is a cache miss per leg)."""
+    # The tuples' arrays taken out once (see jit).
+    t, rules, idm, exit_at = c.tables, c.rules, c.idm, c.exit_at
+    arrive_time, arrive_route, arrive_desired, arrive_yields = (
+        arrivals.time, arrivals.route, arrivals.desired, arrivals.yields,
+    )  # fmt: skip
+    route, progress, speed, desired, yields, active, waited, accel = (
+        drivers.route, drivers.progress, drivers.speed, drivers.desired, drivers.yields,
+        drivers.active, drivers.waited, drivers.accel,
+    )  # fmt: skip
+    ext_route, ext_progress, ext_speed = ext.route, ext.progress, ext.speed
     scenes, slots = route.shape
     legs, most = arrive_time.shape[1], arrive_time.shape[2]
     for b in range(scenes):
