@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -155,7 +155,6 @@ class LeftTurnTrafficTask(LeftTurnTask):
                 f"traffic.action_step_s={traffic.action_step_s!r} must be a whole number of "
                 f"ticks of episode.dt={dt!r}"
             )
-        self._point = _zone_middles(self.network)
         #: Where a vehicle leaves the scene, per movement [m].
         exit_at = np.minimum(
             self.network.box_exits + traffic.exit_distance_m, self.network.lengths - 1.0
@@ -165,11 +164,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self._streams = plain(StreamConstants(
             self.tables, self.rules, self.idm.kernel, config.episode.dt, exit_at
         ))  # fmt: skip
-        # Per ordered pair of movements: the first's zone, its certified zone (the logic view's
-        # table, [2, R, R, 2]).
-        self._pair_zones = np.ascontiguousarray(
-            np.stack([self.network.conflicts, self.cert_network.conflicts])
-        )
+        n = self.north_conflict
+        #: What the compiled conflict view reads that stays fixed (plain at its entry).
+        self._conflict_tables = plain(ConflictTables(
+            self.ego_route,
+            np.ascontiguousarray(np.stack([self.network.conflicts, self.cert_network.conflicts])),
+            _zone_middles(self.network),
+            np.array([n.ego_zone, n.ego_cert_zone, n.north_zone, n.north_cert_zone]),
+            np.array([n.ego_point, n.north_point]), n.approach_distance,
+        ))  # fmt: skip
         low: list[float]
         high: list[float]
         if traffic.observe in ("conflicts", "margins"):
@@ -343,22 +346,17 @@ class LeftTurnTrafficTask(LeftTurnTask):
         tr = state.traffic
         batch, slots = tr.route.shape
         c = slots + 1
-        present = np.empty((batch, c), dtype=bool)
-        inside = np.empty((batch, c), dtype=bool)
-        zones = np.empty((4, batch, c, 2))  # ego's, ego's certified, other's, other's certified
-        points = np.empty((2, batch, c))  # ego's, other's
-        other = np.empty((3, batch, c))  # progress, speed, top speed
-        n = self.north_conflict
-        north_zones = np.array([n.ego_zone, n.ego_cert_zone, n.north_zone, n.north_cert_zone])
-        v, progress = state.world.vehicles, state.world.progress
-        _conflict_view(
-            self.ego_route, self._pair_zones, self._point, north_zones,
-            np.array([n.ego_point, n.north_point]), tr.route, tr.active, tr.progress,
-            tr.speed, tr.desired, np.ascontiguousarray(progress[:, 0]),
-            np.ascontiguousarray(progress[:, 1]), np.ascontiguousarray(v.speed[:, 1]),
-            state.scenarios.north_speed, n.approach_distance, present, inside, zones, points,
-            other,
+        e = np.empty
+        out = ConflictArrays(
+            e((batch, c), dtype=bool), e((batch, c), dtype=bool), e((4, batch, c, 2)),
+            e((2, batch, c)), e((3, batch, c)),
         )  # fmt: skip
+        present, inside, zones, points, other = out
+        v, progress = state.world.vehicles, state.world.progress
+        north = (np.ascontiguousarray(progress[:, 1]), np.ascontiguousarray(v.speed[:, 1]),
+                 state.scenarios.north_speed)  # fmt: skip
+        _conflict_view_entry(self._conflict_tables, tuple(Drivers.of(tr)),
+                             np.ascontiguousarray(progress[:, 0]), north, tuple(out))  # fmt: skip
         return ConflictView(
             ego_progress=progress[:, 0], ego_speed=v.speed[:, 0], ego_throttle=v.throttle[:, 0],
             ego_brake=v.brake[:, 0], present=present, window=inside, ego_point=points[0],
@@ -581,19 +579,69 @@ def _soonest_conflicts(
                 out[b, base + 6 + e] = extra[b, pick, e]
 
 
+class ConflictTables(NamedTuple):
+    """What the compiled conflict view reads that stays fixed for a task.
+
+    Attributes:
+        ego_route: The ego's movement.
+        pair_zones: Per ordered pair of movements, the first's zone, paper and certified
+            margins ``[2, R, R, 2]``.
+        point: Per ordered pair, the middle of the first's zone ``[R, R]``.
+        north_zones: The north car's conflict: the ego's zone, its certified zone, the north
+            car's, its certified one ``[4, 2]``.
+        north_points: The conflict point on the ego's and on the north car's route ``[2]``.
+        approach: Algorithm 1's "at the intersection" distance [m].
+    """
+
+    ego_route: int
+    pair_zones: FloatArray
+    point: FloatArray
+    north_zones: FloatArray
+    north_points: FloatArray
+    approach: float
+
+
+class ConflictArrays(NamedTuple):
+    """The arrays of a :class:`~safeswitch.leftturn.views.ConflictView` the compiled view
+    fills: ``present`` and ``window`` ``[B, C]``, ``zones`` (the ego's, its certified, the
+    other's, its certified) ``[4, B, C, 2]``, ``points`` (the ego's, the other's)
+    ``[2, B, C]``, ``other`` (progress, speed, top speed) ``[3, B, C]``."""
+
+    present: BoolArray
+    window: BoolArray
+    zones: FloatArray
+    points: FloatArray
+    other: FloatArray
+
+
+@jit
+def _conflict_view_entry(
+    c: tuple[Any, ...], drivers: tuple[Any, ...], ego_progress: FloatArray,
+    north: tuple[FloatArray, FloatArray, FloatArray], out: tuple[Any, ...],
+) -> None:  # fmt: skip
+    """:func:`_conflict_view` called with plain tuples, named again here."""
+    _conflict_view(ConflictTables(*c), Drivers(*drivers), ego_progress, north,
+                   ConflictArrays(*out))  # fmt: skip
+
+
 @jit
 def _conflict_view(
-    ego_route: int, pair_zones: FloatArray, point: FloatArray, north_zones: FloatArray,
-    north_points: FloatArray, route: NDArray[np.int64], active: BoolArray, progress: FloatArray,
-    speed: FloatArray, desired: FloatArray, ego_progress: FloatArray,
-    north_progress: FloatArray, north_speed: FloatArray, north_top: FloatArray,
-    approach: float, present: BoolArray, window: BoolArray, zones: FloatArray,
-    points: FloatArray, other: FloatArray,
+    c: ConflictTables, drivers: Drivers, ego_progress: FloatArray,
+    north: tuple[FloatArray, FloatArray, FloatArray], out: ConflictArrays,
 ) -> None:  # fmt: skip
     """Fill the arrays of a :class:`~safeswitch.leftturn.views.ConflictView`: column 0 the
-    north car, then every slot (``present`` false where the slot is empty or its route does not
-    cross the ego's); ``window``: Algorithm 1's While condition of each pair (both within
-    ``approach`` of their conflict point, neither past its zone)."""
+    north car (``north``: its progress, speed and top speed ``[B]``), then every slot
+    (``present`` false where the slot is empty or its route does not cross the ego's);
+    ``window``: Algorithm 1's While condition of each pair (both within ``approach`` of their
+    conflict point, neither past its zone)."""
+    # The tuples' arrays taken out once (see jit).
+    ego_route, pair_zones, point, approach = c.ego_route, c.pair_zones, c.point, c.approach
+    north_zones, north_points = c.north_zones, c.north_points
+    route, active, progress, speed, desired = (
+        drivers.route, drivers.active, drivers.progress, drivers.speed, drivers.desired,
+    )  # fmt: skip
+    north_progress, north_speed, north_top = north
+    present, window, zones, points, other = out
     for b in range(route.shape[0]):
         present[b, 0] = True
         for m in range(4):
