@@ -132,15 +132,16 @@ class PaperLogicLimit:
         # Acceleration bounds at the slower neighbour of each grid speed: a grid speed stands
         # for true speeds up to one step below it, and the engine's reach falls with speed.
         slower = np.maximum(speeds - speed_step, 0.0)
-        self._accel = self.oracle.max_accel(slower)
         self.top_speed = float(speeds[-1])
         if braking == "comfort":
-            self._decel = np.full(bins, lim.max_decel)
+            decel = np.full(bins, lim.max_decel)
         else:
             p = config.vehicle
             drag = closed_throttle_drag(p, speeds) + driving_resistance(p, speeds)
-            self._decel = np.minimum(drag / p.mass, lim.accel_lon)
-        self._curve = self._curvature_bands(speeds - speed_step)
+            decel = np.minimum(drag / p.mass, lim.accel_lon)
+        self._envelope = SpeedEnvelope(
+            self.oracle.max_accel(slower), decel, self._curvature_bands(speeds - speed_step)
+        )
         geo, paper = task.conflict, config.paper
         self._constants = LimitLayout(
             config.episode.dt, geo.zone_a[1], config.episode.approach_distance_m, speed_step,
@@ -196,12 +197,7 @@ class PaperLogicLimit:
     def bound(self, timeline: ConflictTimeline) -> FloatArray:
         """:meth:`times` against conflicts given tick by tick (``[B, H + 1, C]``, e.g. from
         the task's ``conflict_timeline``)."""
-        t = timeline
-        ticks = _reachable(
-            t.start, t.present, t.ego_entry, t.ego_exit, t.ego_point, t.other_distance,
-            t.other_inside, t.other_window, t.other_speed, self._accel, self._decel,
-            self._curve, self._constants, self._paper,
-        )  # fmt: skip
+        ticks = _reachable(timeline, self._envelope, self._constants, self._paper)
         return np.where(ticks >= 0, ticks * self.task.config.episode.dt, np.nan)
 
 
@@ -246,17 +242,58 @@ def _remove(lo: NDArray[np.float64], hi: NDArray[np.float64], n: int, cut_lo: fl
     return k
 
 
+class SpeedEnvelope(NamedTuple):
+    """What the ego can do from each grid speed ``[S]`` (``curve`` ``[S, K, 2]``).
+
+    Attributes:
+        accel: Its largest acceleration [m/s²].
+        decel: Its largest deceleration [m/s²].
+        curve: The stretches of its route it may not be in at that speed (the lateral limit),
+            ``(from, to)`` [m].
+    """
+
+    accel: FloatArray
+    decel: FloatArray
+    curve: FloatArray
+
+
+class Reach(NamedTuple):
+    """A reachable set: the interval of positions ``[lo, hi]`` per grid speed ``[S]`` (empty
+    where ``lo > hi``)."""
+
+    lo: FloatArray
+    hi: FloatArray
+
+
+class Scratch(NamedTuple):
+    """:func:`_tick`'s working arrays (allocated once per scene)."""
+
+    new: Reach
+    piece_lo: FloatArray
+    piece_hi: FloatArray
+    occupied: NDArray[np.int64]
+    firing: NDArray[np.int64]
+    gaps: FloatArray
+
+
 @jit
-def _tick(t: int, lo: FloatArray, hi: FloatArray, new_lo: FloatArray, new_hi: FloatArray,
-          piece_lo: FloatArray, piece_hi: FloatArray, occupied: NDArray[np.int64],
-          firing: NDArray[np.int64], gaps: FloatArray, present: NDArray[np.bool_],
-          ego_entry: FloatArray, ego_exit: FloatArray, ego_point: FloatArray,
-          other_distance: FloatArray, other_inside: NDArray[np.bool_],
-          other_window: NDArray[np.bool_], other_speed: FloatArray, accel: FloatArray,
-          decel: FloatArray, curve: FloatArray, c: LimitLayout,
-          paper: PaperConstants) -> bool:  # fmt: skip
-    """Move the reachable set ``lo``/``hi`` (per grid speed) from tick ``t - 1`` to ``t`` in
+def _tick(t: int, reachable: Reach, w: Scratch, timeline: ConflictTimeline, env: SpeedEnvelope,
+          c: LimitLayout, paper: PaperConstants) -> bool:  # fmt: skip
+    """Move the reachable set (per grid speed) from tick ``t - 1`` to ``t`` in
     place, removing what the constraints of tick ``t`` rule out; whether anything is left."""
+    # The tuples' arrays taken out once (see jit).
+    lo, hi, new_lo, new_hi = reachable.lo, reachable.hi, w.new.lo, w.new.hi
+    piece_lo, piece_hi, occupied, firing, gaps = (
+        w.piece_lo, w.piece_hi, w.occupied, w.firing, w.gaps,
+    )  # fmt: skip
+    present, ego_entry, ego_exit, ego_point = (
+        timeline.present, timeline.ego_entry, timeline.ego_exit, timeline.ego_point,
+    )  # fmt: skip
+    other_distance, other_inside, other_window, other_speed = (
+        timeline.other_distance, timeline.other_inside, timeline.other_window,
+        timeline.other_speed,
+    )  # fmt: skip
+    accel, decel, curve = env.accel, env.decel, env.curve
     dt, dv = c.dt, c.speed_step
     bins, conflicts = accel.shape[0], present.shape[1]
     tol = t * dv * dt  # how far grid positions may run ahead of the true ones
@@ -318,35 +355,33 @@ def _tick(t: int, lo: FloatArray, hi: FloatArray, new_lo: FloatArray, new_hi: Fl
 
 
 @jit
-def _clear_tick(s0: float, v0: float, present: NDArray[np.bool_], ego_entry: FloatArray,
-                ego_exit: FloatArray, ego_point: FloatArray, other_distance: FloatArray,
-                other_inside: NDArray[np.bool_], other_window: NDArray[np.bool_],
-                other_speed: FloatArray, accel: FloatArray, decel: FloatArray, curve: FloatArray,
-                c: LimitLayout, paper: PaperConstants) -> int:  # fmt: skip
+def _clear_tick(timeline: ConflictTimeline, env: SpeedEnvelope, c: LimitLayout,
+                paper: PaperConstants) -> int:  # fmt: skip
     """First tick on which the ego can be past its conflict zone with the north car and still
     get past every later zone without breaking a constraint, or -1 (see the class; the
-    conflicts ``[H + 1, C]`` as in :class:`ConflictTimeline`)."""
-    bins, conflicts, ticks = accel.shape[0], present.shape[1], present.shape[0]
+    timeline of one scene: ``start`` ``[2]``, the conflicts ``[H + 1, C]``)."""
+    present, ego_exit, curve = timeline.present, timeline.ego_exit, env.curve
+    bins, conflicts, ticks = env.accel.shape[0], present.shape[1], present.shape[0]
+    s0, v0 = timeline.start[0], timeline.start[1]
     lo = np.full(bins, np.inf)
     hi = np.full(bins, -np.inf)
     j0 = min(math.ceil(v0 / c.speed_step - 1e-12), bins - 1)
     lo[j0], hi[j0] = s0, s0
-    new_lo, new_hi = np.empty(bins), np.empty(bins)
     go_lo, go_hi = np.empty(bins), np.empty(bins)  # the continuation from a clearing tick
     room = 2 + curve.shape[1] + 2 * conflicts + 4
-    piece_lo, piece_hi = np.empty(room), np.empty(room)
-    occupied = np.empty(conflicts, dtype=np.int64)
-    firing = np.empty(conflicts, dtype=np.int64)
-    gaps = np.empty(conflicts)
+    scratch = Scratch(
+        Reach(np.empty(bins), np.empty(bins)), np.empty(room), np.empty(room),
+        np.empty(conflicts, dtype=np.int64), np.empty(conflicts, dtype=np.int64),
+        np.empty(conflicts),
+    )  # fmt: skip
+    reach, go = Reach(lo, hi), Reach(go_lo, go_hi)
     last = c.clear_at  # past this, no zone is left ahead of the ego
     for t in range(ticks):
         for q in range(conflicts):
             if present[t, q]:
                 last = max(last, ego_exit[t, q])
     for t in range(1, ticks):
-        if not _tick(t, lo, hi, new_lo, new_hi, piece_lo, piece_hi, occupied, firing, gaps,
-                     present, ego_entry, ego_exit, ego_point, other_distance, other_inside,
-                     other_window, other_speed, accel, decel, curve, c, paper):  # fmt: skip
+        if not _tick(t, reach, scratch, timeline, env, c, paper):
             return -1
         cleared = False
         for j in range(bins):
@@ -369,26 +404,21 @@ def _clear_tick(s0: float, v0: float, present: NDArray[np.bool_], ego_entry: Flo
             if far:
                 break
             t2 += 1
-            viable = _tick(t2, go_lo, go_hi, new_lo, new_hi, piece_lo, piece_hi, occupied,
-                           firing, gaps, present, ego_entry, ego_exit, ego_point,
-                           other_distance, other_inside, other_window, other_speed, accel,
-                           decel, curve, c, paper)  # fmt: skip
+            viable = _tick(t2, go, scratch, timeline, env, c, paper)
         if viable:
             return t
     return -1
 
 
 @numba.njit(cache=True, parallel=True)
-def _reachable(start: FloatArray, present: NDArray[np.bool_], ego_entry: FloatArray,
-               ego_exit: FloatArray, ego_point: FloatArray, other_distance: FloatArray,
-               other_inside: NDArray[np.bool_], other_window: NDArray[np.bool_],
-               other_speed: FloatArray, accel: FloatArray, decel: FloatArray, curve: FloatArray,
-               c: LimitLayout, paper: PaperConstants) -> NDArray[np.int64]:  # fmt: skip
-    out = np.empty(start.shape[0], dtype=np.int64)
-    for b in numba.prange(start.shape[0]):
-        out[b] = _clear_tick(
-            start[b, 0], start[b, 1], present[b], ego_entry[b], ego_exit[b], ego_point[b],
-            other_distance[b], other_inside[b], other_window[b], other_speed[b], accel, decel,
-            curve, c, paper,
+def _reachable(timeline: ConflictTimeline, env: SpeedEnvelope, c: LimitLayout,
+               paper: PaperConstants) -> NDArray[np.int64]:  # fmt: skip
+    t = timeline
+    out = np.empty(t.start.shape[0], dtype=np.int64)
+    for b in numba.prange(t.start.shape[0]):
+        scene = ConflictTimeline(
+            t.start[b], t.present[b], t.ego_entry[b], t.ego_exit[b], t.ego_point[b],
+            t.other_distance[b], t.other_inside[b], t.other_window[b], t.other_speed[b],
         )  # fmt: skip
+        out[b] = _clear_tick(scene, env, c, paper)
     return out

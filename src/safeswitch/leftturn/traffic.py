@@ -156,13 +156,13 @@ class LeftTurnTrafficTask(LeftTurnTask):
                 f"ticks of episode.dt={dt!r}"
             )
         #: Where a vehicle leaves the scene, per movement [m].
-        exit_at = np.minimum(
+        self.exit_at = np.minimum(
             self.network.box_exits + traffic.exit_distance_m, self.network.lengths - 1.0
         )
         #: What the compiled streams read that stays fixed (plain tuples at their entry, see
         #: :func:`~safeswitch.core.arrays.plain`).
         self._streams = plain(StreamConstants(
-            self.tables, self.rules, self.idm.kernel, config.episode.dt, exit_at
+            self.tables, self.rules, self.idm.kernel, config.episode.dt, self.exit_at
         ))  # fmt: skip
         n = self.north_conflict
         #: What the compiled conflict view reads that stays fixed (plain at its entry).

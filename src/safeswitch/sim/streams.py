@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -325,7 +325,7 @@ class Arrivals(NamedTuple):
 
 
 @jit
-def named_stream_constants(c: tuple[object, ...]) -> StreamConstants:
+def named_stream_constants(c: tuple[Any, ...]) -> StreamConstants:
     """The inverse of ``plain`` for :class:`StreamConstants` (in compiled code)."""
     return StreamConstants(NetworkTables(*c[0]), RightOfWay(*c[1]), IDMKernel(*c[2]), c[3], c[4])
 
@@ -384,8 +384,8 @@ def _leader(t: NetworkTables, ri: int, si: float, rj: int, sj: float) -> float:
 
 @jit
 def traffic_tick_entry(
-    c: tuple[object, ...], old: tuple[object, ...], ext: tuple[object, ...], decide: BoolArray,
-    new: tuple[object, ...],
+    c: tuple[Any, ...], old: tuple[Any, ...], ext: tuple[Any, ...], decide: BoolArray,
+    new: tuple[Any, ...],
 ) -> None:  # fmt: skip
     """:func:`traffic_tick` called with plain tuples (see
     :func:`~safeswitch.core.arrays.plain`), named again here."""
@@ -599,8 +599,8 @@ def npc_separations(
 
 @jit
 def spawn_entry(
-    c: tuple[object, ...], now: FloatArray, arrivals: tuple[object, ...], entered: IntArray,
-    next_arrival: FloatArray, drivers: tuple[object, ...], ext: tuple[object, ...],
+    c: tuple[Any, ...], now: FloatArray, arrivals: tuple[Any, ...], entered: IntArray,
+    next_arrival: FloatArray, drivers: tuple[Any, ...], ext: tuple[Any, ...],
 ) -> None:  # fmt: skip
     """:func:`spawn` called with plain tuples, named again here."""
     spawn(named_stream_constants(c), now, Arrivals(*arrivals), entered, next_arrival,

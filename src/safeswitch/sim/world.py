@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -229,13 +229,13 @@ class WorldOutputs(NamedTuple):
 
 
 @jit
-def named_world_constants(c: tuple[object, ...]) -> WorldConstants:
+def named_world_constants(c: tuple[Any, ...]) -> WorldConstants:
     """The inverse of ``plain`` for :class:`WorldConstants` (in compiled code)."""
     return WorldConstants(VehicleConstants(*c[0]), c[1], c[2], c[3], c[4], c[5], c[6], c[7])
 
 
 @jit
-def _world_tick_entry(c: tuple[object, ...], i: tuple[object, ...], o: tuple[object, ...]) -> None:
+def _world_tick_entry(c: tuple[Any, ...], i: tuple[Any, ...], o: tuple[Any, ...]) -> None:
     """:func:`_world_tick` called with plain tuples, named again here."""
     _world_tick(named_world_constants(c), WorldInputs(*i), WorldOutputs(*o))
 

@@ -270,7 +270,7 @@ class LeftTurnSumoTrafficTask(_SumoScene, LeftTurnTrafficTask):
     def _read_traffic(self, before: TrafficState, new: TrafficState) -> None:
         """Fill ``new`` (in place) with SUMO's vehicles; retire those past their exit."""
         present = set(self.plant.vehicles())
-        exit_at = self._exit_at
+        exit_at = self.exit_at
         self._poses = {}
         for i, vid in enumerate(self._slot_ids):
             if vid and vid not in present and vid in self._seen:  # it has left the network
