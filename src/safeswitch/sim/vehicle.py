@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import broadcast_flat, flat, jit
+from safeswitch.core.arrays import broadcast_flat, each, flat, jit
 from safeswitch.sim.params import AIR_DENSITY, GRAVITY, VehicleParams
 
 FloatArray = NDArray[np.float64]
@@ -425,16 +425,7 @@ def longitudinal_force(
 def steady_state_throttle(params: VehicleParams, speed: FloatArray) -> FloatArray:
     """Throttle position that holds ``speed`` on a level road (feed-forward for speed control;
     see :func:`steady_throttle`)."""
-    speed = np.asarray(speed, dtype=np.float64)
-    out = np.empty(speed.shape)
-    _map_steady_throttle(flat(speed, speed.shape), _force_constants(params), out.reshape(-1))
-    return out
-
-
-@jit
-def _map_steady_throttle(speed: FloatArray, k: VehicleConstants, out: FloatArray) -> None:
-    for i in range(speed.shape[0]):
-        out[i] = steady_throttle(speed[i], k)
+    return each(steady_throttle, _force_constants(params), speed)
 
 
 def vehicle_step(
