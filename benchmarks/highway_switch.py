@@ -226,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
             f"| {r['switching']} | {r['seed']} | {r['crashes']} | {r['off_road']} | "
             f"{r['episodes']} | {r['safety_rate_first_20pct']:.3f} → "
             f"{r['safety_rate_last_20pct']:.3f} | {r['return_first_20pct']:.1f} → "
-            f"{r['return_last_20pct']:.1f} | {e['collisions']} |"
+            f"{r['return_last_20pct']:.1f} | {e['failures']} |"
         )
     o = result["wrapper_overhead"]
     print(

@@ -14,12 +14,16 @@ def on_page_markdown(markdown: str, **_: Any) -> str:
         return markdown
     from safeswitch.core.config import reference
     from safeswitch.leftturn.config import TrafficConfig
-    from safeswitch.training.config import TrainConfig
+    from safeswitch.training.config import EnvTrainConfig, TrainConfig
 
     generated = "\n".join(
         (
             reference(TrainConfig, "A training configuration (`safeswitch train --config`)"),
             reference(TrafficConfig, "Traffic (`traffic:` in a training configuration)"),
+            reference(
+                EnvTrainConfig,
+                "Any Gymnasium environment (`safeswitch train --config` with an `env_id`)",
+            ),
         )
     )
     return markdown.replace(MARKER, generated)

@@ -54,6 +54,34 @@ def at_least(low: int) -> Callable[[str], int]:
     return value
 
 
+def penalty_value(text: str) -> float:
+    """An argparse type: a finite reward <= 0 (a bonus for needing the Safety controller would
+    teach the policy to need it)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (value <= 0 and value > -float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number <= 0, got {text}")
+    return value
+
+
+def imported_modules(argv: list[str]) -> list[str]:
+    """The modules named by ``--import MODULE`` (or ``--import=MODULE``) anywhere in ``argv``:
+    imported before the parser is built, so that what they register (environments, Safety
+    controllers, switching logics) is known to ``--env`` and ``--switching``."""
+    names, take = [], False
+    for arg in argv:
+        if take:
+            names.append(arg)
+            take = False
+        elif arg == "--import":
+            take = True
+        elif arg.startswith("--import="):
+            names.append(arg.removeprefix("--import="))
+    return names
+
+
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line (``safeswitch train: error: …``, exit 2),
     like every other error of the command line, instead of the usage block and the error."""
@@ -124,16 +152,26 @@ def _training_counts(training: dict[str, Any]) -> str:
     steps = training.get("safety_activation_steps")
     per_episode = training.get("safety_activation_episodes")
     safety = f"{per_episode:,} episodes" if per_episode is not None else f"{steps:,} steps"
-    return (
-        f"{training['collisions']:,} collisions in {episodes:,} training episodes; safety "
-        f"activations: {safety}"
-    )
+    if "failures" in training and "collisions" not in training:  # any plant: what it declares
+        met = f"{training['failures']:,} failures"
+    else:
+        met = f"{training['collisions']:,} collisions"
+    return f"{met} in {episodes:,} training episodes; safety activations: {safety}"
+
+
+def _names_env(config: str | None) -> bool:
+    """The configuration ``config`` is one for a Gymnasium environment (it names ``env_id``)."""
+    if config is None:
+        return False
+    from safeswitch.training.config import config_path, read_config
+
+    return "env_id" in read_config(config_path(config))
 
 
 def _train(args: argparse.Namespace) -> int:
     from safeswitch.app.train import train_and_plot
 
-    if args.env not in (None, LEFT_TURN):
+    if args.env not in (None, LEFT_TURN) or (args.env is None and _names_env(args.config)):
         return _train_env(args)
     if args.resume and args.config:
         raise UsageError("--resume continues with the run's own config.yaml; drop --config")
@@ -153,6 +191,8 @@ def _train(args: argparse.Namespace) -> int:
     env = config.env
     if args.switching is not None:
         env = replace(env, switching=args.switching)
+    if args.penalty is not None:
+        env = replace(env, rewards=replace(env.rewards, adas_penalty=args.penalty))
     if args.no_adas_penalty:
         env = replace(env, adas_penalty=False)
     config = replace(config, env=env, **overrides)
@@ -180,12 +220,15 @@ def _train_env(args: argparse.Namespace) -> int:
 
     if args.no_adas_penalty:
         raise UsageError("--no-adas-penalty is for the left turn; set penalty: 0 in a config")
+    if args.resume and args.config:
+        raise UsageError("--resume continues with the run's own config.yaml; drop --config")
     base = load_env_config(args.config) if args.config else EnvTrainConfig(env_id=args.env)
     overrides = {
         k: v
         for k, v in (
             ("env_id", args.env),
             ("switching", args.switching),
+            ("penalty", args.penalty),
             ("timesteps", args.timesteps),
             ("n_envs", args.n_envs),
             ("seed", args.seed),
@@ -290,6 +333,7 @@ def print_left_turn_summary(summary: dict[str, Any]) -> None:
 
 
 def _evaluate_env(args: argparse.Namespace) -> dict[str, Any]:
+    from safeswitch.core.registry import failure_of, plain_env_id
     from safeswitch.io import prepare_output_dir, write_json
     from safeswitch.training.config import EnvTrainConfig
     from safeswitch.training.generic import make_supervised_env, run_episodes
@@ -299,7 +343,7 @@ def _evaluate_env(args: argparse.Namespace) -> dict[str, Any]:
         raise UsageError(f"--env {args.env} evaluates a trained policy: pass --model RUN")
     policy = load_policy(args.model)
     trained_on = trained_env_id(policy)
-    if trained_on != args.env:
+    if plain_env_id(trained_on) != plain_env_id(args.env):
         raise UsageError(
             f"the policy in {policy.path} was trained on {trained_on}, not {args.env}"
             + ("; evaluate it without --env" if not isinstance(policy.config, EnvTrainConfig)
@@ -322,7 +366,9 @@ def _evaluate_env(args: argparse.Namespace) -> dict[str, Any]:
         "model": str(args.model),
         "switching": switching,
         "seed": args.seed,
-        **run_episodes(env, policy.act_one, args.episodes, args.seed),
+        **run_episodes(
+            env, policy.act_one, args.episodes, args.seed, failure_of(plain_env_id(args.env))
+        ),
     }
     env.close()
     if folder is not None:
@@ -507,6 +553,11 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--n-envs", type=at_least(1), help="environments stepped as one batch")
     train.add_argument("--switching", choices=logics, help="a registered switching logic")
     train.add_argument(
+        "--penalty",
+        type=penalty_value,
+        help="reward on a step the Safety controller acted (<= 0; the paper's R_ADAS: -25)",
+    )
+    train.add_argument(
         "--no-adas-penalty",
         action="store_true",
         help="leave R_ADAS out of the reward (the paper's ablation)",
@@ -677,10 +728,29 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="the same as reproduce --quick (the README's make demo)")
     demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
     demo.set_defaults(func=_reproduce, quick=True, episodes=1000, timesteps=None, overwrite=True)
+    for command in (parser, *sub.choices.values()):
+        command.add_argument(
+            "--import",
+            dest="imports",
+            action="append",
+            metavar="MODULE",
+            help="import MODULE first (repeatable): its environments, Safety controllers and "
+            "switching logics become known to --env and --switching",
+        )
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    modules = imported_modules(argv)
+    if modules:
+        from safeswitch.core.registry import import_modules
+
+        try:
+            import_modules(modules)
+        except ModuleNotFoundError as exc:
+            print(f"safeswitch: error: {exc}", file=sys.stderr)
+            return 2
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -34,8 +34,9 @@ calls ``factory(context, params)``. A logic registered without one is called as
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
@@ -243,6 +244,31 @@ def resolve_logic(
     return logic
 
 
+#: The ``info`` keys whose truth on an episode's last step marks a failure, for a plant that
+#: declares none (a driving plant's collision under the names highway-env and we use).
+DEFAULT_FAILURE_KEYS = ("crashed", "collision")
+
+#: How an episode's failure is read: an ``info`` key (a failure where the last step's value is
+#: true) or ``failure(info) -> bool``.
+Failure = str | Callable[[Mapping[str, Any]], bool]
+
+
+def failure_check(failure: Failure | None) -> Callable[[Mapping[str, Any]], bool]:
+    """``failure`` (see :data:`Failure`; ``None``: :data:`DEFAULT_FAILURE_KEYS`) as a
+    predicate on an episode's last ``info``.
+
+    Raises:
+        ValueError: ``failure`` is neither a non-empty string nor callable (named).
+    """
+    if failure is None:
+        return lambda info: any(bool(info.get(key, False)) for key in DEFAULT_FAILURE_KEYS)
+    if isinstance(failure, str) and failure:
+        return lambda info: bool(info.get(failure, False))
+    if callable(failure):
+        return lambda info: bool(failure(info))
+    raise ValueError(f"failure must be an info key or callable(info) -> bool, got {failure!r}")
+
+
 @dataclass(frozen=True)
 class RegisteredController:
     """A Safety controller registered for a Gymnasium id.
@@ -251,13 +277,20 @@ class RegisteredController:
         factory: ``factory(env) -> safety_controller`` (``safety_controller(state) -> [B, A]``).
         state_fn: ``state_fn(env) -> state`` for :class:`~safeswitch.core.wrappers.SafeSwitch`
             (``None``: the last observation).
+        failure: How the plant's failures are read (:data:`Failure`; ``None``:
+            :data:`DEFAULT_FAILURE_KEYS`).
     """
 
     factory: Callable[[Any], Callable[[Any], Any]]
     state_fn: Callable[[Any], Any] | None = None
+    failure: Failure | None = None
 
 
 _controllers: dict[str, RegisteredController] = {}
+
+#: The entry-point group through which an installed package registers Safety controllers:
+#: each entry point names a callable that calls :func:`register_safety_controller`.
+CONTROLLER_ENTRY_POINTS = "safeswitch.safety_controllers"
 
 
 def register_safety_controller(
@@ -265,6 +298,7 @@ def register_safety_controller(
     factory: Callable[[Any], Callable[[Any], Any]],
     *,
     state_fn: Callable[[Any], Any] | None = None,
+    failure: Failure | None = None,
 ) -> None:
     """Register the Safety controller of the environments ``env_id``, so that ``safeswitch
     train --env ENV_ID --switching LOGIC`` can wrap them in
@@ -274,12 +308,73 @@ def register_safety_controller(
         env_id: A Gymnasium id.
         factory: ``factory(env) -> safety_controller``.
         state_fn: What the controller and the logic see (default: the last observation).
+        failure: What counts as the plant's failure: an ``info`` key, true on an episode's
+            last step (e.g. ``"fell"``), or ``failure(info) -> bool`` (default: ``crashed`` or
+            ``collision``). Training and evaluation count ``failures`` with it.
+
+    Raises:
+        ValueError: ``factory`` is not callable, or ``failure`` is neither a key nor callable.
     """
     if not callable(factory):
         raise ValueError(f"the Safety controller factory of {env_id!r} is not callable")
-    _controllers[env_id] = RegisteredController(factory, state_fn)
+    failure_check(failure)  # refuses a malformed one now, not at the end of a run
+    _controllers[env_id] = RegisteredController(factory, state_fn, failure)
 
 
 def safety_controller_for(env_id: str) -> RegisteredController | None:
-    """The Safety controller registered for ``env_id``, if any."""
+    """The Safety controller registered for ``env_id``, if any (those of installed packages'
+    :data:`CONTROLLER_ENTRY_POINTS` loaded on first use)."""
+    _load_controller_entry_points()
     return _controllers.get(env_id)
+
+
+def failure_of(env_id: str) -> Callable[[Mapping[str, Any]], bool]:
+    """The failure predicate of ``env_id``'s registered Safety controller (the default keys
+    where none is registered or it declares none)."""
+    registered = safety_controller_for(env_id)
+    return failure_check(registered.failure if registered is not None else None)
+
+
+def import_modules(names: Sequence[str]) -> None:
+    """Import the user's modules (``--import``): what they register — environments, Safety
+    controllers, switching logics — is known from then on.
+
+    Raises:
+        ModuleNotFoundError: A module that cannot be found (named).
+    """
+    for name in names:
+        try:
+            importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name and name.startswith(exc.name):
+                raise ModuleNotFoundError(
+                    f"--import {name}: no module named {exc.name!r} (is it installed, or its "
+                    "folder on PYTHONPATH?)"
+                ) from exc
+            raise
+
+
+def plain_env_id(env_id: str) -> str:
+    """``env_id`` without Gymnasium's ``module:`` prefix, the module imported first (so that
+    ``mypackage.envs:Plant-v0`` registers ``Plant-v0``, as ``gymnasium.make`` does)."""
+    module, sep, name = env_id.rpartition(":")
+    if sep and module:
+        import_modules([module])
+        return name
+    return env_id
+
+
+_ENTRY_POINTS_LOADED: list[bool] = []
+
+
+def _load_controller_entry_points() -> None:
+    if _ENTRY_POINTS_LOADED:
+        return
+    _ENTRY_POINTS_LOADED.append(True)
+    for entry in metadata.entry_points(group=CONTROLLER_ENTRY_POINTS):
+        try:
+            entry.load()()
+        except Exception as exc:  # named, so that the user knows which package to fix
+            raise SwitchingError(
+                f"the Safety controller entry point {entry.name!r} ({entry.value}) failed: {exc}"
+            ) from exc

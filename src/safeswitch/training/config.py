@@ -26,7 +26,7 @@ from safeswitch.core.config import (
     move_keys,
     to_dict,
 )
-from safeswitch.core.registry import logic_names, logic_params
+from safeswitch.core.registry import logic_names, logic_params, plain_env_id
 from safeswitch.evaluation.planner_config import GapPlannerConfig, PlannerConfig
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig, TrafficConfig, traffic_config
 
@@ -717,7 +717,8 @@ class EnvTrainConfig:
     """A training run on a registered Gymnasium environment.
 
     Attributes:
-        env_id: The Gymnasium id.
+        env_id: The Gymnasium id (``module:EnvId`` imports ``module`` first, as
+            ``gymnasium.make`` does; a resumed or evaluated run imports it again).
         switching: A registered switching logic (``None``: the environment's default).
         logic_params: Parameters of that logic, for one registered with the class of its
             parameters (e.g. ``ttc``: ``{min_ttc: 2.0}``); ``null``: its defaults.
@@ -757,8 +758,15 @@ class EnvTrainConfig:
     def __post_init__(self) -> None:
         o = "train"
         check_bounds(self, o)
-        if self.env_id not in gym.registry:
-            raise ConfigError(f"env_id={self.env_id!r} is not a registered Gymnasium id")
+        try:
+            registered = plain_env_id(self.env_id) in gym.registry
+        except ModuleNotFoundError as exc:
+            raise ConfigError(f"env_id={self.env_id!r}: {exc}") from exc
+        if not registered:
+            raise ConfigError(
+                f"env_id={self.env_id!r} is not a registered Gymnasium id (a user's environment: "
+                "'module:EnvId', or --import the module that registers it)"
+            )
         if self.switching is not None and self.switching not in logic_names():
             raise ConfigError(
                 f"switching={self.switching!r} is not a registered switching logic "

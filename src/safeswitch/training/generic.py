@@ -10,7 +10,9 @@
 
 The run directory is the left turn's (``config.yaml``, ``progress.csv``, ``tb/``, checkpoints,
 ``model.zip``, ``vecnormalize.pkl``, ``metrics.json`` last), and ``--resume`` works the same.
-Collisions are counted from the ``crashed`` or ``collision`` key of a final step's ``info``.
+Failures are what the plant declares (``register_safety_controller(..., failure=)``: an
+``info`` key or a predicate on the last step's ``info``; by default ``crashed`` or
+``collision``), counted in training and evaluation as ``failures``.
 """
 
 from __future__ import annotations
@@ -29,7 +31,13 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
 from safeswitch.core.config import ConfigError
-from safeswitch.core.registry import LogicContextError, safety_controller_for
+from safeswitch.core.registry import (
+    LogicContextError,
+    failure_check,
+    failure_of,
+    plain_env_id,
+    safety_controller_for,
+)
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.io import write_json
 from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
@@ -49,9 +57,9 @@ PROGRESS_FIELDS = (
     "timesteps",
     "wall_time_s",
     "episodes",
-    "collisions_total",
+    "failures_total",
     "activation_rate",
-    "collision_rate",
+    "failure_rate",
     "return",
 )
 
@@ -80,6 +88,7 @@ def make_supervised_env(
         LogicContextError: The logic does not serve this plant (the message starts with
             ``env_id``: the plant inside may be registered under another id).
     """
+    env_id = plain_env_id(env_id)
     try:
         return _make_supervised(env_id, switching, penalty, logic_params, **kwargs)
     except LogicContextError as exc:
@@ -117,14 +126,11 @@ def _make_supervised(
     )
 
 
-def _collided(info: dict[str, Any]) -> bool:
-    return bool(info.get("crashed", False) or info.get("collision", False))
-
-
 class EnvMonitor(BaseCallback):
-    """Collisions, safety activations and returns of a run on any environment, logged once per
-    rollout to ``progress.csv`` and TensorBoard (``safety/collisions_total``,
-    ``safety/activation_rate``, ``safety/collision_rate``, ``reward/return``)."""
+    """Failures (as the plant declares them), safety activations and returns of a run on any
+    environment, logged once per rollout to ``progress.csv`` and TensorBoard
+    (``safety/failures_total``, ``safety/activation_rate``, ``safety/failure_rate``,
+    ``reward/return``)."""
 
     def __init__(
         self,
@@ -132,22 +138,27 @@ class EnvMonitor(BaseCallback):
         checkpoint_every: int,
         save_checkpoint: Callable[[EnvMonitor], object],
         totals: dict[str, float] | None = None,
+        failed: Callable[[dict[str, Any]], bool] | None = None,
     ) -> None:
         super().__init__()
         self.progress_csv = progress_csv
         self.checkpoint_every = checkpoint_every
         self.save_checkpoint = save_checkpoint
+        self.failed = failed or failure_check(None)
+        totals = dict(totals or {})
+        if "collisions" in totals:  # a checkpoint written before failures were declared
+            totals.setdefault("failures", totals.pop("collisions"))
         self.totals: dict[str, float] = {
-            "collisions": 0,
+            "failures": 0,
             "safety_steps": 0,
             "episodes": 0,
             "steps": 0,
             "wall_time_s": 0.0,
-        } | (totals or {})
+        } | totals
         self._started = time.perf_counter()
         self._wall_before = float(self.totals["wall_time_s"])
         self._next_checkpoint = 0
-        self._rollout: dict[str, list[float]] = {"safety": [], "collision": [], "return": []}
+        self._rollout: dict[str, list[float]] = {"safety": [], "failure": [], "return": []}
 
     @property
     def wall_time_s(self) -> float:
@@ -164,10 +175,10 @@ class EnvMonitor(BaseCallback):
             self.totals["safety_steps"] += active
             self._rollout["safety"].append(float(active))
             if done:
-                crashed = _collided(info)
+                failed = self.failed(info)
                 self.totals["episodes"] += 1
-                self.totals["collisions"] += crashed
-                self._rollout["collision"].append(float(crashed))
+                self.totals["failures"] += failed
+                self._rollout["failure"].append(float(failed))
                 if "episode" in info:
                     self._rollout["return"].append(float(info["episode"]["r"]))
         if self.num_timesteps >= self._next_checkpoint:
@@ -182,17 +193,17 @@ class EnvMonitor(BaseCallback):
             "timesteps": self.num_timesteps,
             "wall_time_s": round(self.wall_time_s, 3),
             "episodes": self.totals["episodes"],
-            "collisions_total": self.totals["collisions"],
+            "failures_total": self.totals["failures"],
             "activation_rate": float(np.mean(r["safety"])) if r["safety"] else 0.0,
         }
-        if r["collision"]:
-            row["collision_rate"] = float(np.mean(r["collision"]))
+        if r["failure"]:
+            row["failure_rate"] = float(np.mean(r["failure"]))
         if r["return"]:
             row["return"] = float(np.mean(r["return"]))
         for key, tag in (
-            ("collisions_total", "safety/collisions_total"),
+            ("failures_total", "safety/failures_total"),
             ("activation_rate", "safety/activation_rate"),
-            ("collision_rate", "safety/collision_rate"),
+            ("failure_rate", "safety/failure_rate"),
             ("return", "reward/return"),
         ):
             if key in row:
@@ -203,7 +214,7 @@ class EnvMonitor(BaseCallback):
             if new_file:
                 writer.writeheader()
             writer.writerow({k: row.get(k, "") for k in PROGRESS_FIELDS})
-        self._rollout = {"safety": [], "collision": [], "return": []}
+        self._rollout = {"safety": [], "failure": [], "return": []}
 
 
 def _make_vec(config: EnvTrainConfig) -> VecMonitor:
@@ -226,10 +237,14 @@ def run_episodes(
     act: Callable[[Any], Any],
     episodes: int,
     seed: int,
+    failed: Callable[[dict[str, Any]], bool] | None = None,
 ) -> dict[str, Any]:
     """``episodes`` episodes of ``act`` (observation → action), reset with seeds ``seed``,
-    ``seed + 1``, …; returns ``evaluate --json``'s fields for a generic environment."""
-    returns, lengths, safety, collisions = [], [], [], 0
+    ``seed + 1``, …; returns ``evaluate --json``'s fields for a generic environment, failures
+    read with ``failed`` (the plant's declared failure, see
+    :func:`~safeswitch.core.registry.failure_of`)."""
+    failed = failed or failure_check(None)
+    returns, lengths, safety, failures = [], [], [], 0
     for k in range(episodes):
         obs, _ = env.reset(seed=seed + k)
         total, steps, active, done = 0.0, 0, 0, False
@@ -243,12 +258,14 @@ def run_episodes(
         returns.append(total)
         lengths.append(steps)
         safety.append(active)
-        collisions += _collided(info)
+        failures += failed(info)
     return {
         "episodes": episodes,
-        "collisions": collisions,
+        "failures": failures,
+        "steps": int(sum(lengths)),
         "safety_activation_episodes": int(sum(a > 0 for a in safety)),
         "safety_activation_steps": int(sum(safety)),
+        "safety_share": float(sum(safety) / sum(lengths)) if lengths else None,
         "mean_return": float(np.mean(returns)) if returns else None,
         "mean_episode_steps": float(np.mean(lengths)) if lengths else None,
     }
@@ -282,11 +299,13 @@ def train_env(
     def save(m: EnvMonitor) -> Path:
         return save_checkpoint(run, model, env, {"totals": m.totals})
 
+    failed = failure_of(plain_env_id(config.env_id))
     monitor = EnvMonitor(
         run / "progress.csv",
         config.checkpoint_every,
         save,
         checkpoint["totals"] if checkpoint else None,
+        failed,
     )
     learn(
         model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar,
@@ -305,7 +324,9 @@ def train_env(
             config.logic_params,
             **config.env_kwargs,
         )
-        evaluation = run_episodes(eval_env, policy.act_one, config.eval_episodes, config.eval_seed)
+        evaluation = run_episodes(
+            eval_env, policy.act_one, config.eval_episodes, config.eval_seed, failed
+        )
         eval_env.close()
     t = monitor.totals
     metrics: dict[str, Any] = {
@@ -318,7 +339,7 @@ def train_env(
         "torch_threads": config.torch_threads,
         "seed": config.seed,
         "training": {
-            "collisions": int(t["collisions"]),
+            "failures": int(t["failures"]),
             "safety_activation_steps": int(t["safety_steps"]),
             "episodes": int(t["episodes"]),
             "steps": int(t["steps"]),
