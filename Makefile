@@ -7,7 +7,7 @@ PIP := $(PY) -m pip
 TORCH_PIN ?= torch==2.13.0
 STAMP := $(VENV)/.installed
 
-.PHONY: venv demo test test-slow test-all bench lint docs clean
+.PHONY: venv numba-cache demo test test-slow test-all bench lint docs clean
 
 venv: $(STAMP)
 
@@ -18,7 +18,19 @@ $(STAMP): pyproject.toml Makefile
 	$(PIP) install --quiet -e ".[dev,bench,ray,sumo,docs]"
 	touch $(STAMP)
 
-demo: venv
+# numba keeps its machine code beside each source file and checks only that file: a kernel that
+# inlines a function from another file keeps the old one after that file changes. Any change to
+# src/ therefore drops the whole cache (a stamp holds the sources' digest).
+NUMBA_STAMP := .numba-sources
+
+numba-cache:
+	@digest=$$(find src -name '*.py' | LC_ALL=C sort | xargs cat | sha256sum | cut -c1-16); \
+	if [ "$$(cat $(NUMBA_STAMP) 2>/dev/null)" != "$$digest" ]; then \
+		find src -path '*__pycache__*' \( -name '*.nbi' -o -name '*.nbc' \) -delete; \
+		echo $$digest > $(NUMBA_STAMP); \
+	fi
+
+demo: venv numba-cache
 	$(VENV)/bin/safeswitch demo
 
 # Tests run on both cores (pytest-xdist). `make test` is the fast tier (within 5 minutes on two
@@ -26,16 +38,16 @@ demo: venv
 # sweeps); CI runs both.
 PYTEST := $(PY) -m pytest -q -n 2
 
-test: venv
+test: venv numba-cache
 	$(PYTEST) -m "not slow"
 
-test-slow: venv
+test-slow: venv numba-cache
 	$(PYTEST) -m slow
 
-test-all: venv
+test-all: venv numba-cache
 	$(PYTEST)
 
-bench: venv
+bench: venv numba-cache
 	$(PY) benchmarks/bench_sim.py
 	$(PY) benchmarks/bench_env.py
 
@@ -49,5 +61,5 @@ docs: venv
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 
 clean:
-	rm -rf $(VENV) out site .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) out site .pytest_cache .mypy_cache .ruff_cache $(NUMBA_STAMP)
 	find src tests benchmarks -name __pycache__ -type d -prune -exec rm -rf {} +

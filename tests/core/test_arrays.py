@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from safeswitch.core.arrays import clamp, columns, flat
+from safeswitch.core.arrays import _each1, _each2, _each3, _each4, clamp, columns, each, flat, jit
 
 
 def test_flat_broadcasts_scalars_and_rows_and_reuses_contiguous_memory():
@@ -25,3 +25,24 @@ def test_clamp_and_columns():
     assert clamp(np.array([-2.0, 0.5, 3.0]), 0.0, 1.0).tolist() == [0.0, 0.5, 1.0]
     out = columns(np.array([1.0, 2.0]), np.array([3.0, 4.0]))
     assert out.tolist() == [[1.0, 3.0], [2.0, 4.0]]
+
+
+@jit
+def _twice(x, k):
+    return 2.0 * x + k
+
+
+@jit
+def _square(x, k):
+    return x * x + k
+
+
+def test_each_runs_the_function_it_is_given_and_is_never_served_from_the_disk_cache():
+    x = np.array([[1.0, 2.0], [3.0, 4.0]])
+    assert each(_twice, 0.5, x).tolist() == [[2.5, 4.5], [6.5, 8.5]]
+    assert each(_square, 0.5, x).tolist() == [[1.5, 4.5], [9.5, 16.5]]  # same signature
+    # numba keys a cached specialisation on the function argument's object, which another
+    # function can take over in a later process: the loops that take a function compile in
+    # each process instead (a stale entry once fed a campaign the wrong throttle).
+    for loop in (_each1, _each2, _each3, _each4):
+        assert type(loop._cache).__name__ == "NullCache"
