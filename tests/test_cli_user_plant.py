@@ -77,7 +77,8 @@ def test_switching_is_checked_after_the_imports(tmp_path, capsys, forgotten):
     code, _ = train(tmp_path, "--import", "tests.core.no_such_module", "--env", ENV_ID)
     assert code == 2
     line = error_line(capsys)
-    assert "--import tests.core.no_such_module" in line and "no module named" in line
+    assert "--import: cannot import 'tests.core.no_such_module'" in line
+    assert "no module named" in line
 
 
 def test_module_colon_id_imports_the_module_and_the_run_remembers_it(tmp_path, capsys, forgotten):

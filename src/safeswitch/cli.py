@@ -749,7 +749,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             import_modules(modules)
         except ModuleNotFoundError as exc:
-            print(f"safeswitch: error: {exc}", file=sys.stderr)
+            print(f"safeswitch: error: --import: {exc}", file=sys.stderr)
             return 2
     parser = build_parser()
     try:

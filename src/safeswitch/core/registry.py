@@ -348,8 +348,8 @@ def import_modules(names: Sequence[str]) -> None:
         except ModuleNotFoundError as exc:
             if exc.name and name.startswith(exc.name):
                 raise ModuleNotFoundError(
-                    f"--import {name}: no module named {exc.name!r} (is it installed, or its "
-                    "folder on PYTHONPATH?)"
+                    f"cannot import {name!r}: no module named {exc.name!r} (is it installed, "
+                    "or its folder on PYTHONPATH?)"
                 ) from exc
             raise
 

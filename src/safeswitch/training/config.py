@@ -110,6 +110,11 @@ class PolicyConfig:
             on a throttle action asks for half throttle everywhere; starting at a gentle cruise
             (-0.3) keeps early training out of the timid and the careless basins
             (docs/learning_experiments.md).
+        intervention_imitation: Learning from the Safety controller's interventions (ours;
+            the HG-DAgger / EGPO line): after each PPO update the actor is also fitted toward
+            the executed safety action on the rollout's states where it ran, with this weight
+            on the squared difference (0: off — PPO and the penalty alone). See
+            :mod:`safeswitch.training.interventions`.
     """
 
     learning_rate_final: Annotated[float | None, Bounds(0, 1, high_open=True)] = None
@@ -121,6 +126,7 @@ class PolicyConfig:
     actor_frozen_steps: Annotated[int, Bounds(0)] = 0
     actor_ramp_steps: Annotated[int, Bounds(0)] = 0
     initial_action: Annotated[float | None, Bounds(-1, 1)] = None
+    intervention_imitation: Annotated[float, Bounds(0, 1000)] = 0.0
 
     def __post_init__(self) -> None:
         check_bounds(self, "policy")

@@ -42,10 +42,11 @@ from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.io import write_json
 from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
 from safeswitch.training.policies import load_policy
-from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.run import (
     build_model,
     learn,
+    learner_env,
+    load_model,
     normalized,
     open_run,
     save_checkpoint,
@@ -290,11 +291,9 @@ def train_env(
         start_run(run, dump_env_config(config))
     env = normalized(vec, config, checkpoint)
     if checkpoint is not None:
-        model = SwitchPPO.load(
-            checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
-        )
+        model = load_model(checkpoint, learner_env(env, config), run)
     else:
-        model = build_model(config, env, run / "tb")
+        model = build_model(config, learner_env(env, config), run / "tb")
 
     def save(m: EnvMonitor) -> Path:
         return save_checkpoint(run, model, env, {"totals": m.totals})

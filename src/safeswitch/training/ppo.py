@@ -13,14 +13,21 @@ PPO unchanged.
 
 The schedule is saved with the model (SB3 saves the attributes), so ``load`` and ``--resume``
 rebuild the same parameter groups.
+
+With ``intervention_imitation`` > 0 the actor also learns from the Safety controller's
+interventions after each update (:mod:`safeswitch.training.interventions`).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import torch
 from stable_baselines3 import PPO
+from stable_baselines3.common.utils import obs_as_tensor
+
+from safeswitch.training.interventions import recorder_of
 
 
 class SwitchPPO(PPO):
@@ -37,6 +44,10 @@ class SwitchPPO(PPO):
             annealed linearly from its initial value to this over the run, one value per
             rollout (set before the rollout, so that the importance ratios of the update that
             follows are computed under the noise the actions were drawn with).
+        intervention_imitation: Weight of the fit toward the executed safety action on the
+            rollout's intervention states after each update (0: none, plain PPO; needs an
+            :class:`~safeswitch.training.interventions.InterventionRecorder` around the
+            environment).
         *args, **kwargs: Passed to :class:`~stable_baselines3.PPO`.
     """
 
@@ -48,6 +59,7 @@ class SwitchPPO(PPO):
         actor_ramp_steps: int = 0,
         learn_log_std: bool = True,
         log_std_final: float | None = None,
+        intervention_imitation: float = 0.0,
         **kwargs: Any,
     ) -> None:
         self.actor_learning_rate = actor_learning_rate
@@ -55,6 +67,7 @@ class SwitchPPO(PPO):
         self.actor_ramp_steps = actor_ramp_steps
         self.learn_log_std = learn_log_std
         self.log_std_final = log_std_final
+        self.intervention_imitation = intervention_imitation
         super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
@@ -94,7 +107,52 @@ class SwitchPPO(PPO):
             with torch.no_grad():
                 log_std.fill_(value)
             self.logger.record("train/log_std", value)
+        recorder = recorder_of(self.env)
+        if recorder is not None:
+            recorder.clear()  # the next update learns from this rollout's interventions only
         return bool(super().collect_rollouts(*args, **kwargs))
+
+    def train(self) -> None:
+        super().train()
+        if self.intervention_imitation > 0:
+            self.imitate_interventions()
+
+    def imitate_interventions(self) -> None:
+        """Fit the actor toward the executed safety action on the rollout's intervention
+        states: ``n_epochs`` passes in minibatches of ``batch_size``, the loss of
+        :mod:`safeswitch.training.interventions` (nothing at all without an intervention)."""
+        recorder = recorder_of(self.env)
+        batch = recorder.batch() if recorder is not None else None
+        self.logger.record("train/intervention_states", 0 if batch is None else len(batch[0]))
+        if batch is None:
+            return
+        states, targets = batch
+        space = self.action_space
+        low = torch.as_tensor(np.asarray(getattr(space, "low", -np.inf)), dtype=torch.float32)
+        high = torch.as_tensor(np.asarray(getattr(space, "high", np.inf)), dtype=torch.float32)
+        target = torch.as_tensor(targets, dtype=torch.float32)
+        self.policy.set_training_mode(True)
+        losses = []
+        count = len(states)
+        size = int(self.batch_size or count)
+        for _ in range(self.n_epochs):
+            order = torch.randperm(count).numpy()  # torch: seeded with the run
+            for start in range(0, count, size):
+                rows = order[start : start + size]
+                observation = obs_as_tensor(states[rows], self.device)
+                normal = self.policy.get_distribution(observation).distribution
+                assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
+                mean = normal.mean
+                executed = torch.maximum(torch.minimum(mean, high), low)
+                loss = self.intervention_imitation * (
+                    (executed - target[rows]).pow(2).sum(dim=-1).mean()
+                )
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+                self.policy.optimizer.step()
+                losses.append(float(loss.detach()))
+        self.logger.record("train/imitation_loss", float(np.mean(losses)))
 
     def actor_rate(self, timesteps: int) -> float:
         """The actor's learning rate after ``timesteps`` (see the module docstring); without an

@@ -48,6 +48,7 @@ from safeswitch.training.config import (
     load_config,
 )
 from safeswitch.training.constraints import ConstraintCosts, ConstraintUpdate
+from safeswitch.training.interventions import InterventionRecorder
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.shaping import (
@@ -152,7 +153,7 @@ class LearningEnv:
 
 
 def build_model(
-    config: TrainConfig | EnvTrainConfig, env: VecNormalize, tensorboard_log: Path | None
+    config: TrainConfig | EnvTrainConfig, env: VecEnv, tensorboard_log: Path | None
 ) -> SwitchPPO:
     """PPO with the configured hyper-parameters (Table II by default)."""
     ppo, policy = config.ppo, config.policy
@@ -188,6 +189,7 @@ def build_model(
         actor_ramp_steps=policy.actor_ramp_steps,
         learn_log_std=policy.learn_log_std,
         log_std_final=policy.log_std_final,
+        intervention_imitation=policy.intervention_imitation,
     )
     if policy.initial_action is not None:
         with torch.no_grad():
@@ -312,6 +314,22 @@ def normalized(venv: Any, config: Any, checkpoint: dict[str, Any] | None) -> Vec
     )
 
 
+def learner_env(env: VecNormalize, config: TrainConfig | EnvTrainConfig) -> VecEnv:
+    """What PPO steps: ``env``, with an
+    :class:`~safeswitch.training.interventions.InterventionRecorder` around it when the policy
+    learns from the interventions (``policy.intervention_imitation``)."""
+    if config.policy.intervention_imitation > 0:
+        return InterventionRecorder(env)
+    return env
+
+
+def load_model(checkpoint: dict[str, Any], env: VecEnv, run: Path) -> SwitchPPO:
+    """The checkpoint's model, learning in ``env``."""
+    return SwitchPPO.load(
+        checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
+    )
+
+
 def learn(
     model: SwitchPPO,
     run: Path,
@@ -405,11 +423,9 @@ def train(
         learning.restore(checkpoint)
     env = normalized(learning.env, config, checkpoint)
     if checkpoint is not None:
-        model = SwitchPPO.load(
-            checkpoint["path"] / "model.zip", env=env, device="cpu", tensorboard_log=str(run / "tb")
-        )
+        model = load_model(checkpoint, learner_env(env, config), run)
     else:
-        model = build_model(config, env, run / "tb")
+        model = build_model(config, learner_env(env, config), run / "tb")
 
     monitor = TrainingMonitor(
         run / "progress.csv",

@@ -1,0 +1,103 @@
+"""Learning from the Safety controller's interventions (issue #39, item 4): the executed safety
+action is a demonstration on the states where the switch overruled the policy."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+from safeswitch.core.wrappers import SafeSwitch
+from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training.interventions import (
+    LEFT_TURN_SAFE_ACTION,
+    InterventionRecorder,
+    interventions,
+    recorder_of,
+)
+from safeswitch.training.ppo import SwitchPPO
+from tests.core import user_plant
+
+
+def wall_env(logic, n=2, seed=0):
+    def make():
+        env = gym.make(user_plant.ENV_ID)
+        return SafeSwitch(env, user_plant.full_brake, logic, penalty=-1.0)
+
+    vec = DummyVecEnv([make] * n)
+    vec.seed(seed)
+    return InterventionRecorder(VecNormalize(vec, norm_reward=False))
+
+
+def model_on(env, coef, seed=0):
+    return SwitchPPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=2, seed=seed,
+                     device="cpu", intervention_imitation=coef,
+                     policy_kwargs={"net_arch": [16, 16]})  # fmt: skip
+
+
+def test_the_safety_action_is_read_from_any_plant_and_from_the_left_turn():
+    infos = [{"safety_active": False}, {"safety_active": True, "executed_action": [-3.0]}]
+    mask, targets = interventions(infos, 1)
+    assert mask.tolist() == [False, True] and targets[1].tolist() == [-3.0]
+    vec = LeftTurnVecEnv(8, switching="paper", seed=0)
+    vec.reset()
+    seen = np.zeros(8, dtype=bool)
+    for _ in range(400):  # full throttle: the paper logic brakes some of them
+        _, _, _, infos = vec.step(np.ones((8, 1), dtype=np.float32))
+        mask, targets = interventions(infos, 1)
+        assert (mask == infos.record.safety_active).all()
+        assert (targets[mask] == LEFT_TURN_SAFE_ACTION).all() and (targets[~mask] == 0).all()
+        seen |= mask
+    assert seen.any()
+
+
+def test_the_recorder_keeps_the_state_the_overruled_action_was_taken_in():
+    env = wall_env("stopping-distance")
+    observation = env.reset()
+    for _ in range(200):
+        before = observation
+        observation, _, _, infos = env.step(np.full((2, 1), 2.0, dtype=np.float32))
+        mask, _ = interventions(infos, 1)
+        if mask.any():
+            states, targets = env.batch()
+            assert np.array_equal(states[-mask.sum() :], before[mask])
+            assert (targets == -user_plant.MAX_BRAKE).all()
+            break
+    else:
+        pytest.fail("full acceleration toward the wall was never overruled")
+    env.clear()
+    assert env.batch() is None and recorder_of(env) is env
+
+
+def _parameters(model):
+    return [p.detach().clone() for p in model.policy.parameters()]
+
+
+def test_imitation_changes_the_update_only_on_intervention_states():
+    # No intervention in the rollouts (no logic): the update is PPO's, to the last bit.
+    plain = model_on(wall_env("none"), 0.0)
+    plain.learn(64)  # each built and trained in turn: both draw from the same seeded RNGs
+    imitating = model_on(wall_env("none"), 5.0)
+    imitating.learn(64)
+    assert recorder_of(imitating.env).batch() is None
+    for a, b in zip(_parameters(plain), _parameters(imitating), strict=True):
+        assert torch.equal(a, b)
+    # With interventions: the mean action on those states moves toward the safety action,
+    # and the value network is not touched by the fit.
+    model = model_on(wall_env("stopping-distance"), 5.0)
+    model.learn(64)
+    recorder = recorder_of(model.env)
+    states, targets = recorder.batch()
+    value_before = [p.detach().clone() for p in model.policy.mlp_extractor.value_net.parameters()]
+    observation = torch.as_tensor(states, dtype=torch.float32)
+
+    def gap():
+        with torch.no_grad():
+            mean = model.policy.get_distribution(observation).distribution.mean
+        return float((mean.clamp(-3, 2) - torch.as_tensor(targets)).pow(2).mean())
+
+    before = gap()
+    model.imitate_interventions()
+    assert gap() < before
+    after = list(model.policy.mlp_extractor.value_net.parameters())
+    assert all(torch.equal(a, b) for a, b in zip(value_before, after, strict=True))
