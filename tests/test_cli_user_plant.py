@@ -139,3 +139,33 @@ def test_installed_packages_register_safety_controllers_by_entry_point(monkeypat
     assert not registry.failure_of(ENV_ID)({"crashed": True})
     with pytest.raises(ValueError, match="failure must be an info key"):
         registry.register_safety_controller(ENV_ID, lambda env: None, failure=3)
+
+
+def test_a_plants_named_costs_are_constraints_whose_multipliers_move(tmp_path, capsys, forgotten):
+    config = tmp_path / "wall.yaml"
+    config.write_text(yaml.safe_dump({
+        "env_id": f"{MODULE}:{ENV_ID}", "switching": LOGIC, "eval_episodes": 2,
+        "ppo": {"n_steps": 64},
+        "constraints": {"speeding": {"budget": 0.01, "integral_gain": 2.0},
+                        "safety": {"budget": 0.5}},
+    }))  # fmt: skip
+    code, run = train(tmp_path, "--config", str(config))
+    assert code == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    # A cart paid for speed drives faster than 5 m/s on far more than 1 % of its steps: the
+    # speeding multiplier has risen; safety episodes above half of them would raise theirs.
+    assert metrics["constraints"]["speeding"]["value"] > 0
+    assert set(metrics["constraints"]) == {"speeding", "safety"}
+    saved = yaml.safe_load((run / "config.yaml").read_text())
+    assert saved["constraints"]["speeding"]["budget"] == 0.01
+    # a cost the plant does not publish is refused before anything is written
+    config.write_text(yaml.safe_dump({"env_id": f"{MODULE}:{ENV_ID}", "switching": LOGIC,
+                                      "constraints": {"comfort": {"budget": 0.1}}}))  # fmt: skip
+    code, other = train(tmp_path, "--config", str(config), name="other")
+    assert code == 2 and not other.exists()
+    line = error_line(capsys)
+    assert "constraints.comfort" in line and "it publishes: speeding" in line
+    config.write_text(yaml.safe_dump({"env_id": f"{MODULE}:{ENV_ID}", "constraints": {
+        "safety": {"budget": 0.1, "reasons": ["x"]}}}))  # fmt: skip
+    code, _ = train(tmp_path, "--config", str(config), name="third")
+    assert code == 2 and "are the left turn's" in error_line(capsys)

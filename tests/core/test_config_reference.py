@@ -6,13 +6,13 @@ from dataclasses import dataclass, field
 
 from safeswitch.core.config import fields_of, reference, sections
 from safeswitch.leftturn.config import TrafficConfig
-from safeswitch.training.config import TrainConfig
+from safeswitch.training.config import EnvTrainConfig, TrainConfig
 
 
 def test_every_configuration_key_is_documented():
     undocumented = [
         f"{key or section.__name__}.{f.name}"
-        for root in (TrainConfig, TrafficConfig)
+        for root in (TrainConfig, TrafficConfig, EnvTrainConfig)
         for key, section in sections(root)
         for f in fields_of(section)
         if not f.description

@@ -1,6 +1,7 @@
 """A user's plant, registered when imported (``--import tests.core.user_plant``): a cart that
 must stop before a wall. Its failure is its own ``info["hit_wall"]`` — neither ``crashed``
-nor ``collision`` — declared with its Safety controller; its switching logic is its own too.
+nor ``collision`` — declared with its Safety controller; its switching logic is its own too;
+it publishes one named cost, ``info["costs"]["speeding"]`` (faster than ``SPEED_LIMIT``).
 
 ``HITS`` counts every episode that ended at the wall, so a test can check what the pipeline
 counted against what the plant did.
@@ -20,6 +21,7 @@ DT = 0.1  # [s]
 MAX_BRAKE = 3.0  # [m/s²]
 MAX_ACCEL = 2.0  # [m/s²]
 MARGIN = 0.5  # [m]
+SPEED_LIMIT = 5.0  # [m/s]: faster is the plant's named cost ``speeding``
 
 HITS: list[int] = []
 
@@ -51,7 +53,8 @@ class Wall(gym.Env):
         if hit:
             HITS.append(1)
         reward = -10.0 if hit else new_speed / 10.0
-        return self.state.copy(), reward, bool(hit), self.t >= self.horizon, {"hit_wall": hit}
+        info = {"hit_wall": hit, "costs": {"speeding": float(new_speed > SPEED_LIMIT)}}
+        return self.state.copy(), reward, bool(hit), self.t >= self.horizon, info
 
 
 def full_brake(state: np.ndarray) -> np.ndarray:

@@ -282,3 +282,37 @@ def test_a_policy_is_evaluated_and_validated_under_the_logic_it_is_deployed_unde
     assert controller_setup("learned", str(run), "certified")[0].switching == "certified"
     with pytest.raises(ConfigError, match=r"deploy_switching .*'papr'"):
         from_dict(TrainConfig, {"deploy_switching": "papr"})
+
+
+def test_a_plants_named_cost_is_charged_at_its_multiplier_and_measured_per_step():
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from safeswitch.training.config import ConstraintConfig
+    from safeswitch.training.constraints import NamedCostConstraints
+    from tests.core import user_plant
+
+    def make():
+        return gym.make(user_plant.ENV_ID)
+
+    plain, charged = DummyVecEnv([make] * 2), DummyVecEnv([make] * 2)
+    plain.seed(3)
+    charged.seed(3)
+    wrapped = NamedCostConstraints(charged, {"speeding": ConstraintConfig(budget=0.1)}, 1)
+    wrapped.multipliers["speeding"].value = 3.0
+    plain.reset()
+    wrapped.reset()
+    fast = np.full((2, 1), 2.0, dtype=np.float32)
+    total, steps, first = np.zeros(2), np.zeros(2), np.ones(2, dtype=bool)
+    while first.any():  # full acceleration: faster than 5 m/s soon, into the wall in the end
+        _, r0, done, infos = plain.step(fast)
+        _, r1, _, _ = wrapped.step(fast)
+        cost = np.array([info["costs"]["speeding"] for info in infos])
+        assert np.allclose(r1, r0 - 3.0 * cost)
+        total += np.where(first, cost, 0.0)  # each environment's first episode
+        steps += first
+        first &= ~done
+    measured = wrapped.end_rollout(timesteps=10**9)
+    rate = total.sum() / steps.sum()
+    assert measured is not None and measured["speeding"] == pytest.approx(rate)
+    assert rate > 0.1 and wrapped.multipliers["speeding"].value > 3.0  # over budget: it rose

@@ -118,6 +118,14 @@ def _convert(hint: Any, value: Any, where: str) -> Any:
             except ConfigError:
                 continue
         raise ConfigError(f"{where}: invalid value {value!r} for type {hint}")
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{where}: expected a mapping, got {value!r}")
+        key_type, value_type = typing.get_args(hint) or (Any, Any)
+        return {
+            _convert(key_type, k, where): _convert(value_type, v, f"{where}.{k}")
+            for k, v in value.items()
+        }
     if origin is tuple:
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{where}: expected a list, got {value!r}")
@@ -153,6 +161,8 @@ def to_dict(config: Any) -> Any:
     """Plain nested dicts/lists of a configuration tree (for YAML or JSON)."""
     if dataclasses.is_dataclass(config) and not isinstance(config, type):
         return {f.name: to_dict(getattr(config, f.name)) for f in dataclasses.fields(config)}
+    if isinstance(config, Mapping):
+        return {k: to_dict(v) for k, v in config.items()}
     if isinstance(config, tuple | list):
         return [to_dict(v) for v in config]
     return config
@@ -313,15 +323,33 @@ def fields_of(cls: type) -> list[Field]:
     return out
 
 
+def _nested(hint: Any) -> tuple[type, str] | None:
+    """The configuration class a field's type holds — itself, ``X | None`` or
+    ``dict[str, X]`` — and the key suffix it is written under (``""``, or ``".<name>"`` for a
+    mapping's entries)."""
+    if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+        return hint, ""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        given = [a for a in args if a is not type(None)]
+        return _nested(given[0]) if len(given) == 1 else None
+    if origin is dict and len(args) == 2:
+        inner = _nested(args[1])
+        return (inner[0], ".<name>") if inner else None
+    return None
+
+
 def sections(cls: type, prefix: str = "") -> list[tuple[str, type]]:
-    """``cls`` and every configuration class nested in it, depth first, each with the dotted
-    key it is found under (``""`` for ``cls`` itself)."""
+    """``cls`` and every configuration class nested in it (directly, as ``X | None`` or as the
+    values of a ``dict[str, X]``), depth first, each with the dotted key it is found under
+    (``""`` for ``cls`` itself)."""
     found = [(prefix, cls)]
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
-        hint = hints[f.name]
-        if dataclasses.is_dataclass(hint) and isinstance(hint, type):
-            found += sections(hint, f"{prefix}.{f.name}" if prefix else f.name)
+        nested = _nested(hints[f.name])
+        if nested is not None:
+            key = f"{prefix}.{f.name}" if prefix else f.name
+            found += sections(nested[0], key + nested[1])
     return found
 
 
@@ -335,8 +363,12 @@ def reference(cls: type, title: str) -> str:
     """A Markdown reference of the configuration tree under ``cls``: one table per class (key,
     type, default, description), read from the dataclasses and their docstrings."""
     lines = [f"## {title}", ""]
+    keys: dict[type, list[str]] = {}  # a class nested under several keys gets one table
     for key, section in sections(cls):
-        lines += [f"### `{key or '(top level)'}` — `{section.__name__}`", ""]
+        keys.setdefault(section, []).append(key)
+    for section, under in keys.items():
+        names = ", ".join(f"`{key or '(top level)'}`" for key in under)
+        lines += [f"### {names} — `{section.__name__}`", ""]
         summary = _markdown(inspect.cleandoc(section.__doc__ or "").split("\n\n")[0])
         summary = summary.replace("\n", " ")
         lines += [summary, "", "| key | type | default | description |", "|---|---|---|---|"]

@@ -740,6 +740,10 @@ class EnvTrainConfig:
         eval_seed: Seed of the final evaluation's episodes (never used in training).
         ppo: PPO hyper-parameters (the paper's Table II by default).
         policy: How the policy and its optimiser depart from Table II (ours).
+        constraints: Constrained PPO (ours): cost name → its constraint. A name is a cost the
+            plant publishes per step in ``info["costs"]`` (e.g. ``speeding``), measured as its
+            mean per step; ``safety`` is the switch's own, the share of episodes with a
+            safety action. See :class:`~safeswitch.training.constraints.NamedCostConstraints`.
     """
 
     env_id: str
@@ -756,6 +760,7 @@ class EnvTrainConfig:
     eval_seed: Annotated[int, Bounds(0, SEED_MAX)] = 1_000_003
     ppo: PPOConfig = field(default_factory=PPOConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
+    constraints: dict[str, ConstraintConfig] = field(default_factory=dict)
 
     MOVED: ClassVar[dict[str, str]] = {
         k: v for k, v in MOVED_FROM_PPO.items() if v.startswith("policy.")
@@ -787,6 +792,14 @@ class EnvTrainConfig:
                   "must be a finite number <= 0 (a bonus for needing the Safety controller "
                   "would teach the policy to need it)")  # fmt: skip
         check_run_shape(self.n_envs, self.ppo)
+        for name, given in self.constraints.items():
+            check(isinstance(given, ConstraintConfig), "constraints", name, given,
+                  "must be a constraint (budget, gains, …)")  # fmt: skip
+            check(not given.reasons, f"constraints.{name}", "reasons", given.reasons,
+                  "are the left turn's (a plant's costs come from info['costs'])")  # fmt: skip
+        if "safety" in self.constraints:
+            budget = self.constraints["safety"].budget
+            check(budget < 1, "constraints.safety", "budget", budget, "is a share: must be < 1")
 
     @property
     def batch_size(self) -> int:

@@ -60,7 +60,9 @@ logs ``constraints/<cost>`` (what was measured) and ``constraints/<cost>_multipl
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -119,7 +121,23 @@ class Multiplier:
         return self.value
 
 
-class ConstraintCosts(VecEnvWrapper):
+class SavedMultipliers:
+    """The multipliers of a constrained environment, as a checkpoint keeps them."""
+
+    multipliers: dict[str, Multiplier]
+
+    def state(self) -> dict[str, dict[str, float]]:
+        """The multipliers' state, for a checkpoint."""
+        return {n: {"value": m.value, "integral": m.integral} for n, m in self.multipliers.items()}
+
+    def restore(self, state: dict[str, dict[str, float]]) -> None:
+        """The multipliers as a checkpoint left them."""
+        for name, saved in state.items():
+            self.multipliers[name].value = float(saved["value"])
+            self.multipliers[name].integral = float(saved["integral"])
+
+
+class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
     """Charges each configured constraint's cost at its multiplier in the reward PPO learns
     from, and measures each over the episodes that end (see the module docstring).
 
@@ -279,22 +297,113 @@ class ConstraintCosts(VecEnvWrapper):
         self._pooled_ticks = self._pooled_episodes = 0
         return measured
 
-    def state(self) -> dict[str, dict[str, float]]:
-        """The multipliers' state, for a checkpoint."""
-        return {n: {"value": m.value, "integral": m.integral} for n, m in self.multipliers.items()}
 
-    def restore(self, state: dict[str, dict[str, float]]) -> None:
-        """The multipliers as a checkpoint left them."""
-        for name, saved in state.items():
-            self.multipliers[name].value = float(saved["value"])
-            self.multipliers[name].integral = float(saved["integral"])
+class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
+    """Constrained PPO on any plant (the generic pipeline's ``constraints``): each constraint
+    is a cost the plant publishes by name in ``info["costs"]`` (a mapping such as
+    ``{"speeding": 1.0, "comfort": 0.0}`` per step), measured as its mean per step over the
+    episodes that end; ``safety`` is the switch's own — an episode with a safety action
+    (``info["safety_active"]``), measured as a share of episodes, as the left turn's. PPO learns
+    from ``r − Σ_c λ_c · cost_c``; the multipliers move as :class:`Multiplier` says, after every
+    rollout with at least ``min_episodes`` ended episodes pooled.
+
+    Raises:
+        ValueError: On the first step, a configured cost the plant does not publish (naming
+            the costs it does).
+    """
+
+    def __init__(
+        self,
+        venv: VecEnv,
+        constraints: Mapping[str, ConstraintConfig],
+        min_episodes: int | None = None,
+    ) -> None:
+        super().__init__(venv)
+        self.multipliers = {n: Multiplier.from_config(c) for n, c in constraints.items()}
+        self.starts = {n: c.start for n, c in constraints.items()}
+        self.min_episodes = max(1, self.num_envs // 2) if min_episodes is None else min_episodes
+        n = self.num_envs
+        self._episode = {name: np.zeros(n) for name in self.multipliers}
+        self._length = np.zeros(n, dtype=np.int64)
+        self._safety_seen = np.zeros(n, dtype=bool)
+        self._checked = False
+        self._pooled = dict.fromkeys(self.multipliers, 0.0)
+        self._pooled_steps = 0
+        self._pooled_episodes = 0
+
+    def reset(self) -> VecEnvObs:
+        observation = self.venv.reset()
+        for sums in self._episode.values():
+            sums[:] = 0.0
+        self._length[:] = 0
+        self._safety_seen[:] = False
+        return observation
+
+    def step_async(self, actions: NDArray[Any]) -> None:
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, reward, done, infos = self.venv.step_wait()
+        costs = self._costs(infos)
+        penalty = np.zeros(self.num_envs)
+        for name, cost in costs.items():
+            penalty += self.multipliers[name].value * cost
+            self._episode[name] += cost
+        self._length += 1
+        ended = np.flatnonzero(done)
+        for name, sums in self._episode.items():
+            self._pooled[name] += float(sums[ended].sum())
+            sums[ended] = 0.0
+        self._pooled_steps += int(self._length[ended].sum())
+        self._pooled_episodes += len(ended)
+        self._length[ended] = 0
+        self._safety_seen[ended] = False
+        return observation, (reward - penalty).astype(np.float32), done, infos
+
+    def _costs(self, infos: Sequence[Mapping[str, Any]]) -> dict[str, NDArray[np.float64]]:
+        out = {name: np.zeros(self.num_envs) for name in self.multipliers}
+        for i, info in enumerate(infos):
+            published = info.get("costs", {})
+            if not self._checked:
+                missing = sorted(set(self.multipliers) - {"safety"} - set(published))
+                if missing:
+                    raise ValueError(
+                        f"constraints: the plant publishes no cost {missing[0]!r} in "
+                        f"info['costs'] (it publishes: {', '.join(sorted(published)) or 'none'})"
+                    )
+                self._checked = True
+            for name in out:
+                if name != "safety":
+                    out[name][i] = float(published[name])
+        if "safety" in out:  # an episode's first safety action is its cost: it counts episodes
+            acted = np.array([bool(info.get("safety_active", False)) for info in infos])
+            out["safety"] = (acted & ~self._safety_seen).astype(np.float64)
+            self._safety_seen |= acted
+        return out
+
+    def end_rollout(self, timesteps: int) -> dict[str, float] | None:
+        """The pooled episodes' measurements (a mean per step; ``safety`` a share of
+        episodes), if there are enough of them; the multipliers past their ``start`` move."""
+        episodes = self._pooled_episodes
+        if episodes < self.min_episodes:
+            return None
+        steps = max(self._pooled_steps, 1)
+        measured = {name: total / steps for name, total in self._pooled.items()}
+        if "safety" in measured:
+            measured["safety"] = self._pooled["safety"] / episodes
+        for name, value in measured.items():
+            if timesteps >= self.starts[name]:
+                self.multipliers[name].update(value)
+        self._pooled = dict.fromkeys(self.multipliers, 0.0)
+        self._pooled_steps = self._pooled_episodes = 0
+        return measured
 
 
 class ConstraintUpdate(BaseCallback):
     """Moves the multipliers after every rollout (each from its ``start`` on) and logs
     ``constraints/<name>`` (what the rollout measured) and ``constraints/<name>_multiplier``."""
 
-    def __init__(self, costs: ConstraintCosts) -> None:
+    def __init__(self, costs: ConstraintCosts | NamedCostConstraints) -> None:
         super().__init__()
         self.costs = costs
 

@@ -41,6 +41,7 @@ from safeswitch.core.registry import (
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.io import write_json
 from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
+from safeswitch.training.constraints import ConstraintUpdate, NamedCostConstraints
 from safeswitch.training.policies import load_policy
 from safeswitch.training.run import (
     build_model,
@@ -233,6 +234,31 @@ def _make_vec(config: EnvTrainConfig) -> VecMonitor:
     return VecMonitor(vec)
 
 
+def check_costs(config: EnvTrainConfig) -> None:
+    """One step of the plant, to check that it publishes every cost the configuration
+    constrains in ``info["costs"]``.
+
+    Raises:
+        ConfigError: Naming the first cost it does not publish and the ones it does.
+    """
+    env = make_supervised_env(
+        config.env_id, config.switching, config.penalty, config.logic_params,
+        **config.env_kwargs,
+    )  # fmt: skip
+    try:
+        env.reset(seed=config.seed)
+        info = env.step(env.action_space.sample())[4]
+    finally:
+        env.close()
+    published = info.get("costs", {})
+    missing = sorted(set(config.constraints) - {"safety"} - set(published))
+    if missing:
+        raise ConfigError(
+            f"constraints.{missing[0]}: {config.env_id} publishes no such cost in "
+            f"info['costs'] (it publishes: {', '.join(sorted(published)) or 'none'})"
+        )
+
+
 def run_episodes(
     env: gym.Env[Any, Any],
     act: Callable[[Any], Any],
@@ -287,16 +313,24 @@ def train_env(
         config = load_env_config(run / "config.yaml")
     torch.set_num_threads(config.torch_threads)
     vec = _make_vec(config)  # a logic that does not fit the plant fails here, nothing written
+    if config.constraints:
+        check_costs(config)  # a cost the plant does not publish: refused before anything is written
     if checkpoint is None:
         start_run(run, dump_env_config(config))
-    env = normalized(vec, config, checkpoint)
+    constrained = NamedCostConstraints(vec, config.constraints) if config.constraints else None
+    if constrained is not None and checkpoint is not None and "constraints" in checkpoint:
+        constrained.restore(checkpoint["constraints"])
+    env = normalized(constrained or vec, config, checkpoint)
     if checkpoint is not None:
         model = load_model(checkpoint, learner_env(env, config), run)
     else:
         model = build_model(config, learner_env(env, config), run / "tb")
 
     def save(m: EnvMonitor) -> Path:
-        return save_checkpoint(run, model, env, {"totals": m.totals})
+        state: dict[str, Any] = {"totals": m.totals}
+        if constrained is not None:
+            state["constraints"] = constrained.state()
+        return save_checkpoint(run, model, env, state)
 
     failed = failure_of(plain_env_id(config.env_id))
     monitor = EnvMonitor(
@@ -308,7 +342,7 @@ def train_env(
     )
     learn(
         model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar,
-        callbacks,
+        [*(callbacks or []), *([ConstraintUpdate(constrained)] if constrained else [])],
     )  # fmt: skip
     wall = monitor.wall_time_s
     save_final(run, model, env)
@@ -349,5 +383,7 @@ def train_env(
             "wall_time_s": round(time.perf_counter() - started, 2),
         },
     }
+    if constrained is not None:
+        metrics["constraints"] = constrained.state()
     write_json(run / "metrics.json", metrics)
     return metrics
