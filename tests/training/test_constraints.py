@@ -316,3 +316,37 @@ def test_a_plants_named_cost_is_charged_at_its_multiplier_and_measured_per_step(
     rate = total.sum() / steps.sum()
     assert measured is not None and measured["speeding"] == pytest.approx(rate)
     assert rate > 0.1 and wrapped.multipliers["speeding"].value > 3.0  # over budget: it rose
+
+
+def test_the_switchs_intervention_rate_is_a_constraint_on_any_plant():
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from safeswitch.core.wrappers import SafeSwitch
+    from safeswitch.training.config import ConstraintConfig
+    from safeswitch.training.constraints import NamedCostConstraints
+    from tests.core import user_plant
+
+    def make():
+        env = gym.make(user_plant.ENV_ID)
+        return SafeSwitch(env, user_plant.full_brake, user_plant.LOGIC, penalty=0.0)
+
+    plain, vec = DummyVecEnv([make] * 2), DummyVecEnv([make] * 2)
+    plain.seed(5)
+    vec.seed(5)
+    wrapped = NamedCostConstraints(vec, {"intervention": ConstraintConfig(budget=0.01)}, 1)
+    wrapped.multipliers["intervention"].value = 2.0
+    plain.reset()
+    wrapped.reset()
+    ran = 0
+    for _ in range(70):  # full acceleration toward the wall: the logic steps in
+        fast = np.full((2, 1), 2.0, dtype=np.float32)
+        _, r0, _, infos = plain.step(fast)
+        _, r1, _, _ = wrapped.step(fast)
+        cost = np.array([info["cost"] for info in infos])
+        assert (cost == [float(info["safety_active"]) for info in infos]).all()
+        assert np.allclose(r1, r0 - 2.0 * cost)
+        ran += int(cost.sum())
+    assert ran > 0
+    measured = wrapped.end_rollout(timesteps=10**9)
+    assert measured is not None and 0 < measured["intervention"] <= 1

@@ -742,8 +742,9 @@ class EnvTrainConfig:
         policy: How the policy and its optimiser depart from Table II (ours).
         constraints: Constrained PPO (ours): cost name → its constraint. A name is a cost the
             plant publishes per step in ``info["costs"]`` (e.g. ``speeding``), measured as its
-            mean per step; ``safety`` is the switch's own, the share of episodes with a
-            safety action. See :class:`~safeswitch.training.constraints.NamedCostConstraints`.
+            mean per step; two are the switch's own: ``intervention``, the share of steps on
+            which the safety action ran, and ``safety``, the share of episodes with one. See
+            :class:`~safeswitch.training.constraints.NamedCostConstraints`.
     """
 
     env_id: str
@@ -797,9 +798,11 @@ class EnvTrainConfig:
                   "must be a constraint (budget, gains, …)")  # fmt: skip
             check(not given.reasons, f"constraints.{name}", "reasons", given.reasons,
                   "are the left turn's (a plant's costs come from info['costs'])")  # fmt: skip
-        if "safety" in self.constraints:
-            budget = self.constraints["safety"].budget
-            check(budget < 1, "constraints.safety", "budget", budget, "is a share: must be < 1")
+        for name in ("intervention", "safety"):
+            if name in self.constraints:
+                budget = self.constraints[name].budget
+                check(budget < 1, f"constraints.{name}", "budget", budget,
+                      "is a share: must be < 1")  # fmt: skip
 
     @property
     def batch_size(self) -> int:

@@ -298,12 +298,19 @@ class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
         return measured
 
 
+#: The costs every switched plant has, from the switch itself (see
+#: :class:`NamedCostConstraints`).
+SWITCH_COSTS = ("intervention", "safety")
+
+
 class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
     """Constrained PPO on any plant (the generic pipeline's ``constraints``): each constraint
     is a cost the plant publishes by name in ``info["costs"]`` (a mapping such as
     ``{"speeding": 1.0, "comfort": 0.0}`` per step), measured as its mean per step over the
-    episodes that end; ``safety`` is the switch's own — an episode with a safety action
-    (``info["safety_active"]``), measured as a share of episodes, as the left turn's. PPO learns
+    episodes that end. Two are the switch's own: ``intervention``, its per-step
+    ``info["cost"]`` (1 on a step the safety action ran), a share of steps; and ``safety``, an
+    episode with a safety action (``info["safety_active"]``), a share of episodes, as the left
+    turn's. PPO learns
     from ``r − Σ_c λ_c · cost_c``; the multipliers move as :class:`Multiplier` says, after every
     rollout with at least ``min_episodes`` ended episodes pooled.
 
@@ -365,7 +372,7 @@ class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
         for i, info in enumerate(infos):
             published = info.get("costs", {})
             if not self._checked:
-                missing = sorted(set(self.multipliers) - {"safety"} - set(published))
+                missing = sorted(set(self.multipliers) - set(SWITCH_COSTS) - set(published))
                 if missing:
                     raise ValueError(
                         f"constraints: the plant publishes no cost {missing[0]!r} in "
@@ -373,7 +380,9 @@ class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
                     )
                 self._checked = True
             for name in out:
-                if name != "safety":
+                if name == "intervention":
+                    out[name][i] = float(info.get("cost", 0.0))
+                elif name != "safety":
                     out[name][i] = float(published[name])
         if "safety" in out:  # an episode's first safety action is its cost: it counts episodes
             acted = np.array([bool(info.get("safety_active", False)) for info in infos])

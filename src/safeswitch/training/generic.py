@@ -41,7 +41,7 @@ from safeswitch.core.registry import (
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.io import write_json
 from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
-from safeswitch.training.constraints import ConstraintUpdate, NamedCostConstraints
+from safeswitch.training.constraints import SWITCH_COSTS, ConstraintUpdate, NamedCostConstraints
 from safeswitch.training.policies import load_policy
 from safeswitch.training.run import (
     build_model,
@@ -251,7 +251,7 @@ def check_costs(config: EnvTrainConfig) -> None:
     finally:
         env.close()
     published = info.get("costs", {})
-    missing = sorted(set(config.constraints) - {"safety"} - set(published))
+    missing = sorted(set(config.constraints) - set(SWITCH_COSTS) - set(published))
     if missing:
         raise ConfigError(
             f"constraints.{missing[0]}: {config.env_id} publishes no such cost in "
