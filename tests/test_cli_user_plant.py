@@ -204,7 +204,9 @@ def test_an_interrupted_constrained_run_resumes_with_its_multipliers(tmp_path, m
     real = NamedCostConstraints.restore
     monkeypatch.setattr(NamedCostConstraints, "restore",
                         lambda self, s: restored.append(s) or real(self, s))  # fmt: skip
-    metrics = train_env(config, run, resume=True, progress_bar=False)
+    # `train --resume --out RUN` alone: the run's config names its plant
+    assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
+    metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["timesteps"] >= 2048
     assert restored == [state["constraints"]]  # it went on from the saved multipliers
     assert metrics["constraints"]["speeding"]["integral"] >= risen

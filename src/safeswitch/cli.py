@@ -7,6 +7,7 @@ import json
 import sys
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, NoReturn
 
 from safeswitch import __version__
@@ -160,8 +161,9 @@ def _training_counts(training: dict[str, Any]) -> str:
 
 
 def _names_env(config: str | None) -> bool:
-    """The configuration ``config`` is one for a Gymnasium environment (it names ``env_id``)."""
-    if config is None:
+    """The configuration ``config`` is one for a Gymnasium environment (it names ``env_id``;
+    a path that does not exist names none)."""
+    if config is None or (config.endswith("config.yaml") and not Path(config).is_file()):
         return False
     from safeswitch.training.config import config_path, read_config
 
@@ -171,7 +173,10 @@ def _names_env(config: str | None) -> bool:
 def _train(args: argparse.Namespace) -> int:
     from safeswitch.app.train import train_and_plot
 
-    if args.env not in (None, LEFT_TURN) or (args.env is None and _names_env(args.config)):
+    resumed = f"{args.out}/config.yaml" if args.resume and args.config is None else None
+    if args.env not in (None, LEFT_TURN) or (
+        args.env is None and _names_env(args.config or resumed)
+    ):
         return _train_env(args)
     if args.resume and args.config:
         raise UsageError("--resume continues with the run's own config.yaml; drop --config")
@@ -222,7 +227,10 @@ def _train_env(args: argparse.Namespace) -> int:
         raise UsageError("--no-adas-penalty is for the left turn; set penalty: 0 in a config")
     if args.resume and args.config:
         raise UsageError("--resume continues with the run's own config.yaml; drop --config")
-    base = load_env_config(args.config) if args.config else EnvTrainConfig(env_id=args.env)
+    if args.resume:  # the run's own configuration (train_env reads it again)
+        base = load_env_config(Path(args.out) / "config.yaml")
+    else:
+        base = load_env_config(args.config) if args.config else EnvTrainConfig(env_id=args.env)
     overrides = {
         k: v
         for k, v in (
