@@ -121,10 +121,89 @@ class Multiplier:
         return self.value
 
 
-class SavedMultipliers:
-    """The multipliers of a constrained environment, as a checkpoint keeps them."""
+class CostPool:
+    """What every constrained environment shares: a multiplier per constraint, each cost
+    summed over each environment's running episode, pooled over the episodes that end, and
+    the multipliers moved from the pool after each rollout (:meth:`end_rollout`); a subclass
+    computes the costs and says what the pool measured (:meth:`measured`)."""
 
     multipliers: dict[str, Multiplier]
+    starts: dict[str, int]
+    min_episodes: int
+
+    def start_pool(
+        self, constraints: Mapping[str, ConstraintConfig], num_envs: int, min_episodes: int | None
+    ) -> None:
+        """Multipliers at their initial values and an empty pool (``min_episodes``: ended
+        episodes needed before the multipliers move; default half the environments)."""
+        self.multipliers = {n: Multiplier.from_config(c) for n, c in constraints.items()}
+        self.starts = {n: c.start for n, c in constraints.items()}
+        self.min_episodes = max(1, num_envs // 2) if min_episodes is None else min_episodes
+        #: Per environment, the running episode's cost sums and its length (in the costs'
+        #: unit of time: ticks, or steps).
+        self._episode = {name: np.zeros(num_envs) for name in self.multipliers}
+        self._length = np.zeros(num_envs, dtype=np.int64)
+        self._empty_pool()
+
+    def _empty_pool(self) -> None:
+        self._pooled = dict.fromkeys(self.multipliers, 0.0)
+        self._pooled_length = 0
+        self._pooled_episodes = 0
+
+    def clear_episodes(self) -> None:
+        """Forget the running episodes (at a reset)."""
+        for sums in self._episode.values():
+            sums[:] = 0.0
+        self._length[:] = 0
+
+    def charge(
+        self,
+        costs: Mapping[str, NDArray[np.float64]],
+        length: NDArray[np.int64] | int,
+        done: NDArray[np.bool_],
+        counted: NDArray[np.bool_] | None = None,
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """Add one step's ``costs`` and ``length`` to the running episodes and pool the ones
+        ``done`` ends (those ``counted``, if given); returns the step's penalty
+        ``Σ λ_c · cost_c`` ``[B]`` and the indices of the ended episodes."""
+        penalty = np.zeros(len(done))
+        for name, cost in costs.items():
+            penalty += self.multipliers[name].value * cost
+            self._episode[name] += cost
+        self._length += length
+        ended = np.flatnonzero(done)
+        pooled = ended if counted is None else ended[counted[ended]]
+        for name, sums in self._episode.items():
+            self._pooled[name] += float(sums[pooled].sum())
+            sums[ended] = 0.0
+        self._pooled_length += int(self._length[pooled].sum())
+        self._pooled_episodes += len(pooled)
+        self._length[ended] = 0
+        return penalty, ended
+
+    def pooled_means(self) -> dict[str, float] | None:
+        """Each pooled cost per unit of pooled length; ``None`` while fewer than
+        ``min_episodes`` episodes have ended."""
+        if self._pooled_episodes < self.min_episodes:
+            return None
+        length = max(self._pooled_length, 1)
+        return {name: total / length for name, total in self._pooled.items()}
+
+    def measured(self) -> dict[str, float] | None:
+        """What the pool measured per constraint, in its budget's unit."""
+        raise NotImplementedError
+
+    def end_rollout(self, timesteps: int) -> dict[str, float] | None:
+        """The pooled episodes' measurements, if there are enough of them (then a new pool
+        starts); the multipliers whose ``start`` is past at ``timesteps`` move."""
+        measured = self.measured()
+        if measured is None:
+            return None
+        for name, value in measured.items():
+            if timesteps >= self.starts[name]:
+                self.multipliers[name].update(value)
+        self._empty_pool()
+        return measured
 
     def state(self) -> dict[str, dict[str, float]]:
         """The multipliers' state, for a checkpoint."""
@@ -137,7 +216,7 @@ class SavedMultipliers:
             self.multipliers[name].integral = float(saved["integral"])
 
 
-class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
+class ConstraintCosts(CostPool, VecEnvWrapper):
     """Charges each configured constraint's cost at its multiplier in the reward PPO learns
     from, and measures each over the episodes that end (see the module docstring).
 
@@ -165,9 +244,7 @@ class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
         base = left_turn_beneath(venv, "constraints")
         super().__init__(venv)
         self.base, self.config = base, config
-        self.multipliers = {name: Multiplier.from_config(c) for name, c in config.active().items()}
-        self.starts = {name: c.start for name, c in config.active().items()}
-        self.min_episodes = max(1, self.num_envs // 2) if min_episodes is None else min_episodes
+        self.start_pool(config.active(), self.num_envs, min_episodes)
         known = base.task.reasons
         #: Per reason-counted cost, the reason codes it counts (``safety`` without reasons
         #: counts every safety action instead).
@@ -198,21 +275,13 @@ class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
         self.dt = episode.dt
         self.horizon_ticks = round(episode.horizon_s / episode.dt)
         n = self.num_envs
-        #: Per environment, the running episode's cost sums [ticks] and its length [ticks].
-        self._episode = {name: np.zeros(n) for name in self.multipliers}
-        self._length = np.zeros(n, dtype=np.int64)
         self._cleared = np.zeros(n, dtype=bool)
         self._safety_seen = np.zeros(n, dtype=bool)
         self._counted = np.ones(n, dtype=bool)
-        self._pooled = dict.fromkeys(self.multipliers, 0.0)
-        self._pooled_ticks = 0
-        self._pooled_episodes = 0
 
     def reset(self) -> VecEnvObs:
         observation = self.venv.reset()
-        for sums in self._episode.values():
-            sums[:] = 0.0
-        self._length[:] = 0
+        self.clear_episodes()
         self._cleared[:] = False
         self._safety_seen[:] = False
         self._counted[:] = not self.base.stagger
@@ -221,19 +290,7 @@ class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
     def step_wait(self) -> VecEnvStepReturn:
         observation, reward, done, infos = self.venv.step_wait()
         costs = self.costs_of_step(done)
-        penalty = np.zeros(self.num_envs)
-        for name, cost in costs.items():
-            penalty += self.multipliers[name].value * cost
-            self._episode[name] += cost
-        self._length += self.base.costs_in_step.ticks
-        ended = np.flatnonzero(done)
-        pooled = ended[self._counted[ended]]
-        for name, sums in self._episode.items():
-            self._pooled[name] += float(sums[pooled].sum())
-            sums[ended] = 0.0
-        self._pooled_ticks += int(self._length[pooled].sum())
-        self._pooled_episodes += len(pooled)
-        self._length[ended] = 0
+        penalty, ended = self.charge(costs, self.base.costs_in_step.ticks, done, self._counted)
         self._cleared[ended] = False
         self._safety_seen[ended] = False
         self._counted[ended] = True
@@ -272,11 +329,10 @@ class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
         ticks; for ``safety`` a share of episodes; for ``clear_time`` the mean time to clear
         [s]; for ``uncleared`` a share of episodes); ``None`` while fewer than ``min_episodes``
         have ended."""
-        episodes = self._pooled_episodes
-        if episodes < self.min_episodes:
+        out = self.pooled_means()  # per tick
+        if out is None:
             return None
-        ticks = max(self._pooled_ticks, 1)
-        out = {name: total / ticks for name, total in self._pooled.items()}
+        episodes = self._pooled_episodes
         for name in ("safety", "uncleared"):
             if name in out:
                 out[name] = self._pooled[name] / episodes
@@ -284,26 +340,13 @@ class ConstraintCosts(SavedMultipliers, VecEnvWrapper):
             out["clear_time"] = self._pooled["clear_time"] * self.dt / episodes
         return out
 
-    def end_rollout(self, timesteps: int) -> dict[str, float] | None:
-        """The pooled episodes' measurements, if there are enough of them (then a new pool
-        starts); the multipliers whose ``start`` is past at ``timesteps`` move."""
-        measured = self.measured()
-        if measured is None:
-            return None
-        for name, value in measured.items():
-            if timesteps >= self.starts[name]:
-                self.multipliers[name].update(value)
-        self._pooled = dict.fromkeys(self.multipliers, 0.0)
-        self._pooled_ticks = self._pooled_episodes = 0
-        return measured
-
 
 #: The costs every switched plant has, from the switch itself (see
 #: :class:`NamedCostConstraints`).
 SWITCH_COSTS = ("intervention", "safety")
 
 
-class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
+class NamedCostConstraints(CostPool, VecEnvWrapper):
     """Constrained PPO on any plant (the generic pipeline's ``constraints``): each constraint
     is a cost the plant publishes by name in ``info["costs"]`` (a mapping such as
     ``{"speeding": 1.0, "comfort": 0.0}`` per step), measured as its mean per step over the
@@ -326,23 +369,13 @@ class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
         min_episodes: int | None = None,
     ) -> None:
         super().__init__(venv)
-        self.multipliers = {n: Multiplier.from_config(c) for n, c in constraints.items()}
-        self.starts = {n: c.start for n, c in constraints.items()}
-        self.min_episodes = max(1, self.num_envs // 2) if min_episodes is None else min_episodes
-        n = self.num_envs
-        self._episode = {name: np.zeros(n) for name in self.multipliers}
-        self._length = np.zeros(n, dtype=np.int64)
-        self._safety_seen = np.zeros(n, dtype=bool)
+        self.start_pool(constraints, self.num_envs, min_episodes)
+        self._safety_seen = np.zeros(self.num_envs, dtype=bool)
         self._checked = False
-        self._pooled = dict.fromkeys(self.multipliers, 0.0)
-        self._pooled_steps = 0
-        self._pooled_episodes = 0
 
     def reset(self) -> VecEnvObs:
         observation = self.venv.reset()
-        for sums in self._episode.values():
-            sums[:] = 0.0
-        self._length[:] = 0
+        self.clear_episodes()
         self._safety_seen[:] = False
         return observation
 
@@ -351,19 +384,7 @@ class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         observation, reward, done, infos = self.venv.step_wait()
-        costs = self._costs(infos)
-        penalty = np.zeros(self.num_envs)
-        for name, cost in costs.items():
-            penalty += self.multipliers[name].value * cost
-            self._episode[name] += cost
-        self._length += 1
-        ended = np.flatnonzero(done)
-        for name, sums in self._episode.items():
-            self._pooled[name] += float(sums[ended].sum())
-            sums[ended] = 0.0
-        self._pooled_steps += int(self._length[ended].sum())
-        self._pooled_episodes += len(ended)
-        self._length[ended] = 0
+        penalty, ended = self.charge(self._costs(infos), 1, done)
         self._safety_seen[ended] = False
         return observation, (reward - penalty).astype(np.float32), done, infos
 
@@ -390,21 +411,12 @@ class NamedCostConstraints(SavedMultipliers, VecEnvWrapper):
             self._safety_seen |= acted
         return out
 
-    def end_rollout(self, timesteps: int) -> dict[str, float] | None:
-        """The pooled episodes' measurements (a mean per step; ``safety`` a share of
-        episodes), if there are enough of them; the multipliers past their ``start`` move."""
-        episodes = self._pooled_episodes
-        if episodes < self.min_episodes:
-            return None
-        steps = max(self._pooled_steps, 1)
-        measured = {name: total / steps for name, total in self._pooled.items()}
-        if "safety" in measured:
-            measured["safety"] = self._pooled["safety"] / episodes
-        for name, value in measured.items():
-            if timesteps >= self.starts[name]:
-                self.multipliers[name].update(value)
-        self._pooled = dict.fromkeys(self.multipliers, 0.0)
-        self._pooled_steps = self._pooled_episodes = 0
+    def measured(self) -> dict[str, float] | None:
+        """What the pooled episodes measured: a mean per step; ``safety`` a share of
+        episodes."""
+        measured = self.pooled_means()
+        if measured is not None and "safety" in measured:
+            measured["safety"] = self._pooled["safety"] / self._pooled_episodes
         return measured
 
 
