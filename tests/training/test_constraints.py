@@ -284,24 +284,30 @@ def test_a_policy_is_evaluated_and_validated_under_the_logic_it_is_deployed_unde
         from_dict(TrainConfig, {"deploy_switching": "papr"})
 
 
-def test_a_plants_named_cost_is_charged_at_its_multiplier_and_measured_per_step():
-    import gymnasium as gym
+def _twins(make, cost, multiplier, seed):
+    """Two copies of the same two environments, one with ``cost`` constrained at
+    ``multiplier``: what the constraint changes is the difference between them."""
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from safeswitch.training.config import ConstraintConfig
     from safeswitch.training.constraints import NamedCostConstraints
-    from tests.core import user_plant
-
-    def make():
-        return gym.make(user_plant.ENV_ID)
 
     plain, charged = DummyVecEnv([make] * 2), DummyVecEnv([make] * 2)
-    plain.seed(3)
-    charged.seed(3)
-    wrapped = NamedCostConstraints(charged, {"speeding": ConstraintConfig(budget=0.1)}, 1)
-    wrapped.multipliers["speeding"].value = 3.0
+    plain.seed(seed)
+    charged.seed(seed)
+    wrapped = NamedCostConstraints(charged, {cost: ConstraintConfig(budget=0.1)}, 1)
+    wrapped.multipliers[cost].value = multiplier
     plain.reset()
     wrapped.reset()
+    return plain, wrapped
+
+
+def test_a_plants_named_cost_is_charged_at_its_multiplier_and_measured_per_step():
+    import gymnasium as gym
+
+    from tests.core import user_plant
+
+    plain, wrapped = _twins(lambda: gym.make(user_plant.ENV_ID), "speeding", 3.0, seed=3)
     fast = np.full((2, 1), 2.0, dtype=np.float32)
     total, steps, first = np.zeros(2), np.zeros(2), np.ones(2, dtype=bool)
     while first.any():  # full acceleration: faster than 5 m/s soon, into the wall in the end
@@ -320,24 +326,15 @@ def test_a_plants_named_cost_is_charged_at_its_multiplier_and_measured_per_step(
 
 def test_the_switchs_intervention_rate_is_a_constraint_on_any_plant():
     import gymnasium as gym
-    from stable_baselines3.common.vec_env import DummyVecEnv
 
     from safeswitch.core.wrappers import SafeSwitch
-    from safeswitch.training.config import ConstraintConfig
-    from safeswitch.training.constraints import NamedCostConstraints
     from tests.core import user_plant
 
     def make():
         env = gym.make(user_plant.ENV_ID)
         return SafeSwitch(env, user_plant.full_brake, user_plant.LOGIC, penalty=0.0)
 
-    plain, vec = DummyVecEnv([make] * 2), DummyVecEnv([make] * 2)
-    plain.seed(5)
-    vec.seed(5)
-    wrapped = NamedCostConstraints(vec, {"intervention": ConstraintConfig(budget=0.01)}, 1)
-    wrapped.multipliers["intervention"].value = 2.0
-    plain.reset()
-    wrapped.reset()
+    plain, wrapped = _twins(make, "intervention", 2.0, seed=5)
     ran = 0
     for _ in range(70):  # full acceleration toward the wall: the logic steps in
         fast = np.full((2, 1), 2.0, dtype=np.float32)
