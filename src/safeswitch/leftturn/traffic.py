@@ -411,15 +411,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
         ext = Externals(externals, ext_progress, np.ascontiguousarray(v.speed), top,
                         self._ext_is_ego)  # fmt: skip
         decide = state.tick % self._action_ticks == 0
-        traffic_tick_entry(self._streams, tuple(Drivers.of(tr)), tuple(ext), decide,
-                           tuple(Drivers.of(new)))  # fmt: skip
+        drivers = tuple(Drivers.of(new))  # written by the tick, then by spawn, in place
+        traffic_tick_entry(self._streams, tuple(Drivers.of(tr)), tuple(ext), decide, drivers)
         now = (state.tick + 1).astype(np.float64) * self.config.episode.dt
         moved = ext._replace(
             progress=_ghost(np.ascontiguousarray(new_world.progress), state.ghost_ego),
             speed=np.ascontiguousarray(new_world.vehicles.speed),
         )
         spawn_entry(self._streams, now, tuple(Arrivals.of(tr.schedule)), new.entered,
-                    new.next_arrival, tuple(Drivers.of(new)), tuple(moved))  # fmt: skip
+                    new.next_arrival, drivers, tuple(moved))  # fmt: skip
         place(self.tables, new)
         return self.with_separations(state, new, new_world, separation)
 
