@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml Makefile
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 	$(PIP) install --quiet "$(TORCH_PIN)"
-	$(PIP) install --quiet -e ".[dev,bench,ray,sumo,docs]"
+	$(PIP) install --quiet -e ".[dev,bench,ray,sumo,docs,deploy]"
 	touch $(STAMP)
 
 # numba keeps its machine code beside each source file and checks only that file: a kernel that

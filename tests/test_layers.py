@@ -1,11 +1,14 @@
 """The package's layers: each imports only the layers below it (no cycles between packages),
 and only ``report`` imports matplotlib.
 
-core → sim → leftturn → sumo, evaluation → training → report → app, examples → cli
-(``io`` and ``progress`` are leaf utilities every layer may use.)
+core → sim → leftturn → sumo, evaluation, runtime → training → report, deploy → app, examples
+→ cli (``io`` and ``progress`` are leaf utilities every layer may use). ``runtime`` (the exported
+controller) sits on the simulation layers alone: it runs without the training stack.
 """
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -25,9 +28,11 @@ BELOW = {
     "report": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
     "examples": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
     "bench": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training"},
+    "runtime": UTILITIES | {"core", "sim", "leftturn"},
+    "deploy": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training", "runtime"},
 }
 BELOW["app"] = BELOW["training"] | {"training", "report", "examples", "sumo"}
-BELOW["cli"] = BELOW["app"] | {"app", "bench"}
+BELOW["cli"] = BELOW["app"] | {"app", "bench", "deploy"}
 
 
 def modules():
@@ -153,3 +158,28 @@ def test_the_configuration_imports_no_simulation_logic_planner_or_learner():
     loaded = set(done.stdout.split())
     assert "safeswitch.training.config" in loaded  # the probe saw the import
     assert loaded <= allowed, f"configuration loads {sorted(loaded - allowed)}"
+
+
+_REGISTRATION = """
+import sys
+first = sys.argv[1]
+if first == "gymnasium":
+    import gymnasium
+import safeswitch
+assert ("gymnasium" in sys.modules) == (first == "gymnasium"), "import safeswitch loaded Gymnasium"
+import gymnasium as gym
+for env_id in (safeswitch.ENV_ID, safeswitch.TRAFFIC_ENV_ID):
+    assert env_id in gym.registry, env_id
+env = gym.make(safeswitch.ENV_ID)
+print(env.reset(seed=0)[0].shape)
+"""
+
+
+@pytest.mark.parametrize("first", ["safeswitch", "gymnasium"])
+def test_the_package_registers_its_ids_without_importing_gymnasium_itself(first):
+    done = subprocess.run(
+        [sys.executable, "-c", _REGISTRATION, first], capture_output=True, text=True,
+        timeout=120, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "(6,)"

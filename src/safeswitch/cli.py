@@ -7,6 +7,7 @@ import json
 import sys
 from collections.abc import Callable
 from dataclasses import replace
+from importlib import import_module
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -522,6 +523,27 @@ def _falsify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _deploy_module(name: str) -> Any:
+    """A module of :mod:`safeswitch.deploy`, or a one-line error naming the extra it needs."""
+    try:
+        return import_module(f"safeswitch.deploy.{name}")
+    except ModuleNotFoundError as exc:
+        raise ValueError(
+            f"{exc.name} is not installed: the deployment commands need the deploy extra "
+            "(pip install 'safeswitch[deploy]')"
+        ) from exc
+
+
+def _export(args: argparse.Namespace) -> int:
+    deploy = _deploy_module("export")
+    result = deploy.export(
+        args.model, args.out, switching=args.switching, observations=args.observations,
+        overwrite=args.overwrite,
+    )  # fmt: skip
+    print(deploy.main_summary(result))
+    return 0
+
+
 def _distributed(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--workers", type=at_least(0), default=2,
@@ -705,6 +727,24 @@ def build_parser() -> argparse.ArgumentParser:
     fal.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     _distributed(fal)
     fal.set_defaults(func=_falsify)
+
+    exp = sub.add_parser(
+        "export",
+        help="a trained policy as ONNX with its switch's parameters, checked against torch",
+    )
+    exp.add_argument(
+        "--model", required=True, help=f"a run directory or a shipped policy ({', '.join(SHIPPED)})"
+    )
+    exp.add_argument("--out", required=True, help="export folder")
+    exp.add_argument(
+        "--switching", choices=logics, help="the logic to deploy under (default: the run's)"
+    )
+    exp.add_argument(
+        "--observations", type=at_least(1), default=100_000,
+        help="observations of the parity check, from the policy's own evaluation episodes",
+    )  # fmt: skip
+    exp.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
+    exp.set_defaults(func=_export)
 
     bench = sub.add_parser("bench", help="throughput figures of the simulator and environments")
     bench.add_argument("--json", action="store_true", help="print one JSON object")

@@ -38,7 +38,7 @@ from safeswitch.core.arrays import columns, jit, plain, take_rows
 from safeswitch.core.pid import PIDState, pid_tick
 from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
-from safeswitch.core.switching import SwitchingLogic, reason_names, supervise
+from safeswitch.core.switching import Supervision, SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
@@ -440,20 +440,31 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             )
         speed = np.stack([scenarios.ego_speed, scenarios.north_speed], axis=1)
         world = self.world.place(progress, speed)
-        # Bumpless start: PID_th's integral holds the throttle that cruises at the speed limit.
-        gains = c.controllers.throttle_pid
-        cruise = float(steady_state_throttle(c.vehicle, np.asarray(v_lim)))
-        pid_throttle = PIDState.zeros((batch,), cruise / gains.ki if gains.ki > 0 else 0.0)
+        memory = self.controller_memory(batch)
         return TaskState(
             world=world,
             scenarios=Scenarios(*(getattr(scenarios, f.name).copy() for f in fields(Scenarios))),
-            pid_throttle=pid_throttle,
-            pid_brake=PIDState.zeros((batch,), self.brake_feedforward()),
-            pid_lane=PIDState.zeros((batch, 2)),
-            pid_north=PIDState.zeros((batch,)),
+            pid_throttle=memory.throttle,
+            pid_brake=memory.brake,
+            pid_lane=memory.lane,
+            pid_north=memory.north,
             accel_lon=np.zeros(batch),
             tick=np.zeros(batch, dtype=np.int64),
             outcome=np.zeros(batch, dtype=np.int8),
+        )
+
+    def controller_memory(self, batch: int) -> ControllerMemory:
+        """The controllers' memory at the start of ``batch`` episodes, bumpless: ``PID_th``'s
+        integral holds the throttle that cruises at the speed limit, ``PID_b``'s the brake of
+        :meth:`brake_feedforward`."""
+        c = self.config
+        gains = c.controllers.throttle_pid
+        cruise = float(steady_state_throttle(c.vehicle, np.asarray(c.controllers.speed_limit)))
+        return ControllerMemory(
+            PIDState.zeros((batch,), cruise / gains.ki if gains.ki > 0 else 0.0),
+            PIDState.zeros((batch,), self.brake_feedforward()),
+            PIDState.zeros((batch, 2)),
+            PIDState.zeros((batch,)),
         )
 
     def brake_feedforward(self) -> float:
@@ -646,16 +657,15 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         """The observation from the plant's six values: here exactly those."""
         return observation
 
-    def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
-        """Advance every episode by one tick.
+    def switch(self, state: TaskState, action: FloatArray) -> Switched:
+        """Steps 1–3 of a tick: every controller side by side, who proposes the ego's pedals,
+        and the switching logic's decision — everything that decides what reaches the plant,
+        without advancing it (what :meth:`step` and the deployment runtime,
+        :mod:`safeswitch.runtime`, both run).
 
         Args:
             state: Current state (not modified).
-            action: Learned actions in [-1, 1], shape ``[B]`` or ``[B, 1]``; out-of-range values
-                are clipped, NaN/inf ones are never executed.
-
-        Returns:
-            The next state and the record of the tick. Episodes that ended are not reset here.
+            action: Learned actions in [-1, 1], shape ``[B]`` or ``[B, 1]``.
         """
         world = state.world
         batch = state.batch_size
@@ -677,22 +687,14 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             )),
             tuple(out),
         )  # fmt: skip
-        safety_brake, north_throttle, north_brake = (
-            out.safety_brake,
-            out.north_throttle,
-            out.north_brake,
-        )
-        pid_throttle, pid_brake = PIDState(*out.pid_throttle), PIDState(*out.pid_brake)
-        pid_north, pid_lane = PIDState(*out.pid_north), PIDState(*out.pid_lane)
-        steer, proposed, safe, fallback = out.steer, out.proposed, out.safe, out.fallback
-        both, in_charge = out.both, out.in_charge
+        proposed = out.proposed
         cut_over_range = None
         if self._limiter is not None:
             # The learned controller's speed limiter cuts its finite throttle (NaN/inf is left
             # for the logic to refuse); one above 1 that it cut still counts as clipped.
             raw = proposed[:, 0]  # a view: the cut is written into the proposal in place
             cut = self.limit_speed(raw, v.speed[:, 0])
-            limited = in_charge & np.isfinite(raw) & (cut < raw)
+            limited = out.in_charge & np.isfinite(raw) & (cut < raw)
             cut_over_range = limited & (raw > 1.0)
             raw[limited] = cut[limited]
         # 2. The switching logic decides through the framework's one supervision step: the
@@ -701,13 +703,34 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         # instead, wherever the car is, stopped it in the north car's path: 266 collisions in
         # 2,500 random episodes with 30 % NaN ticks under the paper logic; holding, 1 — as many
         # as without the NaN ticks).
-        view = self.view(state, both)
-        sup = supervise(self.switching, view, proposed, safe, 0.0, 1.0, fallback)
+        view = self.view(state, out.both)
+        sup = supervise(self.switching, view, proposed, out.safe, 0.0, 1.0, out.fallback)
+        clipped = sup.clipped if cut_over_range is None else sup.clipped | cut_over_range
+        return Switched(learned_throttle, out, sup, clipped)
+
+    def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
+        """Advance every episode by one tick.
+
+        Args:
+            state: Current state (not modified).
+            action: Learned actions in [-1, 1], shape ``[B]`` or ``[B, 1]``; out-of-range values
+                are clipped, NaN/inf ones are never executed.
+
+        Returns:
+            The next state and the record of the tick. Episodes that ended are not reset here.
+        """
+        world = state.world
+        batch = state.batch_size
+        switched = self.switch(state, action)
+        out, sup = switched.controllers, switched.supervision
+        north_throttle, north_brake = out.north_throttle, out.north_brake
+        pid_throttle, pid_brake = PIDState(*out.pid_throttle), PIDState(*out.pid_brake)
+        pid_north, pid_lane = PIDState(*out.pid_north), PIDState(*out.pid_lane)
         throttle, brake = sup.executed[:, 0], sup.executed[:, 1]
 
         # 4. The plant (and, in traffic, the other vehicles).
         new_world, outputs, separation = self.world.step(
-            world, columns(throttle, north_throttle), columns(brake, north_brake), steer
+            world, columns(throttle, north_throttle), columns(brake, north_brake), out.steer
         )
         others, separation = self.advance_others(state, new_world, separation)
         nv = new_world.vehicles
@@ -716,7 +739,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         _after_plant_entry(
             self._bookkeeping_constants,
             tuple(AfterPlant(
-                sup.safety_active, sup.use_safety, sup.valid, in_charge, sup.reason, separation,
+                sup.safety_active, sup.use_safety, sup.valid, out.in_charge, sup.reason,
+                separation,
                 nv.x, nv.y, speed, new_world.progress, new_world.lateral, outputs.accel_lon,
                 outputs.accel_lat, state.tick, state.outcome,
             )),
@@ -761,10 +785,10 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             safety_active=sup.safety_active,
             reason=reason,
             controller=controller,
-            both_at_intersection=both,
-            learned_throttle=learned_throttle,
-            action_clipped=sup.clipped if cut_over_range is None else sup.clipped | cut_over_range,
-            safety_brake=safety_brake,
+            both_at_intersection=out.both,
+            learned_throttle=switched.learned_throttle,
+            action_clipped=switched.clipped,
+            safety_brake=out.safety_brake,
             throttle=throttle,
             brake=brake,
             ego_speed=speed[:, 0],
@@ -822,6 +846,33 @@ def learned_actions(action: Any, batch: int) -> FloatArray:
             "expected one throttle action in [-1, 1] each"
         )
     return values.reshape(batch)
+
+
+class ControllerMemory(NamedTuple):
+    """The controllers' memory: ``PID_th``, ``PID_b`` ``[B]``, ``PID_lka`` of both cars
+    ``[B, 2]`` and the north car's speed PID ``[B]``."""
+
+    throttle: PIDState
+    brake: PIDState
+    lane: PIDState
+    north: PIDState
+
+
+class Switched(NamedTuple):
+    """What decides a tick's ego pedals (:meth:`LeftTurnTask.switch`).
+
+    Attributes:
+        learned_throttle: The learned controller's throttle ``(a + 1) / 2`` ``[B]``.
+        controllers: Every controller's output and new memory.
+        supervision: The switching logic's decision and the executed pedals.
+        clipped: The learned throttle was out of range and was clipped (by the supervision or
+            the speed limiter) ``[B]``.
+    """
+
+    learned_throttle: FloatArray
+    controllers: ControllerOutputs
+    supervision: Supervision
+    clipped: BoolArray
 
 
 class ControllerGains(NamedTuple):

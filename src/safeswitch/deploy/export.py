@@ -1,0 +1,331 @@
+"""``safeswitch export``: a trained policy as ONNX, with its switch's parameters and a manifest,
+checked against the original on observations of its own evaluation episodes.
+
+The folder (see docs/deploy.md):
+
+* ``policy.onnx`` — the deterministic action, observation normalisation folded in
+  (:mod:`~safeswitch.deploy.onnx_policy`);
+* ``scene.yaml`` — the scene the policy is deployed in: the switching logic's and the Safety
+  controller's parameters (``switching``, ``paper``/``certified``, ``controllers``), the
+  vehicle, the geometry and the tick: everything :class:`safeswitch.runtime.Controller` builds
+  the switch from (a plant of a user's: its training configuration);
+* ``manifest.json`` — versions, the observation and action layouts with units, the logic and
+  its assumptions, the parity check's result. Written last: a folder without it is incomplete,
+  and the runtime refuses it.
+
+Parity: the ONNX actions must equal SB3's deterministic ``predict`` (torch) within
+``tolerance`` on ``observations`` observations drawn from evaluation episodes of the policy
+itself; otherwise nothing is written and the command fails.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import platform
+from dataclasses import dataclass, replace
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from gymnasium.spaces import Box
+from numpy.typing import NDArray
+
+from safeswitch.core.config import to_dict
+from safeswitch.deploy.onnx_policy import INPUT, OPSET, ExportError, policy_graph
+from safeswitch.io import prepare_output_dir, write_atomic, write_bytes_atomic, write_json
+
+#: Manifest format written here and read by :mod:`safeswitch.runtime`.
+FORMAT = "safeswitch-controller"
+FORMAT_VERSION = 1
+#: Largest tolerated |ONNX − torch| action difference (issue #42).
+TOLERANCE = 1e-5
+#: Seed of the evaluation episodes the parity observations come from (the evaluation seed of
+#: the README's tables: never a training scenario).
+PARITY_SEED = 1_000_003
+
+#: The left turn's observation and action, as the manifest states them.
+LEFT_TURN_OBSERVATION = [
+    {"name": "x_e", "unit": "m", "meaning": "ego's centre of gravity, east"},
+    {"name": "y_e", "unit": "m", "meaning": "ego's centre of gravity, north"},
+    {"name": "v_e", "unit": "m/s", "meaning": "ego's speed"},
+    {"name": "x_n", "unit": "m", "meaning": "north car's centre of gravity, east"},
+    {"name": "y_n", "unit": "m", "meaning": "north car's centre of gravity, north"},
+    {"name": "v_n", "unit": "m/s", "meaning": "north car's speed"},
+]
+LEFT_TURN_ACTION = [
+    {
+        "name": "a",
+        "unit": "1",
+        "meaning": "learned throttle command: throttle = (a + 1) / 2; the brake stays released",
+    }
+]
+
+#: What each built-in logic's claim rests on (docs/certified.md, docs/leftturn.md).
+ASSUMPTIONS = {
+    "paper": [
+        "the paper's rule (Algorithm 1): a time-to-reach comparison and a speed threshold; a "
+        "heuristic with no collision-freedom guarantee",
+        "perfect perception: positions and speeds exact, no latency",
+    ],
+    "certified": [
+        "the other car drives its route and never exceeds other_top_speed (its set speed)",
+        "perfect perception: positions, speeds and arc lengths exact, no latency",
+        "the ego's brakes deliver the modelled deceleration on the modelled road (tyre "
+        "friction μ of scene.yaml's vehicle)",
+        "the switch runs every tick (dt of scene.yaml's episode)",
+    ],
+}
+
+
+@dataclass
+class ExportResult:
+    """What :func:`export` wrote and measured.
+
+    Attributes:
+        folder: The export folder.
+        manifest: The manifest written.
+        max_abs_diff: Largest |ONNX − torch| action difference on the parity observations.
+        observations: How many observations the parity check used.
+    """
+
+    folder: Path
+    manifest: dict[str, Any]
+    max_abs_diff: float
+    observations: int
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for package in ("safeswitch", "numpy", "onnx", "onnxruntime", "torch", "stable-baselines3",
+                    "gymnasium"):  # fmt: skip
+        try:
+            out[package] = version(package)
+        except PackageNotFoundError:
+            out[package] = "not installed"
+    return out
+
+
+def left_turn_observations(
+    policy: Any, config: Any, traffic: Any, count: int, seed: int = PARITY_SEED
+) -> NDArray[np.float32]:
+    """``count`` observations the policy meets in its own evaluation episodes (random
+    scenarios under ``seed``, the episodes' live ticks only), in episode order."""
+    from safeswitch.evaluation.rollout import rollout
+    from safeswitch.leftturn.make import build_task
+
+    task = build_task(None, config, traffic=traffic)
+    seen: list[NDArray[np.float32]] = []
+    total, chunk = 0, 256
+    act = policy.as_policy()
+    live = np.ones(chunk, dtype=bool)
+
+    def recording(obs: NDArray[np.float32], state: Any, tick: int) -> NDArray[np.float64]:
+        seen.append(obs[live].copy())
+        return act(obs, state, tick)
+
+    def on_tick(state: Any, record: Any, tick: int) -> None:
+        live[:] &= ~(record.terminated | record.truncated)
+
+    first = 0
+    while total < count:
+        live[:] = True
+        scenarios = task.draw_scenarios(
+            seed, np.arange(first, first + chunk), np.zeros(chunk, dtype=np.int64)
+        )
+        before = len(seen)
+        rollout(task, scenarios, recording, on_tick)
+        total += sum(len(o) for o in seen[before:])
+        first += chunk
+    return np.concatenate(seen)[:count]
+
+
+def env_observations(policy: Any, env_id: str, count: int, seed: int = PARITY_SEED) -> Any:
+    """``count`` observations the policy meets in its own episodes of the Gymnasium ``env_id``
+    (deterministic actions; one seed per episode from ``seed``)."""
+    import gymnasium as gym
+
+    env = gym.make(env_id)
+    seen: list[Any] = []
+    episode = 0
+    try:
+        while len(seen) < count:
+            obs, _ = env.reset(seed=seed + episode)
+            done = False
+            while not done and len(seen) < count:
+                seen.append(np.asarray(obs, dtype=np.float32))
+                obs, _, terminated, truncated, _ = env.step(policy.act_one(obs))
+                done = terminated or truncated
+            episode += 1
+    finally:
+        env.close()
+    return np.stack(seen)
+
+
+def parity(
+    onnx_bytes: bytes, policy: Any, observations: NDArray[np.float32]
+) -> tuple[float, NDArray[np.float32]]:
+    """Largest |ONNX − torch| action difference on ``observations`` (torch: SB3's
+    deterministic ``predict`` on the normalised observations), and the ONNX actions."""
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    session = ort.InferenceSession(onnx_bytes, options, providers=["CPUExecutionProvider"])
+    actions = np.asarray(session.run(None, {INPUT: observations})[0], dtype=np.float32)
+    reference, _ = policy.model.predict(policy.normalise(observations), deterministic=True)
+    reference = np.asarray(reference, dtype=np.float32).reshape(actions.shape)
+    return float(np.max(np.abs(actions - reference))), actions
+
+
+def runtime_support(policy: Any) -> tuple[bool, str]:
+    """Whether :class:`safeswitch.runtime.Controller` runs the exported controller, and why
+    not."""
+    from safeswitch.training.config import TrainConfig
+
+    if not isinstance(policy.config, TrainConfig):
+        return False, (
+            f"trained on {policy.config.env_id}: its Safety controller and switching logic are "
+            "Python objects of the user's plant; the ONNX policy runs anywhere, the switch "
+            "stays the plant's own"
+        )
+    if policy.config.traffic is not None:
+        return False, (
+            "trained in traffic: the traffic logics read every vehicle's state and the streams' "
+            "phantoms, which the one-vehicle runtime does not take yet"
+        )
+    return True, "the paper's scene (one oncoming car)"
+
+
+def export(
+    model: str | Path,
+    out: str | Path,
+    *,
+    switching: str | None = None,
+    observations: int = 100_000,
+    tolerance: float = TOLERANCE,
+    overwrite: bool = False,
+) -> ExportResult:
+    """Export ``model`` (a run directory, a checkpoint or a shipped policy's name) to ``out``.
+
+    Args:
+        model: The policy.
+        out: The export folder.
+        switching: The switching logic to deploy under (default: the run's deployment logic).
+        observations: Observations of the parity check.
+        tolerance: Largest tolerated |ONNX − torch| action difference.
+        overwrite: Replace the files of an earlier export in ``out``.
+
+    Raises:
+        ExportError: The policy does not export, or the parity check failed (nothing written).
+    """
+    from safeswitch.core.registry import logic_names
+    from safeswitch.training.config import TrainConfig
+    from safeswitch.training.policies import load_policy
+
+    if observations < 1:
+        raise ExportError(f"--observations must be at least 1, got {observations}")
+    if not tolerance > 0:
+        raise ExportError(f"the parity tolerance must be positive, got {tolerance}")
+    policy = load_policy(model)
+    graph = policy_graph(policy)
+    onnx_bytes = graph.SerializeToString()
+    config = policy.config
+    if isinstance(config, TrainConfig):
+        scene = config.deployed_env
+        if switching is not None:
+            if switching not in logic_names():
+                raise ExportError(
+                    f"--switching {switching!r} is not a registered logic "
+                    f"(known: {', '.join(sorted(logic_names()))})"
+                )
+            scene = replace(scene, switching=switching)
+        seen = left_turn_observations(policy, scene, config.traffic_settings, observations)
+        scene_dict: dict[str, Any] = to_dict(scene)
+        if config.traffic is not None:
+            scene_dict = {"env": scene_dict, "traffic": to_dict(config.traffic_settings)}
+        observation_layout = LEFT_TURN_OBSERVATION if config.traffic is None else None
+        logic: str | None = scene.switching
+        decision_interval, dt = scene.episode.decision_interval, scene.episode.dt
+        env_id = "safeswitch/LeftTurnTraffic-v0" if config.traffic else "safeswitch/LeftTurn-v0"
+    else:
+        seen = env_observations(policy, config.env_id, observations)
+        scene_dict = to_dict(config)
+        observation_layout = None
+        logic = switching or config.switching
+        decision_interval, dt = 1, None
+        env_id = config.env_id
+    worst, _ = parity(onnx_bytes, policy, seen)
+    if not worst <= tolerance:
+        raise ExportError(
+            f"parity check failed: the ONNX actions differ from torch's by up to {worst:.3g} on "
+            f"{len(seen):,} observations (tolerance {tolerance:g}); nothing was written"
+        )
+    supported, why = runtime_support(policy)
+    space, action_space = policy.model.observation_space, policy.model.action_space
+    assert isinstance(space, Box) and isinstance(action_space, Box)  # checked by policy_graph
+    manifest: dict[str, Any] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "source": {"model": str(model), "path": str(policy.path), "env_id": env_id},
+        "versions": _versions(),
+        "policy": {
+            "file": "policy.onnx",
+            "sha256": hashlib.sha256(onnx_bytes).hexdigest(),
+            "opset": OPSET,
+            "ir_version": int(graph.ir_version),
+            "input": {"name": INPUT, "dtype": "float32", "shape": ["N", int(space.shape[0])]},
+            "output": {
+                "name": "action",
+                "dtype": "float32",
+                "shape": ["N", int(action_space.shape[0])],
+            },
+            "normalisation": "folded in" if policy.normalizer is not None else "none",
+            "deterministic": "the Gaussian's mean, clipped to the action bounds",
+        },
+        "observation": {
+            "layout": observation_layout,
+            "low": np.asarray(space.low).tolist(),
+            "high": np.asarray(space.high).tolist(),
+        },
+        "action": {
+            "layout": LEFT_TURN_ACTION if observation_layout is not None else None,
+            "low": np.asarray(action_space.low).tolist(),
+            "high": np.asarray(action_space.high).tolist(),
+        },
+        "decision_interval_ticks": decision_interval,
+        "dt_s": dt,
+        "switch": {
+            "logic": logic,
+            "assumptions": ASSUMPTIONS.get(str(logic), ["see the logic's documentation"]),
+            "parameters": "scene.yaml",
+        },
+        "parity": {
+            "observations": len(seen),
+            "from": f"evaluation episodes of the policy (seed {PARITY_SEED})",
+            "max_abs_diff": worst,
+            "tolerance": tolerance,
+            "reference": "stable-baselines3 predict(deterministic=True), torch, CPU",
+        },
+        "runtime": {"supported": supported, "scope": why},
+    }
+    folder = prepare_output_dir(out, overwrite)
+    write_bytes_atomic(folder / "policy.onnx", onnx_bytes)
+    write_atomic(folder / "scene.yaml", yaml.safe_dump(scene_dict, sort_keys=False))
+    write_json(folder / "manifest.json", manifest)
+    return ExportResult(folder, manifest, worst, len(seen))
+
+
+def main_summary(result: ExportResult) -> str:
+    """The command's closing lines."""
+    runtime = result.manifest["runtime"]
+    lines = [
+        f"exported to {result.folder}: policy.onnx (opset {OPSET}), scene.yaml, manifest.json",
+        f"parity: max |ONNX - torch| = {result.max_abs_diff:.2e} on {result.observations:,} "
+        f"observations (tolerance {result.manifest['parity']['tolerance']:g})",
+        "runtime: safeswitch.runtime.Controller runs it"
+        if runtime["supported"]
+        else f"runtime: policy only ({runtime['scope']})",
+    ]
+    return "\n".join(lines)
