@@ -31,7 +31,7 @@ BELOW = {
     "runtime": UTILITIES | {"core", "sim", "leftturn"},
     "deploy": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training", "runtime"},
 }
-BELOW["app"] = BELOW["training"] | {"training", "report", "examples", "sumo"}
+BELOW["app"] = BELOW["training"] | {"training", "report", "examples", "sumo", "deploy", "runtime"}
 BELOW["cli"] = BELOW["app"] | {"app", "bench", "deploy"}
 
 

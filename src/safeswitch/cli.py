@@ -285,6 +285,13 @@ def _evaluate_options(args: argparse.Namespace) -> None:
             "--episodes counts random scenarios; --scenarios paper runs the paper's three "
             "(cut, yield1, yield2)"
         )
+    if args.scenarios is not None and args.scenarios.startswith("openscenario:"):
+        for option in ("episodes", "traffic"):
+            if getattr(args, option) is not None:
+                raise UsageError(
+                    f"--{option} does not apply to --scenarios openscenario:PATH: the files "
+                    "say which scenarios (the paper's scene)"
+                )
     for key, value in EVALUATE_DEFAULTS.items():
         if getattr(args, key) is None:
             setattr(args, key, value)
@@ -544,6 +551,33 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export_scenario(args: argparse.Namespace) -> int:
+    _deploy_module("openscenario")  # the extra's check
+    from safeswitch.app.export_scenario import export_scenarios
+
+    index = export_scenarios(
+        args.out, args.scenarios, args.episodes, args.seed, args.controller, args.model,
+        args.switching, overwrite=args.overwrite, progress=not args.no_progress,
+    )  # fmt: skip
+    entries = index["scenarios"]
+    collisions = sum(e["collision"] for e in entries)
+    print(
+        f"wrote {len(entries):,} OpenSCENARIO {index['openscenario']} files (schema-valid) and "
+        f"{index['road']} to {args.out}; {collisions:,} of them end in a collision under "
+        f"{index['source']['controller']} ({index['source']['switching']} logic)"
+    )
+    return 0
+
+
+def scenarios_value(text: str) -> str:
+    """``--scenarios``: ``paper``, ``random`` or ``openscenario:PATH``."""
+    if text in ("paper", "random") or (text.startswith("openscenario:") and len(text) > 13):
+        return text
+    raise argparse.ArgumentTypeError(
+        f"expected paper, random or openscenario:PATH (a .xosc file or a folder), got {text!r}"
+    )
+
+
 def _distributed(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--workers", type=at_least(0), default=2,
@@ -621,8 +655,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--env", help=f"a Gymnasium id (default {LEFT_TURN})")
     ev.add_argument(
-        "--scenarios", choices=("paper", "random"),
-        help="the paper's three (cut, yield1, yield2) or random ones (default)",
+        "--scenarios", type=scenarios_value, metavar="{paper,random,openscenario:PATH}",
+        help="the paper's three (cut, yield1, yield2), random ones (default), or the scenarios "
+        "of OpenSCENARIO files written by export-scenario (a .xosc file or a folder)",
     )  # fmt: skip
     ev.add_argument("--episodes", type=at_least(1), help="random scenarios (default 1000)")
     ev.add_argument("--seed", type=seed_value, default=0, help="seed of the random scenarios")
@@ -745,6 +780,29 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     exp.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
     exp.set_defaults(func=_export)
+
+    xsc = sub.add_parser(
+        "export-scenario",
+        help="scenarios as OpenSCENARIO 1.0 + OpenDRIVE, with the trajectories of a run",
+    )
+    xsc.add_argument(
+        "--scenarios", default="paper",
+        help="paper (default), random (--episodes, --seed) or falsify:FOLDER (every "
+        "counterexample of a safeswitch falsify run, replayed under its controller)",
+    )  # fmt: skip
+    xsc.add_argument("--episodes", type=at_least(1), default=1000, help="random scenarios")
+    xsc.add_argument("--seed", type=seed_value, default=0, help="seed of the random scenarios")
+    xsc.add_argument(
+        "--controller", choices=("learned", "rule", "planner"),
+        help="who drives the run whose trajectories are written (default: rule; learned with "
+        "--model)",
+    )  # fmt: skip
+    xsc.add_argument("--model", help="a trained policy (for --controller learned)")
+    xsc.add_argument("--switching", choices=logics, help="the logic (default: the controller's)")
+    xsc.add_argument("--out", required=True, help="output folder")
+    xsc.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
+    xsc.add_argument("--no-progress", action="store_true", help="no progress bar")
+    xsc.set_defaults(func=_export_scenario)
 
     bench = sub.add_parser("bench", help="throughput figures of the simulator and environments")
     bench.add_argument("--json", action="store_true", help="print one JSON object")

@@ -36,6 +36,9 @@ from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.progress import Progress, format_duration
 from safeswitch.training.config import TrainConfig
 
+#: Prefix of ``--scenarios`` naming OpenSCENARIO files (``safeswitch export-scenario``).
+OPENSCENARIO = "openscenario:"
+
 #: Every ``--sim``.
 SIMULATORS = ("embedded", "sumo")
 
@@ -183,9 +186,14 @@ def evaluate(
 
         task = on_sumo = sumo_task(env_config, settings)
     policy = fit_observations(policy, model if controller == "learned" else None, task)
-    chunks = scenario_chunks(task, scenarios, episodes, seed)  # validates the arguments
+    if scenarios.startswith(OPENSCENARIO):
+        read = _openscenario(scenarios, task)
+        chunks: Iterator[tuple[list[str], Scenarios]] = iter([read])
+        total = len(read[0])
+    else:
+        chunks = scenario_chunks(task, scenarios, episodes, seed)  # validates the arguments
+        total = len(SCENARIO_NAMES) if scenarios == "paper" else episodes
     folder = prepare_output_dir(out, overwrite) if out is not None else None
-    total = len(SCENARIO_NAMES) if scenarios == "paper" else episodes
     accumulator = SummaryAccumulator()
     writer = EpisodeCSV(folder / "episodes.csv") if folder is not None else None
     bar = Progress(total, f"evaluate {controller}", enabled=progress)
@@ -242,6 +250,19 @@ def evaluate(
     if folder is not None:
         write_json(folder / "summary.json", summary)
     return summary
+
+
+def _openscenario(scenarios: str, task: LeftTurnTask) -> tuple[list[str], Scenarios]:
+    """The scenarios of ``openscenario:PATH`` and their names (the paper's scene only)."""
+    if task.crossing_zones().shape[0] > 0:
+        raise ValueError(
+            "--scenarios openscenario: the files hold the paper's scene (one oncoming car); "
+            "evaluate them without --traffic"
+        )
+    from safeswitch.deploy.openscenario import read_scenarios
+
+    batch, names = read_scenarios(scenarios[len(OPENSCENARIO) :], task)
+    return names, batch
 
 
 def _one_by_one(

@@ -75,24 +75,35 @@ def _setup(target: Target, batch: int, seed: int) -> tuple[Any, Any]:
     return LeftTurnTask(config), policy
 
 
+def target_setup(target: Target, batch: int, seed: int) -> tuple[Any, Any]:
+    """The task and the policy of a falsification target (adversaries drawn with ``seed``)."""
+    return _setup(target, batch, seed)
+
+
+def scenarios_of(values: np.ndarray) -> Any:
+    """Scenarios from rows of :data:`PARAMETERS` values (km/h speeds) ``[N, 4]``."""
+    from safeswitch.leftturn.scenarios import Scenarios
+
+    return Scenarios(
+        ego_start_distance=values[:, 0],
+        ego_speed=values[:, 1] / 3.6,
+        north_speed=values[:, 2] / 3.6,
+        arrival_offset=values[:, 3],
+    )
+
+
 def simulate(target: Target, unit: np.ndarray, seed: int) -> np.ndarray:
     """Per scenario (rows of ``unit`` ``[N, 4]`` in [0, 1]): min separation [m], collision,
     safety ticks (a task, run in a worker)."""
     import torch
 
     from safeswitch.evaluation.rollout import rollout
-    from safeswitch.leftturn.scenarios import Scenarios
 
     torch.set_num_threads(1)
     task, policy = _setup(target, unit.shape[0], seed)
     ranges = _ranges(task.config.scenarios)
     values = ranges[:, 0] + unit * (ranges[:, 1] - ranges[:, 0])
-    scenarios = Scenarios(
-        ego_start_distance=values[:, 0],
-        ego_speed=values[:, 1] / 3.6,
-        north_speed=values[:, 2] / 3.6,
-        arrival_offset=values[:, 3],
-    )
+    scenarios = scenarios_of(values)
     result = rollout(task, scenarios, policy)
     return np.stack(
         [result.min_separation, result.collision.astype(float), result.safety_steps], axis=1
@@ -294,6 +305,7 @@ def _write_scenarios(
         for method, g, units, outcome in rows:
             values = ranges[:, 0] + units * np.ptp(ranges, axis=1)
             for v, o in zip(values, outcome, strict=True):
-                writer.writerow([method, g, *(f"{x:.4f}" for x in v), f"{o[0]:.4f}", int(o[1]),
-                                 int(o[2])])  # fmt: skip
+                # every digit of the parameters: a counterexample must replay exactly
+                writer.writerow([method, g, *(repr(float(x)) for x in v), f"{o[0]:.4f}",
+                                 int(o[1]), int(o[2])])  # fmt: skip
     tmp.replace(path)

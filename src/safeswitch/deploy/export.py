@@ -98,8 +98,15 @@ class ExportResult:
 
 def _versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
-    for package in ("safeswitch", "numpy", "onnx", "onnxruntime", "torch", "stable-baselines3",
-                    "gymnasium"):  # fmt: skip
+    for package in (
+        "safeswitch",
+        "numpy",
+        "onnx",
+        "onnxruntime",
+        "torch",
+        "stable-baselines3",
+        "gymnasium",
+    ):
         try:
             out[package] = version(package)
         except PackageNotFoundError:

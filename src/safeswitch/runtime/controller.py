@@ -237,9 +237,11 @@ class Controller:
         switched = self.task.switch(self._task_state(state), np.array([self._held]))
         out, sup = switched.controllers, switched.supervision
         self._memory = type(self._memory)(
-            PIDState(*out.pid_throttle), PIDState(*out.pid_brake), PIDState(*out.pid_lane),
+            PIDState(*out.pid_throttle),
+            PIDState(*out.pid_brake),
+            PIDState(*out.pid_lane),
             PIDState(*out.pid_north),
-        )  # fmt: skip
+        )
         reason = self.task.reasons[int(sup.reason[0])]
         active = bool(sup.safety_active[0])
         if not out.in_charge[0] and not active:
@@ -270,15 +272,21 @@ class Controller:
             LOG.warning(
                 "tick %d: inference took %.3f ms, over the %.3f ms deadline; learned action "
                 "not used (throttle %.3f, brake %.3f)",
-                decision.tick, 1e3 * decision.inference_s, 1e3 * (self.deadline_s or 0.0),
-                pedals.throttle, pedals.brake,
-            )  # fmt: skip
+                decision.tick,
+                1e3 * decision.inference_s,
+                1e3 * (self.deadline_s or 0.0),
+                pedals.throttle,
+                pedals.brake,
+            )
         else:
             LOG.info(
                 "tick %d: safety action (%s): throttle %.3f, brake %.3f instead of a = %.3f",
-                decision.tick, decision.reason, pedals.throttle, pedals.brake,
+                decision.tick,
+                decision.reason,
+                pedals.throttle,
+                pedals.brake,
                 decision.learned_action,
-            )  # fmt: skip
+            )
 
     def _task_state(self, m: Measurement) -> TaskState:
         """The measurements and the controllers' memory as the task's state of one episode
@@ -302,14 +310,23 @@ class Controller:
             vehicles, pair(m.ego_progress, m.other_progress), np.zeros((1, 2)), np.zeros(1)
         )
         scenarios = Scenarios(
-            *(np.array([m.other_top_speed if f.name == "north_speed" else 0.0])
-              for f in fields(Scenarios))
-        )  # fmt: skip
+            *(
+                np.array([m.other_top_speed if f.name == "north_speed" else 0.0])
+                for f in fields(Scenarios)
+            )
+        )
         memory = self._memory
         return TaskState(
-            world, scenarios, memory.throttle, memory.brake, memory.lane, memory.north,
-            np.array([m.ego_accel_lon]), np.array([self._tick]), np.zeros(1, dtype=np.int8),
-        )  # fmt: skip
+            world,
+            scenarios,
+            memory.throttle,
+            memory.brake,
+            memory.lane,
+            memory.north,
+            np.array([m.ego_accel_lon]),
+            np.array([self._tick]),
+            np.zeros(1, dtype=np.int8),
+        )
 
 
 def measurement_of(state: TaskState, index: int = 0) -> Measurement:
