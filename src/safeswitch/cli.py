@@ -558,6 +558,7 @@ def _export_scenario(args: argparse.Namespace) -> int:
     index = export_scenarios(
         args.out, args.scenarios, args.episodes, args.seed, args.controller, args.model,
         args.switching, overwrite=args.overwrite, progress=not args.no_progress,
+        traffic=args.traffic,
     )  # fmt: skip
     entries = index["scenarios"]
     collisions = sum(e["collision"] for e in entries)
@@ -798,6 +799,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--model)",
     )  # fmt: skip
     xsc.add_argument("--model", help="a trained policy (for --controller learned)")
+    xsc.add_argument(
+        "--traffic", help="traffic from every leg: a preset (light, medium, heavy, train, test)"
+    )
     xsc.add_argument("--switching", choices=logics, help="the logic (default: the controller's)")
     xsc.add_argument("--out", required=True, help="output folder")
     xsc.add_argument("--overwrite", action="store_true", help="replace files in a used --out")

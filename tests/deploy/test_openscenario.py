@@ -85,8 +85,8 @@ def test_the_oncoming_cars_trajectory_is_the_recorded_path(random50):
     task = LeftTurnTask(config)
     file = folder / "random-3.xosc"
     scenario, _ = read_scenarios(file, task)
-    tracks, _ = record(task, scenario, policy)
-    north = tracks[1]
+    runs, _ = record(task, scenario, policy)
+    north = runs[0].north
     root = ET.parse(file).getroot()
     vertices = root.findall(".//Trajectory[@name='NorthTrajectory']//Vertex")
     t = np.array([float(v.get("time")) for v in vertices])
@@ -103,19 +103,23 @@ def test_a_file_for_another_scene_or_edited_by_hand_is_refused(random50, tmp_pat
     config, _ = baseline_setup("rule", None)
     task = LeftTurnTask(config)
     text = (folder / "random-0.xosc").read_text()
-    start = ET.parse(folder / "random-0.xosc").getroot().find(
-        "ParameterDeclarations/ParameterDeclaration[@name='EgoStartDistance']").get("value")
+    start = (
+        ET.parse(folder / "random-0.xosc")
+        .getroot()
+        .find("ParameterDeclarations/ParameterDeclaration[@name='EgoStartDistance']")
+        .get("value")
+    )
     edited = tmp_path / "edited.xosc"
     edited.write_text(text.replace(f'value="{start}"', f'value="{float(start) + 2.0!r}"'))
     with pytest.raises(OpenScenarioError, match="Ego starts at"):
         read_scenarios(edited, task)
     garbled = tmp_path / "garbled.xosc"
     garbled.write_text(text.replace(f'value="{start}"', 'value="far"'))
-    with pytest.raises(OpenScenarioError, match="EgoStartDistance .* is 'far'"):
+    with pytest.raises(OpenScenarioError, match=r"EgoStartDistance .* is 'far'"):
         read_scenarios(garbled, task)
     invalid = tmp_path / "invalid.xosc"
     invalid.write_text(text.replace("<Storyboard>", "<Storyboard><Bogus/>"))
-    with pytest.raises(OpenScenarioError, match="not valid OpenSCENARIO 1.0"):
+    with pytest.raises(OpenScenarioError, match=r"not valid OpenSCENARIO 1\.0"):
         read_scenarios(invalid, task)
 
 
@@ -135,7 +139,8 @@ def test_every_falsified_counterexample_replays_its_failure(tmp_path, capsys):
     assert summary["episodes"] == summary["collisions"] == len(failed)
     rows = sorted(episodes(tmp_path / "replay"), key=lambda r: r["episode"])
     assert sorted(float(r["ego_start_distance_m"]) for r in rows) == pytest.approx(
-        sorted(float(r["ego_start_distance_m"]) for r in failed), abs=1e-3)
+        sorted(float(r["ego_start_distance_m"]) for r in failed), abs=1e-3
+    )
 
 
 def test_the_command_line_checks_what_does_not_apply(random50, capsys):
@@ -159,7 +164,8 @@ def test_1000_random_scenarios_round_trip_to_identical_outcomes(tmp_path):
     rows = episodes(tmp_path / "replay")
     assert len(rows) == 1000 and all(row == by_name[row["episode"]] for row in rows)
     assert {k: v for k, v in replay.items() if k not in ("scenarios", "seed")} == {
-        k: v for k, v in direct.items() if k not in ("scenarios", "seed")}
+        k: v for k, v in direct.items() if k not in ("scenarios", "seed")
+    }
 
 
 def test_scenarios_type_is_what_the_reader_builds():
@@ -173,3 +179,27 @@ def test_index_lists_parameters_and_outcomes(random50):
                           "collision", "outcome", "safety_steps", "min_separation_m"}  # fmt: skip
     assert index["source"]["controller"] == "rule" and index["openscenario"] == "1.0"
     assert json.loads(json.dumps(index)) == index
+
+
+def test_a_traffic_scene_exports_every_vehicle_from_entry_to_exit(tmp_path):
+    out = tmp_path / "traffic"
+    index = export_scenarios(out, "random", 3, seed=5, traffic="medium")
+    schema = xmlschema.XMLSchema(str(schema_file()))
+    for entry in index["scenarios"]:
+        file = out / entry["file"]
+        schema.validate(str(file))
+        root = ET.parse(file).getroot()
+        cars = [o.get("name") for o in root.iterfind("Entities/ScenarioObject")]
+        assert cars[:2] == ["Ego", "North"] and len(cars) == 2 + entry["other_vehicles"] > 4
+        for car in cars[2:]:
+            # each enters where its trajectory starts, at the time its trajectory starts
+            added = root.find(f".//Event[@name='{car}Enter']")
+            first = root.find(f".//Trajectory[@name='{car}Trajectory']//Vertex")
+            where = added.find(".//AddEntityAction//WorldPosition")
+            assert where.get("x") == first.find(".//WorldPosition").get("x")
+            rule = added.find(".//SimulationTimeCondition")
+            assert float(rule.get("value")) == pytest.approx(
+                max(float(first.get("time")) - 0.01, 0.0)
+            )
+        with pytest.raises(OpenScenarioError, match="holds a scene with traffic"):
+            read_scenarios(file, LeftTurnTask(baseline_setup("rule", None)[0]))

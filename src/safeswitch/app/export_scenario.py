@@ -61,22 +61,26 @@ def export_scenarios(
     switching: str | None = None,
     overwrite: bool = False,
     progress: bool = False,
+    traffic: str | None = None,
 ) -> dict[str, Any]:
-    """Write the scenarios with a run's trajectories to ``out``; returns the index."""
+    """Write the scenarios with a run's trajectories to ``out``; returns the index.
+    ``traffic``: a preset's name (the paper's scene without)."""
     from safeswitch.app.evaluate import controller_setup, fit_observations
     from safeswitch.deploy import openscenario
     from safeswitch.deploy.openscenario import PARAMETERS
     from safeswitch.evaluation.evaluate import scenario_set
-    from safeswitch.leftturn.task import LeftTurnTask
+    from safeswitch.leftturn.config import traffic_config
+    from safeswitch.leftturn.make import build_task
 
-    source: dict[str, Any] = {"scenarios": scenarios}
+    source: dict[str, Any] = {"scenarios": scenarios, "traffic": traffic or "none"}
     if scenarios.startswith(FALSIFY):
         from safeswitch.app.falsify import Target, target_setup
 
-        if controller is not None or model is not None or switching is not None:
+        if any(v is not None for v in (controller, model, switching, traffic)):
             raise ValueError(
                 "--scenarios falsify:FOLDER replays the counterexamples under the controller "
-                "and logic that failed; drop --controller, --model and --switching"
+                "and logic that failed, in the paper's scene; drop --controller, --model, "
+                "--switching and --traffic"
             )
         batch, names, summary = counterexamples(Path(scenarios[len(FALSIFY) :]))
         if str(summary["controller"]).startswith("adversary:"):
@@ -86,18 +90,14 @@ def export_scenarios(
             )
         target = Target(summary["controller"], summary["model"], summary["switching"])
         task, policy = target_setup(target, len(names), int(summary["seed"]))
-        source.update(
-            controller=target.controller,
-            model=target.model,
-            switching=target.switching,
-            failure=summary["failure"],
-        )
+        source.update(controller=target.controller, model=target.model,
+                      switching=target.switching, failure=summary["failure"])  # fmt: skip
     else:
         controller = controller or ("learned" if model is not None else "rule")
         config, policy = controller_setup(controller, model, switching)
         if policy is None:
             raise ValueError("--controller oracle plans instead of driving; record another one")
-        task = LeftTurnTask(config)
+        task = build_task(None, config, traffic=traffic_config(traffic))
         policy = fit_observations(policy, model if controller == "learned" else None, task)
         batch, names = scenario_set(task, scenarios, episodes, seed)
         source.update(controller=controller, model=model, switching=config.switching, seed=seed)
@@ -109,34 +109,31 @@ def export_scenarios(
     for start in range(0, len(names), chunk):
         rows = np.arange(start, min(start + chunk, len(names)))
         part = batch.take(rows)
-        tracks, result = openscenario.record(task, part, policy)
+        runs, result = openscenario.record(task, part, policy)
         for k, i in enumerate(rows):
             name = names[i]
             description = (
-                f"safeswitch {scenarios} scenario {name}; the oncoming car's trajectory as it "
-                f"drove under {source['controller']} with the {source['switching']} logic"
+                f"safeswitch {scenarios} scenario {name} (traffic: {source['traffic']}); the "
+                f"other vehicles as they drove while the ego ran {source['controller']} under "
+                f"the {source['switching']} logic"
             )
             openscenario.write_scenario(
-                folder, name, task, part.take(np.array([k])), tracks[2 * k + 1], description
-            )
+                folder, name, task, part.take(np.array([k])), runs[k], description,
+                traffic=source["traffic"],
+            )  # fmt: skip
             values = {osc: float(getattr(part, field)[k]) for osc, field, _ in PARAMETERS}
-            entries.append(
-                {
-                    "file": f"{name}.xosc",
-                    **values,
-                    "collision": bool(result.collision[k]),
-                    "outcome": int(result.outcome[k]),
-                    "safety_steps": int(result.safety_steps[k]),
-                    "min_separation_m": float(result.min_separation[k]),
-                }
-            )
+            entries.append({
+                "file": f"{name}.xosc",
+                **values,
+                "other_vehicles": len(runs[k].others),
+                "collision": bool(result.collision[k]),
+                "outcome": int(result.outcome[k]),
+                "safety_steps": int(result.safety_steps[k]),
+                "min_separation_m": float(result.min_separation[k]),
+            })  # fmt: skip
             bar.update(1)
     bar.close()
-    index = {
-        "source": source,
-        "road": openscenario.ROAD_FILE,
-        "openscenario": f"1.{openscenario.OSC_MINOR}",
-        "scenarios": entries,
-    }
+    index = {"source": source, "road": openscenario.ROAD_FILE,
+             "openscenario": f"1.{openscenario.OSC_MINOR}", "scenarios": entries}  # fmt: skip
     write_json(folder / "index.json", index)
     return index

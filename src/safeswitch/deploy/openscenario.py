@@ -54,6 +54,9 @@ PARAMETERS = (
 #: replaying simulator interpolates linearly between them; at the oncoming car's speeds a
 #: vertex every 0.1 s stays within millimetres of the tick-by-tick path on its straight lane.
 TRAJECTORY_STEP_S = 0.1
+#: The parameter naming the traffic of a scene (``none``: the paper's scene, the only one
+#: :func:`read_scenarios` reads back).
+TRAFFIC = "Traffic"
 #: The vehicles' height [m] (the embedded simulator is planar).
 HEIGHT = 1.5
 #: A parsed start position may differ from this scene's by this much [m] (written with every
@@ -150,22 +153,63 @@ def road_network(task: LeftTurnTask) -> Any:
     return odr
 
 
-def record(task: LeftTurnTask, scenarios: Scenarios, policy: Any) -> tuple[list[Track], Any]:
-    """Play each scenario with ``policy`` and keep both cars' trajectories (until the episode
-    ends); returns per scenario ``[ego, north]`` tracks flattened in that order, and the
-    rollout's result."""
+@dataclass
+class Run:
+    """The trajectories of one episode: the ego, the oncoming car and, in traffic, every other
+    vehicle from the tick it entered to the tick it left (its :attr:`Track.time` says when)."""
+
+    ego: Track
+    north: Track
+    others: list[Track]
+
+
+#: Consecutive positions of a slot farther apart than this [m] are two vehicles (a slot freed
+#: and filled again on one tick); a car moves at most 0.35 m per 20 ms tick.
+_JUMP_M = 5.0
+
+
+def _appearances(
+    active: NDArray[np.bool_], x: NDArray[np.float64], y: NDArray[np.float64]
+) -> list[tuple[int, int]]:
+    """``(first, last)`` ticks of each vehicle that held one slot."""
+    out = []
+    start = None
+    for t in range(len(active)):
+        jumped = (
+            start is not None
+            and active[t]
+            and math.hypot(x[t] - x[t - 1], y[t] - y[t - 1]) > _JUMP_M
+        )
+        if start is not None and (not active[t] or jumped):
+            out.append((start, t - 1))
+            start = None
+        if active[t] and start is None:
+            start = t
+    if start is not None:
+        out.append((start, len(active) - 1))
+    return out
+
+
+def record(task: LeftTurnTask, scenarios: Scenarios, policy: Any) -> tuple[list[Run], Any]:
+    """Play each scenario with ``policy`` and keep every vehicle's trajectory until the episode
+    ends; returns one :class:`Run` per scenario and the rollout's result."""
     from safeswitch.evaluation.rollout import rollout
 
     batch = scenarios.ego_speed.shape[0]
     dt = task.config.episode.dt
-    rows: list[tuple[NDArray[np.float64], ...]] = []
+    rows: list[tuple[NDArray[Any], ...]] = []
+    others: list[tuple[NDArray[Any], ...]] = []
     live = np.ones(batch, dtype=bool)
     ended_at = np.full(batch, -1)
 
     def keep(state: TaskState) -> None:
         v = state.world.vehicles
-        yaw = np.arctan2(v.sin_yaw, v.cos_yaw)
-        rows.append((v.x.copy(), v.y.copy(), yaw, v.speed.copy()))
+        rows.append((v.x.copy(), v.y.copy(), np.arctan2(v.sin_yaw, v.cos_yaw), v.speed.copy()))
+        traffic = getattr(state, "traffic", None)
+        if traffic is not None:
+            others.append((traffic.x.copy(), traffic.y.copy(),
+                           np.arctan2(traffic.sin_yaw, traffic.cos_yaw), traffic.speed.copy(),
+                           traffic.active.copy()))  # fmt: skip
 
     keep(task.initial(scenarios))
 
@@ -178,15 +222,26 @@ def record(task: LeftTurnTask, scenarios: Scenarios, policy: Any) -> tuple[list[
     result = rollout(task, scenarios, policy, on_tick)
     ended_at[ended_at < 0] = len(rows) - 1
     x, y, yaw, speed = (np.stack([r[i] for r in rows]) for i in range(4))  # [T, B, 2]
-    tracks = []
+    runs = []
     for b in range(batch):
         n = int(ended_at[b]) + 1
         time = dt * np.arange(n, dtype=np.float64)
-        for slot in range(2):
-            tracks.append(
-                Track(time, x[:n, b, slot], y[:n, b, slot], yaw[:n, b, slot], speed[:n, b, slot])
-            )
-    return tracks, result
+        ego, north = (
+            Track(time, x[:n, b, s], y[:n, b, s], yaw[:n, b, s], speed[:n, b, s]) for s in (0, 1)
+        )
+        tracks = []
+        if others:
+            ox, oy, oyaw, ospeed, active = (np.stack([r[i] for r in others]) for i in range(5))
+            for slot in range(active.shape[2]):
+                for first, last in _appearances(
+                    active[:n, b, slot], ox[:n, b, slot], oy[:n, b, slot]
+                ):
+                    span = slice(first, last + 1)
+                    tracks.append(Track(time[span], ox[span, b, slot], oy[span, b, slot],
+                                        oyaw[span, b, slot], ospeed[span, b, slot]))  # fmt: skip
+            tracks.sort(key=lambda track: float(track.time[0]))
+        runs.append(Run(ego, north, tracks))
+    return runs, result
 
 
 def _vehicle(name: str, task: LeftTurnTask) -> Any:
@@ -215,11 +270,13 @@ def write_scenario(
     name: str,
     task: LeftTurnTask,
     scenario: Scenarios,
-    north: Track,
+    run: Run,
     description: str,
+    traffic: str = "none",
 ) -> Path:
-    """Write scenario ``scenario`` (one row) as ``folder/name.xosc`` with the oncoming car's
-    trajectory ``north``; checked against the schema."""
+    """Write scenario ``scenario`` (one row) as ``folder/name.xosc`` with the trajectories of
+    ``run`` (the oncoming car's, and in ``traffic`` every other vehicle's: added to the scene
+    when it entered, deleted when it left); checked against the schema."""
     from scenariogeneration import xosc
 
     if scenario.ego_speed.shape != (1,):
@@ -232,8 +289,10 @@ def write_scenario(
     for osc_name, field_name, _ in PARAMETERS:
         value = float(getattr(scenario, field_name)[0])
         params.add_parameter(xosc.Parameter(osc_name, xosc.ParameterType.double, repr(value)))
+    params.add_parameter(xosc.Parameter(TRAFFIC, xosc.ParameterType.string, traffic))
+    others = [(f"Car{i + 1}", track) for i, track in enumerate(run.others)]
     entities = xosc.Entities()
-    for who in ("Ego", "North"):
+    for who in ("Ego", "North", *(car for car, _ in others)):
         entities.add_scenario_object(who, _vehicle(who, task))
     init = xosc.Init()
     step = xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)
@@ -254,44 +313,55 @@ def write_scenario(
             xosc.WorldPosition(float(point[0]), float(point[1]), 0.0), xosc.RouteStrategy.shortest
         )
     every = max(1, round(TRAJECTORY_STEP_S / task.config.episode.dt))
-    keep = np.unique(np.append(np.arange(0, len(north.time), every), len(north.time) - 1))
-    trajectory = xosc.Trajectory("NorthTrajectory", False)
-    trajectory.add_shape(
-        xosc.Polyline(
-            [float(t) for t in north.time[keep]],
-            [
-                xosc.WorldPosition(float(x), float(y), 0.0, float(h))
-                for x, y, h in zip(north.x[keep], north.y[keep], north.yaw[keep], strict=True)
-            ],
+
+    def follow(who: str, track: Track) -> Any:
+        keep = np.unique(np.append(np.arange(0, len(track.time), every), len(track.time) - 1))
+        trajectory = xosc.Trajectory(f"{who}Trajectory", False)
+        trajectory.add_shape(
+            xosc.Polyline(
+                [float(t) for t in track.time[keep]],
+                [
+                    xosc.WorldPosition(float(x), float(y), 0.0, float(h))
+                    for x, y, h in zip(track.x[keep], track.y[keep], track.yaw[keep], strict=True)
+                ],
+            )
         )
-    )
-    at_start = xosc.ValueTrigger(
-        "AtStart",
-        0.0,
-        xosc.ConditionEdge.none,
-        xosc.SimulationTimeCondition(0.0, xosc.Rule.greaterThan),
-    )
+        return xosc.FollowTrajectoryAction(
+            trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.absolute, 1.0, 0.0
+        )
+
+    half_tick = task.config.episode.dt / 2
+
+    def at(time: float, label: str) -> Any:
+        """Fires on the tick at ``time`` (OpenSCENARIO 1.0 has no greaterOrEqual)."""
+        threshold = max(time - half_tick, 0.0)
+        return xosc.ValueTrigger(
+            label, 0.0, xosc.ConditionEdge.none,
+            xosc.SimulationTimeCondition(threshold, xosc.Rule.greaterThan),
+        )  # fmt: skip
+
     story = xosc.Story("LeftTurn")
-    act = xosc.Act("Drive", at_start)
-    for who, action_name, action in (
-        ("Ego", "AssignEgoRoute", xosc.AssignRouteAction(route)),
-        (
-            "North",
-            "FollowRecordedTrajectory",
-            xosc.FollowTrajectoryAction(
-                trajectory,
-                xosc.FollowingMode.position,
-                xosc.ReferenceContext.absolute,
-                1.0,
-                0.0,
-            ),
-        ),
-    ):
-        event = xosc.Event(f"{who}Event", xosc.Priority.overwrite)
-        event.add_action(action_name, action)
-        event.add_trigger(at_start)
+    act = xosc.Act("Drive", at(0.0, "AtStart"))
+    vehicles: list[tuple[str, list[tuple[str, Any, float]]]] = [
+        ("Ego", [("AssignEgoRoute", xosc.AssignRouteAction(route), 0.0)]),
+        ("North", [("FollowRecordedTrajectory", follow("North", run.north), 0.0)]),
+    ]
+    for car, track in others:
+        first, last = float(track.time[0]), float(track.time[-1])
+        position = xosc.WorldPosition(float(track.x[0]), float(track.y[0]), 0.0,
+                                      float(track.yaw[0]))  # fmt: skip
+        steps = [("Enter", xosc.AddEntityAction(car, position), first),
+                 ("FollowRecordedTrajectory", follow(car, track), first)]  # fmt: skip
+        if last < float(run.ego.time[-1]):  # it left before the episode ended
+            steps.append(("Leave", xosc.DeleteEntityAction(car), last))
+        vehicles.append((car, steps))
+    for who, steps in vehicles:
         maneuver = xosc.Maneuver(f"{who}Maneuver")
-        maneuver.add_event(event)
+        for action_name, action, time in steps:
+            event = xosc.Event(f"{who}{action_name}", xosc.Priority.parallel)
+            event.add_action(action_name, action)
+            event.add_trigger(at(time, f"{who}{action_name}At"))
+            maneuver.add_event(event)
         group = xosc.ManeuverGroup(f"{who}Group")
         group.add_actor(who)
         group.add_maneuver(maneuver)
@@ -386,6 +456,13 @@ def read_scenarios(path: str | Path, task: LeftTurnTask) -> tuple[Scenarios, lis
             p.get("name"): p.get("value")
             for p in root.iterfind("./ParameterDeclarations/ParameterDeclaration")
         }
+        traffic = declared.get(TRAFFIC, "none")
+        if traffic != "none":
+            raise OpenScenarioError(
+                f"{file} holds a scene with traffic ({traffic}): its other vehicles replay in "
+                "another simulator; safeswitch evaluates traffic from its presets and seeds "
+                "(--traffic, --seed)"
+            )
         for osc_name, field_name, unit in PARAMETERS:
             text = declared.get(osc_name)
             try:
