@@ -21,7 +21,9 @@ LOGIC = "stopping-distance"
 
 @pytest.fixture
 def forgotten():
-    """The user's module not imported: its environment, controller and logic unknown."""
+    """The user's module not imported: its environment, controller and logic unknown. Other
+    test modules import it for good: afterwards it is registered again as it was."""
+    before = sys.modules.get(MODULE)
 
     def forget():
         sys.modules.pop(MODULE, None)
@@ -32,6 +34,9 @@ def forgotten():
     forget()
     yield
     forget()
+    if before is not None:
+        sys.modules[MODULE] = before
+        before.register()
 
 
 def train(tmp_path, *extra, name="run"):
