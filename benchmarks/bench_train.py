@@ -23,9 +23,9 @@ import numpy as np
 import torch
 
 import _common
+from safeswitch.training import train
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import load_policy
-from safeswitch.training.run import train
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -28,8 +28,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 import _common
 import safeswitch
 from safeswitch.io import write_json
+from safeswitch.training import train
 from safeswitch.training.config import EnvTrainConfig, PPOConfig
-from safeswitch.training.generic import train_env
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "highway.json"
@@ -80,7 +80,7 @@ def train_one(switching: str, seed: int, timesteps: int) -> dict[str, object]:
     )
     episodes = Episodes()
     with tempfile.TemporaryDirectory() as tmp:
-        metrics = train_env(config, Path(tmp) / "run", progress_bar=False, callbacks=[episodes])
+        metrics = train(config, Path(tmp) / "run", progress_bar=False, callbacks=[episodes])
     rows = episodes.rows
     steps = np.array([r["length"] for r in rows], dtype=float)
     safety = np.array([r["safety_steps"] for r in rows])

@@ -36,8 +36,8 @@ WALL = "tests.core.user_plant:UserWall-v0"
 
 def one_run(env_id: str, switching: str, penalty: float, timesteps: int, seed: int,
             weight: float, episodes: int) -> dict[str, object]:  # fmt: skip
+    from safeswitch.training import train
     from safeswitch.training.config import EnvTrainConfig, PolicyConfig
-    from safeswitch.training.generic import train_env
 
     config = EnvTrainConfig(
         env_id=env_id, switching=switching, penalty=penalty, timesteps=timesteps, seed=seed,
@@ -45,7 +45,7 @@ def one_run(env_id: str, switching: str, penalty: float, timesteps: int, seed: i
         policy=PolicyConfig(intervention_imitation=weight),
     )  # fmt: skip
     with tempfile.TemporaryDirectory() as run:
-        metrics = train_env(config, run, progress_bar=False)
+        metrics = train(config, run, progress_bar=False)
     t, e = metrics["training"], metrics["evaluation"]
     return {
         "seed": seed, "intervention_imitation": weight, "timesteps": metrics["timesteps"],

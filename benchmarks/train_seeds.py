@@ -28,9 +28,10 @@ from pathlib import Path
 
 import _common
 from safeswitch.io import write_json
+from safeswitch.training import train
 from safeswitch.training.config import TrainConfig, load_config
 from safeswitch.training.policies import load_policy
-from safeswitch.training.run import evaluate_trained, train
+from safeswitch.training.run import evaluate_trained
 
 RESULTS = Path(__file__).parent / "results"
 #: What each evaluation reports (``safeswitch evaluate``'s fields).

@@ -1,7 +1,7 @@
 import pytest
 
+from safeswitch.training import train
 from safeswitch.training.callbacks import TrainingMonitor
-from safeswitch.training.run import train
 
 
 @pytest.fixture

@@ -13,6 +13,7 @@ import yaml
 from safeswitch import __version__
 from safeswitch.cli import DEFAULT_CONFIG, main
 from safeswitch.core.config import ConfigError, from_dict
+from safeswitch.training import train
 from safeswitch.training.config import (
     TrainConfig,
     config_path,
@@ -21,7 +22,6 @@ from safeswitch.training.config import (
     packaged_config_names,
 )
 from safeswitch.training.policies import SHIPPED_DIR
-from safeswitch.training.run import train
 
 EVAL = ["evaluate", "--controller", "learned", "--scenarios", "random", "--episodes", "6"]
 
@@ -293,7 +293,7 @@ def test_a_traffic_policy_keeps_its_observation_in_other_traffic(tmp_path, capsy
 
     from safeswitch.app.evaluate import traffic_setup
     from safeswitch.core.config import from_dict
-    from safeswitch.training.run import train
+    from safeswitch.training import train
 
     run = from_dict(TrainConfig, {
         "timesteps": 1024, "n_envs": 8, "seed": 5, "eval_episodes": 0, "torch_threads": 1,

@@ -178,9 +178,10 @@ def test_a_plants_named_costs_are_constraints_whose_multipliers_move(tmp_path, c
 
 def test_an_interrupted_constrained_run_resumes_with_its_multipliers(tmp_path, monkeypatch,
                                                                      forgotten):  # fmt: skip
+    from safeswitch.training import train
     from safeswitch.training.config import ConstraintConfig, EnvTrainConfig
     from safeswitch.training.constraints import NamedCostConstraints
-    from safeswitch.training.generic import EnvMonitor, train_env
+    from safeswitch.training.generic import EnvMonitor
 
     config = EnvTrainConfig(
         env_id=f"{MODULE}:{ENV_ID}", switching=LOGIC, timesteps=2048, n_envs=2,
@@ -197,7 +198,7 @@ def test_an_interrupted_constrained_run_resumes_with_its_multipliers(tmp_path, m
     monkeypatch.setattr(EnvMonitor, "_on_rollout_end", interrupt)
     run = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
-        train_env(config, run, progress_bar=False)
+        train(config, run, progress_bar=False)
     monkeypatch.setattr(EnvMonitor, "_on_rollout_end", original)
     assert not (run / "metrics.json").exists()
     saved = sorted(run.glob("checkpoints/*/state.json"))

@@ -221,14 +221,14 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _train_env(args: argparse.Namespace) -> int:
+    from safeswitch.training import train
     from safeswitch.training.config import EnvTrainConfig, load_env_config
-    from safeswitch.training.generic import train_env
 
     if args.no_adas_penalty:
         raise UsageError("--no-adas-penalty is for the left turn; set penalty: 0 in a config")
     if args.resume and args.config:
         raise UsageError("--resume continues with the run's own config.yaml; drop --config")
-    if args.resume:  # the run's own configuration (train_env reads it again)
+    if args.resume:  # the run's own configuration (train reads it again)
         base = load_env_config(Path(args.out) / "config.yaml")
     else:
         base = load_env_config(args.config) if args.config else EnvTrainConfig(env_id=args.env)
@@ -246,7 +246,7 @@ def _train_env(args: argparse.Namespace) -> int:
         if v is not None
     }
     config = replace(base, **overrides)
-    metrics = train_env(config, args.out, resume=args.resume, progress_bar=not args.no_progress)
+    metrics = train(config, args.out, resume=args.resume, progress_bar=not args.no_progress)
     t = metrics["training"]
     print(
         f"trained {metrics['timesteps']:,} steps on {config.env_id} in "

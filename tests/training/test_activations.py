@@ -31,9 +31,9 @@ def test_fast_tanh_is_opt_in():
 
 def test_a_run_with_fast_tanh_saves_loads_and_acts_as_it_predicts(tmp_path):
     from safeswitch.core.config import from_dict
+    from safeswitch.training import train
     from safeswitch.training.config import TrainConfig
     from safeswitch.training.policies import load_policy
-    from safeswitch.training.run import train
 
     config = from_dict(TrainConfig, {
         "timesteps": 1024, "n_envs": 8, "seed": 3, "eval_episodes": 5, "torch_threads": 1,

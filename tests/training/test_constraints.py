@@ -8,9 +8,9 @@ import pytest
 
 from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training import train
 from safeswitch.training.config import ConstraintConfig, ConstraintsConfig, TrainConfig
 from safeswitch.training.constraints import ConstraintCosts, Multiplier
-from safeswitch.training.run import train
 
 FIXED = {"integral_gain": 0.0}  # a multiplier that stays at its initial value
 

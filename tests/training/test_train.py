@@ -4,8 +4,9 @@ import pytest
 import yaml
 
 from safeswitch.cli import main
+from safeswitch.training import train
 from safeswitch.training.config import TrainConfig, dump_config, load_config
-from safeswitch.training.run import RunDirectoryError, train
+from safeswitch.training.run import RunDirectoryError
 
 SMALL = {
     "timesteps": 4096,

@@ -10,9 +10,9 @@ from safeswitch.cli import main
 from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.evaluation.evaluate import run_controller
 from safeswitch.leftturn.make import build_task
+from safeswitch.training import train
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
-from safeswitch.training.run import train
 
 SMALL = {
     "timesteps": 4096,

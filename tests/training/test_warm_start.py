@@ -16,11 +16,12 @@ from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training import train
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
 from safeswitch.training.ppo import SwitchPPO
-from safeswitch.training.run import build_model, complete_checkpoints, train
+from safeswitch.training.run import build_model, complete_checkpoints
 from safeswitch.training.warm_start import FrozenRunningMeanStd
 
 BASE = {

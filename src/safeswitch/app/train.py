@@ -7,14 +7,14 @@ from pathlib import Path
 from typing import Any
 
 from safeswitch.report.training import training_curves
+from safeswitch.training import train
 from safeswitch.training.config import TrainConfig, load_config
-from safeswitch.training.run import train
 
 
 def train_and_plot(
     config: TrainConfig, out: str | Path, resume: bool = False, progress_bar: bool = True
 ) -> dict[str, Any]:
-    """:func:`~safeswitch.training.run.train`, then ``training_curves.png`` in the run
+    """:func:`~safeswitch.training.pipeline.train`, then ``training_curves.png`` in the run
     directory; returns the run's metrics."""
     metrics = train(config, out, resume=resume, progress_bar=progress_bar)
     run = Path(out)

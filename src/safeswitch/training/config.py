@@ -745,6 +745,12 @@ class EnvTrainConfig:
             mean per step; two are the switch's own: ``intervention``, the share of steps on
             which the safety action ran, and ``safety``, the share of episodes with one. See
             :class:`~safeswitch.training.constraints.NamedCostConstraints`.
+        validation: Best-policy selection on validation episodes (off by default): every
+            ``every`` timesteps the deterministic policy drives ``episodes`` episodes reset
+            with seeds from ``seed``; ``criterion`` ``return`` keeps the highest mean return,
+            ``collisions_then_return`` the fewest failures first (as the plant declares
+            them). ``switching``, ``stress`` and ``constraints_then_return`` are the left
+            turn's.
     """
 
     env_id: str
@@ -762,6 +768,7 @@ class EnvTrainConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
     constraints: dict[str, ConstraintConfig] = field(default_factory=dict)
+    validation: ValidationConfig = field(default_factory=ValidationConfig)
 
     MOVED: ClassVar[dict[str, str]] = {
         k: v for k, v in MOVED_FROM_PPO.items() if v.startswith("policy.")
@@ -793,6 +800,15 @@ class EnvTrainConfig:
                   "must be a finite number <= 0 (a bonus for needing the Safety controller "
                   "would teach the policy to need it)")  # fmt: skip
         check_run_shape(self.n_envs, self.ppo)
+        v = self.validation
+        for name, value, why in (
+            ("switching", v.switching, "a plant is validated under its own logic"),
+            ("stress", v.stress, "stress sets are scenario sets of the left turn"),
+        ):
+            check(value is None, "validation", name, value, f"must be null ({why})")
+        check(v.criterion != "constraints_then_return", "validation", "criterion", v.criterion,
+              "must be return or collisions_then_return on a plant (constraints_then_return "
+              "ranks by the left turn's measures)")  # fmt: skip
         for name, given in self.constraints.items():
             check(isinstance(given, ConstraintConfig), "constraints", name, given,
                   "must be a constraint (budget, gains, …)")  # fmt: skip

@@ -1,4 +1,5 @@
-"""Training and evaluation on any registered Gymnasium environment under a switching logic.
+"""Any registered Gymnasium environment under a switching logic, as a plant of the one training
+pipeline (:mod:`safeswitch.training.pipeline`) and for evaluation.
 
 ``safeswitch train --env ID`` and ``safeswitch evaluate --env ID`` work for
 
@@ -21,14 +22,14 @@ import csv
 import inspect
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import torch
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
 
 from safeswitch.core.config import ConfigError
 from safeswitch.core.registry import (
@@ -39,21 +40,11 @@ from safeswitch.core.registry import (
     safety_controller_for,
 )
 from safeswitch.core.wrappers import SafeSwitch
-from safeswitch.io import write_json
-from safeswitch.training.config import EnvTrainConfig, dump_env_config, load_env_config
+from safeswitch.training.config import EnvTrainConfig, dump_env_config
 from safeswitch.training.constraints import SWITCH_COSTS, ConstraintUpdate, NamedCostConstraints
+from safeswitch.training.plant import Plant
 from safeswitch.training.policies import load_policy
-from safeswitch.training.run import (
-    build_model,
-    learn,
-    learner_env,
-    load_model,
-    normalized,
-    open_run,
-    save_checkpoint,
-    save_final,
-    start_run,
-)
+from safeswitch.training.validation import BestPolicy
 
 PROGRESS_FIELDS = (
     "timesteps",
@@ -219,32 +210,14 @@ class EnvMonitor(BaseCallback):
         self._rollout = {"safety": [], "failure": [], "return": []}
 
 
-def _make_vec(config: EnvTrainConfig) -> VecMonitor:
-    def make() -> gym.Env[Any, Any]:
-        return make_supervised_env(
-            config.env_id,
-            config.switching,
-            config.penalty,
-            config.logic_params,
-            **config.env_kwargs,
-        )
-
-    vec = DummyVecEnv([make] * config.n_envs)
-    vec.seed(config.seed)
-    return VecMonitor(vec)
-
-
-def check_costs(config: EnvTrainConfig) -> None:
+def check_costs(config: EnvTrainConfig, make_env: Callable[[], gym.Env[Any, Any]]) -> None:
     """One step of the plant, to check that it publishes every cost the configuration
     constrains in ``info["costs"]``.
 
     Raises:
         ConfigError: Naming the first cost it does not publish and the ones it does.
     """
-    env = make_supervised_env(
-        config.env_id, config.switching, config.penalty, config.logic_params,
-        **config.env_kwargs,
-    )  # fmt: skip
+    env = make_env()
     try:
         env.reset(seed=config.seed)
         info = env.step(env.action_space.sample())[4]
@@ -298,92 +271,127 @@ def run_episodes(
     }
 
 
-def train_env(
-    config: EnvTrainConfig,
-    out: str | Path,
-    resume: bool = False,
-    progress_bar: bool = True,
-    callbacks: list[BaseCallback] | None = None,
-) -> dict[str, Any]:
-    """Train (or resume) a run on ``config.env_id``; returns ``metrics.json``'s contents.
-    ``callbacks``: further SB3 callbacks (e.g. a benchmark's own recording)."""
-    run = Path(out)
-    checkpoint = open_run(run, resume)
-    if checkpoint is not None:
-        config = load_env_config(run / "config.yaml")
-    torch.set_num_threads(config.torch_threads)
-    vec = _make_vec(config)  # a logic that does not fit the plant fails here, nothing written
-    if config.constraints:
-        check_costs(config)  # a cost the plant does not publish: refused before anything is written
-    if checkpoint is None:
-        start_run(run, dump_env_config(config))
-    constrained = NamedCostConstraints(vec, config.constraints) if config.constraints else None
-    if constrained is not None and checkpoint is not None and "constraints" in checkpoint:
-        constrained.restore(checkpoint["constraints"])
-    env = normalized(constrained or vec, config, checkpoint)
-    if checkpoint is not None:
-        model = load_model(checkpoint, learner_env(env, config), run)
-    else:
-        model = build_model(config, learner_env(env, config), run / "tb")
+class GymLearning:
+    """A Gymnasium plant's learning-only wrapper: the constraints on its named costs and the
+    switch's (``constraints``; none: the environments as they are)."""
 
-    def save(m: EnvMonitor) -> Path:
-        state: dict[str, Any] = {"totals": m.totals}
-        if constrained is not None:
-            state["constraints"] = constrained.state()
-        return save_checkpoint(run, model, env, state)
+    def __init__(self, vec: VecEnv, constraints: dict[str, Any]) -> None:
+        self.constrained = NamedCostConstraints(vec, constraints) if constraints else None
+        self.env: VecEnv = self.constrained or vec
 
-    failed = failure_of(plain_env_id(config.env_id))
-    monitor = EnvMonitor(
-        run / "progress.csv",
-        config.checkpoint_every,
-        save,
-        checkpoint["totals"] if checkpoint else None,
-        failed,
-    )
-    learn(
-        model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar,
-        [*(callbacks or []), *([ConstraintUpdate(constrained)] if constrained else [])],
-    )  # fmt: skip
-    wall = monitor.wall_time_s
-    save_final(run, model, env)
-    started = time.perf_counter()
-    evaluation: dict[str, Any] = {}
-    if config.eval_episodes:
+    def schedules(self) -> list[BaseCallback]:
+        return [ConstraintUpdate(self.constrained)] if self.constrained is not None else []
+
+    def state(self) -> dict[str, Any]:
+        return {} if self.constrained is None else {"constraints": self.constrained.state()}
+
+    def restore(self, checkpoint: dict[str, Any]) -> None:
+        if self.constrained is not None and "constraints" in checkpoint:
+            self.constrained.restore(checkpoint["constraints"])
+
+
+class EpisodeValidator(BestPolicy):
+    """Validation on any plant: the deterministic policy drives ``validation.episodes``
+    episodes reset with seeds ``validation.seed``, ``+ 1``, …; ``collisions_then_return``
+    ranks the fewest failures (as the plant declares them) first."""
+
+    fields = ("timesteps", "mean_return", "failures", "safety_activation_episodes",
+              "safety_share", "best")  # fmt: skip
+
+    def __init__(
+        self,
+        config: EnvTrainConfig,
+        run: Path,
+        make_env: Callable[[], gym.Env[Any, Any]],
+        failed: Callable[[dict[str, Any]], bool],
+    ) -> None:
+        super().__init__(config, run)
+        self.make_env, self.failed = make_env, failed
+
+    def validate(self) -> dict[str, Any]:
+        v = self.config.validation
+        env = self.make_env()
+        try:
+            return run_episodes(env, self._policy().act_one, v.episodes, v.seed, self.failed)
+        finally:
+            env.close()
+
+    def key(self, summary: dict[str, Any]) -> tuple[float, ...]:
+        mean_return = float(summary["mean_return"])
+        if self.config.validation.criterion == "collisions_then_return":
+            return (-float(summary["failures"]), mean_return)
+        return (mean_return,)
+
+    def record(self, summary: dict[str, Any]) -> dict[str, Any]:
+        super().record(summary)
+        self.logger.record("validation/failures", summary["failures"])
+        self.logger.record("validation/safety_share", summary["safety_share"])
+        return {}
+
+
+class GymPlant(Plant):
+    """A Gymnasium plant under a switching logic as the one pipeline's plant.
+
+    Args:
+        config: The run's configuration.
+        make_env: Builds one environment (default: ``config.env_id`` under its switching
+            logic, see :func:`make_supervised_env`).
+    """
+
+    def __init__(
+        self, config: EnvTrainConfig, make_env: Callable[[], gym.Env[Any, Any]] | None = None
+    ) -> None:
+        self.config = config
+        self.make_env = make_env or partial(
+            make_supervised_env, config.env_id, config.switching, config.penalty,
+            config.logic_params, **config.env_kwargs,
+        )  # fmt: skip
+        self.failed = failure_of(plain_env_id(config.env_id))
+
+    def dump(self) -> str:
+        return dump_env_config(self.config)
+
+    def vec_env(self) -> VecMonitor:
+        vec = DummyVecEnv([self.make_env] * self.config.n_envs)
+        vec.seed(self.config.seed)
+        return VecMonitor(vec)
+
+    def check(self, vec: VecEnv) -> None:
+        if self.config.constraints:
+            check_costs(self.config, self.make_env)
+
+    def learning(self, vec: VecEnv) -> GymLearning:
+        return GymLearning(vec, self.config.constraints)
+
+    def monitor(
+        self, run: Path, save: Callable[[Any], object], totals: dict[str, float] | None
+    ) -> EnvMonitor:
+        return EnvMonitor(
+            run / "progress.csv", self.config.checkpoint_every, save, totals, self.failed
+        )
+
+    def validator(self, run: Path) -> EpisodeValidator | None:
+        if not self.config.validation.every:
+            return None
+        return EpisodeValidator(self.config, run, self.make_env, self.failed)
+
+    def evaluate(self, run: Path) -> dict[str, Any]:
         policy = load_policy(run)
-        eval_env = make_supervised_env(
-            config.env_id,
-            config.switching,
-            config.penalty,
-            config.logic_params,
-            **config.env_kwargs,
-        )
-        evaluation = run_episodes(
-            eval_env, policy.act_one, config.eval_episodes, config.eval_seed, failed
-        )
-        eval_env.close()
-    t = monitor.totals
-    metrics: dict[str, Any] = {
-        "env_id": config.env_id,
-        "switching": config.switching,
-        "timesteps": int(model.num_timesteps),
-        "wall_time_s": round(wall, 2),
-        "steps_per_s": round(model.num_timesteps / max(wall, 1e-9), 1),
-        "n_envs": config.n_envs,
-        "torch_threads": config.torch_threads,
-        "seed": config.seed,
-        "training": {
+        env = self.make_env()
+        try:
+            c = self.config
+            return run_episodes(env, policy.act_one, c.eval_episodes, c.eval_seed, self.failed)
+        finally:
+            env.close()
+
+    def header(self, run: Path) -> dict[str, Any]:
+        return {"env_id": self.config.env_id, "switching": self.config.switching}
+
+    def training(self, totals: dict[str, float]) -> dict[str, Any]:
+        t = totals
+        return {
             "failures": int(t["failures"]),
             "safety_activation_steps": int(t["safety_steps"]),
             "episodes": int(t["episodes"]),
             "steps": int(t["steps"]),
-        },
-        "evaluation": {
-            "seed": config.eval_seed,
-            **evaluation,
-            "wall_time_s": round(time.perf_counter() - started, 2),
-        },
-    }
-    if constrained is not None:
-        metrics["constraints"] = constrained.state()
-    write_json(run / "metrics.json", metrics)
-    return metrics
+        }

@@ -1,5 +1,6 @@
-"""A training run: PPO on the batched left-turn VecEnv, with a run directory that is safe to
-interrupt and resume.
+"""A training run's directory, safe to interrupt and resume, and the left turn as a plant of
+the one training pipeline (:mod:`safeswitch.training.pipeline`, which every plant trains
+through).
 
 Run directory::
 
@@ -23,7 +24,7 @@ import json
 import os
 import shutil
 import sys
-import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -45,10 +46,10 @@ from safeswitch.training.config import (
     ShapingConfig,
     TrainConfig,
     dump_config,
-    load_config,
 )
 from safeswitch.training.constraints import ConstraintCosts, ConstraintUpdate
 from safeswitch.training.interventions import InterventionRecorder
+from safeswitch.training.plant import Plant
 from safeswitch.training.policies import TrainedPolicy, load_policy
 from safeswitch.training.ppo import SwitchPPO
 from safeswitch.training.shaping import (
@@ -60,7 +61,7 @@ from safeswitch.training.shaping import (
     ReasonPenalty,
     ShapingSchedule,
 )
-from safeswitch.training.validation import Validator, select_best
+from safeswitch.training.validation import Validator
 from safeswitch.training.warm_start import warm_start
 
 
@@ -237,22 +238,6 @@ def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[
     return final
 
 
-def _save_checkpoint(
-    run: Path,
-    model: SwitchPPO,
-    env: VecNormalize,
-    vec: LeftTurnVecEnv,
-    monitor: TrainingMonitor,
-    learning: LearningEnv,
-) -> Path:
-    state = {
-        "totals": monitor.totals,
-        "episode_counters": vec.episode_counters.tolist(),
-        **learning.state(),
-    }
-    return save_checkpoint(run, model, env, state)
-
-
 def open_run(run: Path, resume: bool) -> dict[str, Any] | None:
     """Check ``run`` for a new run (empty or absent) or for ``--resume`` (an incomplete run
     with a checkpoint), writing nothing; returns the latest checkpoint's state with its
@@ -391,93 +376,71 @@ def evaluate_trained(
     return summary_against_oracle(result, plan, task.config.episode.horizon_s)
 
 
-def train(
-    config: TrainConfig, out: str | Path, resume: bool = False, progress_bar: bool = True
-) -> dict[str, Any]:
-    """Train (or resume) a run; returns the contents of ``metrics.json``.
+class LeftTurnPlant(Plant):
+    """The left turn as the one pipeline's plant (:mod:`safeswitch.training.pipeline`): the
+    batched VecEnv, its shaping and constraints, the planner's warm start, validation on
+    scenario sets with the oracle, and the evaluation against the oracle."""
 
-    Raises:
-        RunDirectoryError: ``out`` holds another run and ``resume`` is off, or ``resume`` is on
-            and there is nothing to resume.
-        KeyboardInterrupt: after saving a checkpoint, if interrupted.
-    """
-    run = Path(out)
-    checkpoint = open_run(run, resume)
-    if checkpoint is not None:
-        config = load_config(run / "config.yaml")
-    torch.set_num_threads(config.torch_threads)
-    # The environment first: it builds the switching logic for the task, so a logic that does
-    # not fit it is refused before the run directory is written.
-    vec = LeftTurnVecEnv(
-        config.n_envs, config=config.train_env, seed=config.seed, traffic=config.traffic_settings,
-        stagger=config.stagger_starts,
-    )  # fmt: skip
-    if checkpoint is None:
-        start_run(run, dump_config(config))
-    if checkpoint is not None:
+    def __init__(self, config: TrainConfig) -> None:
+        self.config = config
+
+    def dump(self) -> str:
+        return dump_config(self.config)
+
+    def vec_env(self) -> LeftTurnVecEnv:
+        c = self.config
+        return LeftTurnVecEnv(
+            c.n_envs, config=c.train_env, seed=c.seed, traffic=c.traffic_settings,
+            stagger=c.stagger_starts,
+        )  # fmt: skip
+
+    def learning(self, vec: VecEnv) -> LearningEnv:
+        c = self.config
+        assert isinstance(vec, LeftTurnVecEnv)
+        return LearningEnv(vec, c.shaping, c.ppo.gamma, c.constraints, c.deploy_switching)
+
+    def monitor(
+        self, run: Path, save: Callable[[Any], object], totals: dict[str, float] | None
+    ) -> TrainingMonitor:
+        return TrainingMonitor(run / "progress.csv", self.config.checkpoint_every, save, totals)
+
+    def vec_state(self, vec: VecEnv) -> dict[str, Any]:
+        assert isinstance(vec, LeftTurnVecEnv)
+        return {"episode_counters": vec.episode_counters.tolist()}
+
+    def restore_vec(self, vec: VecEnv, checkpoint: dict[str, Any]) -> None:
+        assert isinstance(vec, LeftTurnVecEnv)
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
-    learning = LearningEnv(
-        vec, config.shaping, config.ppo.gamma, config.constraints, config.deploy_switching
-    )
-    if checkpoint is not None:
-        learning.restore(checkpoint)
-    env = normalized(learning.env, config, checkpoint)
-    if checkpoint is not None:
-        model = load_model(checkpoint, learner_env(env, config), run)
-    else:
-        model = build_model(config, learner_env(env, config), run / "tb")
 
-    monitor = TrainingMonitor(
-        run / "progress.csv",
-        config.checkpoint_every,
-        lambda m: _save_checkpoint(run, model, env, vec, m, learning),
-        checkpoint["totals"] if checkpoint else None,
-    )
-    if checkpoint is None and config.warm_start.episodes > 0:
-        write_atomic(run / "warm_start.json", json.dumps(warm_start(model, env, config), indent=2))
-        _save_checkpoint(
-            run, model, env, vec, monitor, learning
-        )  # --resume starts after the warm start
-    validator = Validator(config, run) if config.validation.every else None
-    extra: list[BaseCallback] = [validator] if validator is not None else []
-    extra += learning.schedules()
-    learn(
-        model, run, config.timesteps, monitor,
-        lambda: _save_checkpoint(run, model, env, vec, monitor, learning), resume, progress_bar,
-        extra=extra,
-    )  # fmt: skip
-    wall = monitor.wall_time_s
-    save_final(run, model, env)
-    selected = None
-    if validator is not None and validator.state["best_timesteps"] is not None:
-        select_best(run)
-        selected = {"validation_seed": config.validation.seed, **validator.state}
+    def warm_start(self, model: SwitchPPO, env: VecNormalize, run: Path) -> bool:
+        if self.config.warm_start.episodes <= 0:
+            return False
+        record = warm_start(model, env, self.config)
+        write_atomic(run / "warm_start.json", json.dumps(record, indent=2))
+        return True
 
-    started = time.perf_counter()
-    evaluation = (
-        evaluate_trained(load_policy(run), config, config.eval_episodes, config.eval_seed)
-        if config.eval_episodes
-        else {}
-    )
-    t = monitor.totals
-    metrics: dict[str, Any] = {
-        "timesteps": int(model.num_timesteps),
-        "wall_time_s": round(wall, 2),
-        "steps_per_s": round(model.num_timesteps / max(wall, 1e-9), 1),
-        "n_envs": config.n_envs,
-        "torch_threads": config.torch_threads,
-        "switching": config.env.switching,
-        "deployed_switching": config.deployed_env.switching,
-        "adas_penalty": config.env.adas_penalty,
-        "seed": config.seed,
-        "warm_start": (
-            json.loads((run / "warm_start.json").read_text(encoding="utf-8"))
-            if (run / "warm_start.json").is_file()
-            else None
-        ),
-        "selected": selected,
-        **learning.state(),
-        "training": {
+    def validator(self, run: Path) -> Validator | None:
+        return Validator(self.config, run) if self.config.validation.every else None
+
+    def evaluate(self, run: Path) -> dict[str, Any]:
+        c = self.config
+        return evaluate_trained(load_policy(run), c, c.eval_episodes, c.eval_seed)
+
+    def header(self, run: Path) -> dict[str, Any]:
+        c = self.config
+        record = run / "warm_start.json"
+        return {
+            "switching": c.env.switching,
+            "deployed_switching": c.deployed_env.switching,
+            "adas_penalty": c.env.adas_penalty,
+            "warm_start": (
+                json.loads(record.read_text(encoding="utf-8")) if record.is_file() else None
+            ),
+        }
+
+    def training(self, totals: dict[str, float]) -> dict[str, Any]:
+        t = totals
+        return {
             "collisions": int(t["collisions"]),
             "collision_episodes": int(t["collision_episodes"]),
             "lost_control_episodes": int(t["lost_control"]),
@@ -485,12 +448,4 @@ def train(
             "safety_activation_steps": int(t["safety_steps"]),
             "safety_activation_episodes": int(t["safety_episodes"]),
             "episodes": int(t["episodes"]),
-        },
-        "evaluation": {
-            "seed": config.eval_seed,
-            **evaluation,
-            "wall_time_s": round(time.perf_counter() - started, 2),
-        },
-    }
-    write_atomic(run / "metrics.json", json.dumps(metrics, indent=2))
-    return metrics
+        }

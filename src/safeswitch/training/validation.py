@@ -67,32 +67,24 @@ VALIDATION_FIELDS = (
 )
 
 
-class Validator(BaseCallback):
-    """Validates the policy after the rollouts that reach each ``every`` timesteps and keeps
-    the best (see the module docstring).
+class BestPolicy(BaseCallback):
+    """Validates the policy after the rollouts that reach each ``validation.every`` timesteps
+    and keeps the best (see the module docstring): what every plant shares. A plant's
+    validator says how a policy is validated (:meth:`validate`: a summary with at least
+    ``mean_return``), how summaries rank (:meth:`key`, maximised) and which columns
+    ``validation.csv`` has (:attr:`fields`).
 
     Args:
         config: The run's configuration (its ``validation`` section set).
         run: The run directory (a resumed run's ``best/`` is the best so far).
     """
 
-    def __init__(self, config: TrainConfig, run: Path) -> None:
+    #: Columns of ``validation.csv``.
+    fields: tuple[str, ...] = ("timesteps", "mean_return", "best")
+
+    def __init__(self, config: Any, run: Path) -> None:
         super().__init__()
-        v = config.validation
         self.config, self.run = config, run
-        env = config.deployed_env
-        if v.switching is not None:
-            env = dataclasses.replace(env, switching=v.switching)
-        self.task = build_task(None, env, traffic=config.traffic_settings)
-        self.scenarios = self.task.scenario_set(v.seed, v.episodes)
-        self._plan: OraclePlan | None = None
-        self.stress_task, self.stress_scenarios = None, None
-        if v.stress is not None:
-            stress = v.stress
-            self.stress_task = build_task(
-                None, dataclasses.replace(env, scenarios=stress.scenarios)
-            )
-            self.stress_scenarios = self.stress_task.scenario_set(stress.seed, stress.episodes)
         saved = run / "best" / "state.json"
         #: The best score and when it was reached (``None``: no validation yet).
         self.state: dict[str, Any] = (
@@ -101,6 +93,22 @@ class Validator(BaseCallback):
             else {"best_return": None, "best_timesteps": None}
         )
         self._next = 0
+
+    def validate(self) -> dict[str, Any]:
+        """The current deterministic policy's summary on the validation set."""
+        raise NotImplementedError
+
+    def key(self, summary: dict[str, Any]) -> tuple[float, ...]:
+        """What ``validation.criterion`` maximises, from a validation's summary."""
+        raise NotImplementedError
+
+    def refine(self, summary: dict[str, Any], best: list[float] | None) -> None:
+        """More measures of a policy about to become the best (in place); none here."""
+
+    def record(self, summary: dict[str, Any]) -> dict[str, Any]:
+        """Further columns of the validation's row, and its TensorBoard scalars."""
+        self.logger.record("validation/return", float(summary["mean_return"]))
+        return {}
 
     def _on_training_start(self) -> None:
         v = self.config.validation
@@ -121,19 +129,14 @@ class Validator(BaseCallback):
         if best is None and self.state["best_return"] is not None:  # a run from before keys
             best = self._old_key(self.state)
         better = best is None or tuple(key) > tuple(best)
-        if better and self.stress_task is not None:
-
-            def still_better(collisions: int) -> bool:
-                key = self.key({**summary, "stress_collisions": collisions})
-                return best is None or tuple(key) > tuple(best)
-
-            summary["stress_collisions"] = self.stress_collisions(still_better)
+        if better:
+            self.refine(summary, best)
             key = self.key(summary)
             better = best is None or tuple(key) > tuple(best)
         if better:
             self.state = {
                 "best_return": score,
-                "best_collisions": int(summary["collisions"]),
+                "best_collisions": int(summary.get("collisions", summary.get("failures", 0))),
                 "best_timesteps": int(self.num_timesteps),
                 "best_key": list(key),
                 **(
@@ -143,13 +146,11 @@ class Validator(BaseCallback):
                 ),
             }
             self._save_best()
-        horizon = self.task.config.episode.horizon_s
-        clear_time = constraint_measures(summary, horizon)["clear_time"]
-        row = {"timesteps": self.num_timesteps, **summary, "clear_time_s": clear_time,
+        row = {"timesteps": self.num_timesteps, **summary, **self.record(summary),
                "best": int(better)}  # fmt: skip
         path = self.run / "validation.csv"
         new_file = not path.exists()
-        fields: list[str] = list(VALIDATION_FIELDS)
+        fields: list[str] = list(self.fields)
         if not new_file:  # a resumed run keeps its file's columns (an older version's too)
             with open(path, newline="", encoding="utf-8") as handle:
                 fields = next(csv.reader(handle), fields)
@@ -158,12 +159,6 @@ class Validator(BaseCallback):
             if new_file:
                 writer.writeheader()
             writer.writerow(row)
-        self.logger.record("validation/return", score)
-        self.logger.record("validation/efficiency", summary.get("mean_efficiency", np.nan))
-        self.logger.record("validation/safety_activation_episodes",
-                           summary["safety_activation_episodes"])  # fmt: skip
-        if "stress_collisions" in summary:
-            self.logger.record("validation/stress_collisions", summary["stress_collisions"])
 
     def _old_key(self, state: dict[str, Any]) -> list[float] | None:
         """The key of the best policy a run resumed from before keys recorded (its return and
@@ -175,6 +170,65 @@ class Validator(BaseCallback):
         if criterion == "collisions_then_return":
             return [-float(state.get("best_collisions", 0)), float(state["best_return"])]
         return None
+
+    def _policy(self) -> TrainedPolicy:
+        env = self.model.get_env()
+        normalizer = env if self.config.ppo.normalize_observations else None
+        return TrainedPolicy(self.model, normalizer, self.config, self.run)  # type: ignore[arg-type]
+
+    def _save_best(self) -> None:
+        tmp, final = self.run / ".best.tmp", self.run / "best"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        self.model.save(tmp / "model.zip")
+        self.model.get_env().save(str(tmp / "vecnormalize.pkl"))  # type: ignore[union-attr]
+        (tmp / "state.json").write_text(json.dumps(self.state), encoding="utf-8")
+        shutil.rmtree(final, ignore_errors=True)
+        os.replace(tmp, final)
+
+
+class Validator(BestPolicy):
+    """The left turn's validator: random scenarios under the deployment logic, the oracle's
+    efficiency, and optionally the stress set (see the module docstring)."""
+
+    fields = VALIDATION_FIELDS
+
+    def __init__(self, config: TrainConfig, run: Path) -> None:
+        super().__init__(config, run)
+        v = config.validation
+        env = config.deployed_env
+        if v.switching is not None:
+            env = dataclasses.replace(env, switching=v.switching)
+        self.task = build_task(None, env, traffic=config.traffic_settings)
+        self.scenarios = self.task.scenario_set(v.seed, v.episodes)
+        self._plan: OraclePlan | None = None
+        self.stress_task, self.stress_scenarios = None, None
+        if v.stress is not None:
+            stress = v.stress
+            self.stress_task = build_task(
+                None, dataclasses.replace(env, scenarios=stress.scenarios)
+            )
+            self.stress_scenarios = self.stress_task.scenario_set(stress.seed, stress.episodes)
+
+    def refine(self, summary: dict[str, Any], best: list[float] | None) -> None:
+        if self.stress_task is None:
+            return
+
+        def still_better(collisions: int) -> bool:
+            key = self.key({**summary, "stress_collisions": collisions})
+            return best is None or tuple(key) > tuple(best)
+
+        summary["stress_collisions"] = self.stress_collisions(still_better)
+
+    def record(self, summary: dict[str, Any]) -> dict[str, Any]:
+        super().record(summary)
+        self.logger.record("validation/efficiency", summary.get("mean_efficiency", np.nan))
+        self.logger.record("validation/safety_activation_episodes",
+                           summary["safety_activation_episodes"])  # fmt: skip
+        if "stress_collisions" in summary:
+            self.logger.record("validation/stress_collisions", summary["stress_collisions"])
+        horizon = self.task.config.episode.horizon_s
+        return {"clear_time_s": constraint_measures(summary, horizon)["clear_time"]}
 
     def key(self, summary: dict[str, Any]) -> tuple[float, ...]:
         """What ``validation.criterion`` maximises, from a validation's summary (its
@@ -188,11 +242,6 @@ class Validator(BaseCallback):
             horizon = self.task.config.episode.horizon_s
             return (-collisions, *constraint_key(self.config, summary, horizon))
         return (mean_return,)
-
-    def _policy(self) -> TrainedPolicy:
-        env = self.model.get_env()
-        normalizer = env if self.config.ppo.normalize_observations else None
-        return TrainedPolicy(self.model, normalizer, self.config, self.run)  # type: ignore[arg-type]
 
     def stress_collisions(self, still_better: Callable[[int], bool] | None = None) -> int:
         """The current deterministic policy's collisions on the stress set, driven in chunks
@@ -217,16 +266,6 @@ class Validator(BaseCallback):
             self.task, self._policy().as_policy(), self.scenarios, plan=self._plan, trace=False
         )
         return summary_against_oracle(result, self._plan, self.task.config.episode.horizon_s)
-
-    def _save_best(self) -> None:
-        tmp, final = self.run / ".best.tmp", self.run / "best"
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir()
-        self.model.save(tmp / "model.zip")
-        self.model.get_env().save(str(tmp / "vecnormalize.pkl"))  # type: ignore[union-attr]
-        (tmp / "state.json").write_text(json.dumps(self.state), encoding="utf-8")
-        shutil.rmtree(final, ignore_errors=True)
-        os.replace(tmp, final)
 
 
 def constraint_measures(summary: dict[str, Any], horizon_s: float) -> dict[str, float]:
