@@ -171,6 +171,15 @@ def _names_env(config: str | None) -> bool:
     return "env_id" in read_config(config_path(config))
 
 
+def _resume_takes_no_changes(args: argparse.Namespace) -> None:
+    """``--resume`` continues with the run's own configuration: a file or settings given with it
+    would be silently ignored."""
+    if args.resume and args.config:
+        raise UsageError("--resume continues with the run's own config.yaml; drop --config")
+    if args.resume and args.set:
+        raise UsageError("--resume continues with the run's own config.yaml; drop --set")
+
+
 def _train(args: argparse.Namespace) -> int:
     from safeswitch.app.train import train_and_plot
 
@@ -179,11 +188,11 @@ def _train(args: argparse.Namespace) -> int:
         args.env is None and _names_env(args.config or resumed)
     ):
         return _train_env(args)
-    if args.resume and args.config:
-        raise UsageError("--resume continues with the run's own config.yaml; drop --config")
+    _resume_takes_no_changes(args)
+    from safeswitch.core.config import with_settings
     from safeswitch.training.config import load_config
 
-    config = load_config(args.config or DEFAULT_CONFIG)
+    config = with_settings(load_config(args.config or DEFAULT_CONFIG), args.set or [])
     overrides = {
         k: v
         for k, v in (
@@ -221,17 +230,18 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _train_env(args: argparse.Namespace) -> int:
+    from safeswitch.core.config import with_settings
     from safeswitch.training import train
     from safeswitch.training.config import EnvTrainConfig, load_env_config
 
     if args.no_adas_penalty:
         raise UsageError("--no-adas-penalty is for the left turn; set penalty: 0 in a config")
-    if args.resume and args.config:
-        raise UsageError("--resume continues with the run's own config.yaml; drop --config")
+    _resume_takes_no_changes(args)
     if args.resume:  # the run's own configuration (train reads it again)
         base = load_env_config(Path(args.out) / "config.yaml")
     else:
         base = load_env_config(args.config) if args.config else EnvTrainConfig(env_id=args.env)
+        base = with_settings(base, args.set or [])
     overrides = {
         k: v
         for k, v in (
@@ -274,6 +284,11 @@ def _evaluate_options(args: argparse.Namespace) -> None:
                 )
         if args.traffic is not None:
             raise UsageError(f"--traffic is an option of the left turn, not of --env {args.env}")
+        if args.set:
+            raise UsageError(
+                f"--set changes the left turn's scene; --env {args.env} is evaluated as its "
+                "run was trained"
+            )
     controller = args.controller or EVALUATE_DEFAULTS["controller"]
     if controller == "oracle" and args.switching is not None:
         raise UsageError(
@@ -316,6 +331,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             traffic=args.traffic,
             sim=args.sim,
+            settings=args.set or (),
         )
     _note_missing_targets(args.model)
     if args.json:
@@ -455,7 +471,7 @@ def _cells(args: argparse.Namespace) -> list[Any]:
             if controller == "learned" and model is None:
                 raise UsageError("--controller learned needs --model")
             for switching in switchings:
-                cells.append(Cell(controller, model, switching))
+                cells.append(Cell(controller, model, switching, tuple(args.set or ())))
     return cells
 
 
@@ -628,6 +644,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="leave R_ADAS out of the reward (the paper's ablation)",
     )
     train.add_argument("--seed", type=seed_value, help="seed of PPO and of the training scenarios")
+    train.add_argument(
+        "--set", action="append", metavar="KEY=VALUE",
+        help="change one configuration setting (repeatable): a dotted key and a YAML value, "
+        "e.g. env.scenarios.north_speed_kmh=[30,45] or ppo.gamma=0.995; checked like a file",
+    )  # fmt: skip
     train.add_argument("--torch-threads", type=at_least(1), help="CPU threads for torch")
     train.add_argument("--out", required=True, help="run directory")
     train.add_argument(
@@ -655,6 +676,11 @@ def build_parser() -> argparse.ArgumentParser:
         "oracle: the minimum-time crossing planned with knowledge of the north car",
     )
     ev.add_argument("--env", help=f"a Gymnasium id (default {LEFT_TURN})")
+    ev.add_argument(
+        "--set", action="append", metavar="KEY=VALUE",
+        help="change the scene (repeatable): env.KEY=VALUE with a dotted key of the left "
+        "turn's configuration and a YAML value, e.g. env.scenarios.north_speed_kmh=[30,45]",
+    )  # fmt: skip
     ev.add_argument(
         "--scenarios", type=scenarios_value, metavar="{paper,random,openscenario:PATH}",
         help="the paper's three (cut, yield1, yield2), random ones (default), or the scenarios "
@@ -712,6 +738,11 @@ def build_parser() -> argparse.ArgumentParser:
     camp.add_argument("--model", nargs="+", help="trained policies (for --controller learned)")
     camp.add_argument("--switching", nargs="+", choices=logics, help="logics (default: each's own)")
     camp.add_argument("--scenarios", choices=("random", "grid", "paper"), default="random")
+    camp.add_argument(
+        "--set", action="append", metavar="KEY=VALUE",
+        help="change the scene of every cell (repeatable): env.KEY=VALUE, e.g. "
+        "env.scenarios.north_speed_kmh=[30,45]",
+    )  # fmt: skip
     camp.add_argument("--episodes", type=at_least(1), default=100_000, help="random scenarios")
     camp.add_argument("--seed", type=seed_value, default=0, help="seed of the random scenarios")
     camp.add_argument(

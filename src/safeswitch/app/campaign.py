@@ -162,11 +162,19 @@ class Space:
 
 @dataclass(frozen=True)
 class Cell:
-    """One controller under one switching logic (``switching=None``: its own)."""
+    """One controller under one switching logic (``switching=None``: its own), in the scene
+    as ``settings`` (``env.KEY=VALUE``, see :func:`~safeswitch.app.evaluate.scene_settings`)
+    change it."""
 
     controller: str
     model: str | None = None
     switching: str | None = None
+    settings: tuple[str, ...] = ()
+
+    def record(self) -> dict[str, Any]:
+        """The cell as ``campaign.json`` keeps it (no ``settings`` when there are none: a
+        campaign written before settings existed resumes)."""
+        return {k: v for k, v in asdict(self).items() if k != "settings" or v}
 
     @property
     def key(self) -> str:
@@ -210,7 +218,7 @@ def run_shard(shard: Shard, space: Space, folder: str) -> dict[str, Any]:
     from safeswitch.leftturn.task import LeftTurnTask
 
     cell = shard.cell  # a policy is loaded with one torch thread (load_policy)
-    config, policy = controller_setup(cell.controller, cell.model, cell.switching)
+    config, policy = controller_setup(cell.controller, cell.model, cell.switching, cell.settings)
     task = LeftTurnTask(config)
     accumulator = SummaryAccumulator()
     rows: list[list[Any]] = []
@@ -293,7 +301,7 @@ def _check_cells(cells: list[Cell]) -> None:
     from safeswitch.leftturn.task import LeftTurnTask
 
     for cell in cells:
-        config, _ = controller_setup(cell.controller, cell.model, cell.switching)
+        config, _ = controller_setup(cell.controller, cell.model, cell.switching, cell.settings)
         LeftTurnTask(config)  # builds the logic: one that does not fit the left turn is named
 
 
@@ -330,7 +338,7 @@ def campaign(
     if workers < 0:
         raise DistributedError(f"--workers must be >= 0, got {workers}")
     asked = {
-        "cells": [asdict(c) for c in cells],
+        "cells": [c.record() for c in cells],
         "space": {
             "kind": space.kind,
             "episodes": space.episodes,

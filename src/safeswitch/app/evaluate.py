@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import take_rows
+from safeswitch.core.config import ConfigError, with_settings
 from safeswitch.evaluation.evaluate import (
     BASELINES,
     EpisodeCSV,
@@ -57,14 +58,42 @@ LONG_PLAN_S = 3600.0
 CONTROLLERS: tuple[str, ...] = ("learned", *BASELINES)
 
 
+def scene_settings(config: LeftTurnConfig, specs: Sequence[str]) -> LeftTurnConfig:
+    """``config`` with ``--set env.KEY=VALUE`` settings (``KEY``: a dotted key of the left
+    turn's configuration), validated as a file is.
+
+    Raises:
+        ConfigError: A setting outside ``env.``, an unknown key or a bad value.
+    """
+    scene = []
+    for spec in specs:
+        if not spec.startswith("env."):
+            raise ConfigError(
+                f"--set {spec!r}: this command changes the scene the controller drives in: "
+                "env.KEY=VALUE (training settings are train's)"
+            )
+        scene.append(spec[len("env.") :])
+    return with_settings(config, scene, prefix="env.")
+
+
 def controller_setup(
-    controller: str, model: str | None, switching: str | None
+    controller: str,
+    model: str | None,
+    switching: str | None,
+    settings: Sequence[str] = (),
 ) -> tuple[LeftTurnConfig, Policy | None]:
     """The task configuration and policy of a controller (``None`` for the oracle, which
     plans instead of acting): a trained policy (``learned``, from ``model``) with the
     environment it was trained in, or a baseline (see
     :func:`~safeswitch.evaluation.evaluate.baseline_setup`); ``switching`` overrides the
-    logic."""
+    logic, ``settings`` (``env.KEY=VALUE``) change the scene (:func:`scene_settings`)."""
+    config, policy = _controller_setup(controller, model, switching)
+    return scene_settings(config, settings), policy
+
+
+def _controller_setup(
+    controller: str, model: str | None, switching: str | None
+) -> tuple[LeftTurnConfig, Policy | None]:
     if controller == "learned":
         if model is None:
             raise ValueError("--controller learned needs --model (a run directory or 'shipped')")
@@ -162,6 +191,7 @@ def evaluate(
     progress: bool = False,
     traffic: str | None = None,
     sim: str = "embedded",
+    settings: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Run the evaluation and return its summary (see :mod:`safeswitch.evaluation.metrics` for
     the fields); with ``out``, write ``episodes.csv`` (row by row, as chunks finish) and
@@ -177,14 +207,14 @@ def evaluate(
     """
     if sim not in SIMULATORS:
         raise ValueError(f"--sim must be one of {', '.join(SIMULATORS)}, got {sim!r}")
-    env_config, policy = controller_setup(controller, model, switching)
-    settings, traffic_label = traffic_setup(controller, model, traffic)
-    task = build_task(None, env_config, traffic=settings)
+    env_config, policy = controller_setup(controller, model, switching, settings)
+    traffic_settings, traffic_label = traffic_setup(controller, model, traffic)
+    task = build_task(None, env_config, traffic=traffic_settings)
     on_sumo = None
     if sim == "sumo":
         from safeswitch.sumo.task import sumo_task
 
-        task = on_sumo = sumo_task(env_config, settings)
+        task = on_sumo = sumo_task(env_config, traffic_settings)
     policy = fit_observations(policy, model if controller == "learned" else None, task)
     if scenarios.startswith(OPENSCENARIO):
         read = _openscenario(scenarios, task)
@@ -242,6 +272,7 @@ def evaluate(
         "switching": env_config.switching if policy is not None else None,
         "scenarios": scenarios,
         "traffic": traffic_label,
+        "settings": list(settings),
         "sim": sim,
         "seed": seed,
         **accumulator.summary(),

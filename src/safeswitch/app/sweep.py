@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from safeswitch.app.distributed import check_reachable, cluster
-from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.core.config import ConfigError, from_dict, set_key, to_dict
 from safeswitch.io import write_atomic, write_json
 from safeswitch.training.config import TrainConfig, load_config
 
@@ -70,15 +70,7 @@ def parse_sets(specs: list[str]) -> list[tuple[str, list[Any]]]:
 
 def _with(config: TrainConfig, key: str, value: Any) -> TrainConfig:
     data = to_dict(config)
-    node = data
-    parts = key.split(".")
-    for part in parts[:-1]:
-        if not isinstance(node, dict) or part not in node:
-            raise ConfigError(f"--set {key}: no configuration key {part!r}")
-        node = node[part]
-    if not isinstance(node, dict) or parts[-1] not in node:
-        raise ConfigError(f"--set {key}: no configuration key {parts[-1]!r}")
-    node[parts[-1]] = value
+    set_key(data, key, value)
     return from_dict(TrainConfig, data)
 
 

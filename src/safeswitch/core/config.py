@@ -14,7 +14,7 @@ import math
 import re
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -166,6 +166,74 @@ def to_dict(config: Any) -> Any:
     if isinstance(config, tuple | list):
         return [to_dict(v) for v in config]
     return config
+
+
+def parse_setting(spec: str, option: str = "--set", prefix: str = "") -> tuple[str, Any]:
+    """``KEY=VALUE`` → ``(KEY, VALUE)``: a dotted configuration key and a YAML value
+    (``[30, 45]``, ``heavy``, ``null``, ``0.5``).
+
+    Raises:
+        ConfigError: Not ``KEY=VALUE``, or a value YAML cannot read (the message quotes it).
+    """
+    import yaml
+
+    key, sep, text = spec.partition("=")
+    if not sep or not key.strip() or not text.strip():
+        raise ConfigError(
+            f"{option} {prefix + spec!r}: expected KEY=VALUE (a dotted configuration key, e.g. "
+            "env.scenarios.north_speed_kmh=[30,45])"
+        )
+    try:
+        return key.strip(), yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        first = str(exc).splitlines()[0]
+        raise ConfigError(
+            f"{option} {prefix + spec!r}: {text!r} is not a YAML value ({first})"
+        ) from exc
+
+
+def set_key(
+    data: dict[str, Any], key: str, value: Any, option: str = "--set", prefix: str = ""
+) -> None:
+    """Set the dotted ``key`` of the configuration dict ``data`` (every part must exist, as
+    :func:`to_dict` writes them) to ``value``, in place; messages name the key with
+    ``prefix`` (the section ``data`` is of a larger configuration).
+
+    Raises:
+        ConfigError: A part of ``key`` that is no key there (the message lists the keys).
+    """
+    node: Any = data
+    parts = key.split(".")
+    for i, part in enumerate(parts):
+        if not isinstance(node, dict) or part not in node:
+            where = prefix + ".".join(parts[:i])
+            if not isinstance(node, dict):
+                raise ConfigError(f"{option} {prefix}{key}: {where} is {node!r}, not a section")
+            known = ", ".join(sorted(node))
+            what = where.rstrip(".") or "the configuration"
+            raise ConfigError(
+                f"{option} {prefix}{key}: {what} has no key {part!r} (its keys: {known})"
+            )
+        if i == len(parts) - 1:
+            node[part] = value
+        else:
+            node = node[part]
+
+
+def with_settings(config: T, specs: Sequence[str], option: str = "--set", prefix: str = "") -> T:
+    """``config`` with each ``KEY=VALUE`` of ``specs`` set (see :func:`parse_setting`),
+    validated as a configuration file is (``prefix``: see :func:`set_key`).
+
+    Raises:
+        ConfigError: A malformed setting, an unknown key or a bad value (one line, naming it).
+    """
+    if not specs:
+        return config
+    data = to_dict(config)
+    for spec in specs:
+        key, value = parse_setting(spec, option, prefix)
+        set_key(data, key, value, option, prefix)
+    return from_dict(type(config), data, prefix.rstrip("."))
 
 
 @dataclasses.dataclass(frozen=True)
