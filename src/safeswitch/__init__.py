@@ -91,6 +91,7 @@ _EXPORTS = {
     "register_logic": "safeswitch.core.registry",
     "make_logic": "safeswitch.core.registry",
     "logic_names": "safeswitch.core.registry",
+    "adapt": "safeswitch.app.adapt",
 }
 
 __all__ = [
@@ -106,6 +107,7 @@ __all__ = [
     "SwitchingError",
     "SwitchingLogic",
     "__version__",
+    "adapt",
     "logic_names",
     "make_logic",
     "register_logic",
@@ -113,6 +115,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
+    from safeswitch.app.adapt import adapt
     from safeswitch.core.registry import logic_names, make_logic, register_logic
     from safeswitch.core.switching import (
         Decision,

@@ -557,6 +557,31 @@ def _deploy_module(name: str) -> Any:
         ) from exc
 
 
+def _adapt(args: argparse.Namespace) -> int:
+    from safeswitch.app.adapt import adapt
+
+    summary = adapt(
+        args.model, args.out, switching=args.switching, settings=args.set or (),
+        episodes=args.episodes, block=args.block, n_envs=args.n_envs, seed=args.seed,
+        eval_episodes=args.eval_episodes, resume=args.resume, progress=not args.no_progress,
+    )  # fmt: skip
+    last = summary["blocks"][-1]
+    for where in ("shifted", "original"):
+        frozen, adapted = summary[where]["frozen"], summary[where]["adapted"]
+        print(
+            f"{where:>8}: safety action in {frozen['safety_activation_episodes']:,} → "
+            f"{adapted['safety_activation_episodes']:,} of {adapted['episodes']:,} episodes; "
+            f"efficiency {frozen['mean_efficiency']:.3f} → {adapted['mean_efficiency']:.3f}"
+        )
+    print(
+        f"deployed {sum(b['episodes'] for b in summary['blocks']):,} episodes: "
+        f"{summary['collisions']:,} collisions, {summary['failures']:,} failures; last block: "
+        f"safety action in {last['safety_activation_episodes']:,} of {last['episodes']:,}"
+    )
+    print(f"adapted policy: {args.out} (safeswitch evaluate --model {args.out})")
+    return 0
+
+
 def _export(args: argparse.Namespace) -> int:
     deploy = _deploy_module("export")
     result = deploy.export(
@@ -794,6 +819,31 @@ def build_parser() -> argparse.ArgumentParser:
     fal.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     _distributed(fal)
     fal.set_defaults(func=_falsify)
+
+    adp = sub.add_parser(
+        "adapt", help="keep a trained policy learning in deployment, the switch authoritative"
+    )
+    adp.add_argument("--model", required=True, help="a run directory or a shipped policy")
+    adp.add_argument("--out", required=True, help="output folder (the adapted policy's run)")
+    adp.add_argument(
+        "--switching", choices=logics, default="certified",
+        help="the logic it is deployed under (default: certified)",
+    )  # fmt: skip
+    adp.add_argument(
+        "--set", action="append", metavar="KEY=VALUE",
+        help="the shift (repeatable): env.KEY=VALUE, e.g. env.scenarios.north_speed_kmh=[40,50]",
+    )  # fmt: skip
+    adp.add_argument("--episodes", type=at_least(1), default=10_000, help="deployment episodes")
+    adp.add_argument("--block", type=at_least(1), default=1_000, help="episodes per block")
+    adp.add_argument("--n-envs", type=at_least(1), default=16, help="environments at once")
+    adp.add_argument("--seed", type=seed_value, default=0, help="seed of the deployment")
+    adp.add_argument(
+        "--eval-episodes", type=at_least(1), default=1_000,
+        help="held-out scenarios of each evaluation (frozen, each block, adapted)",
+    )  # fmt: skip
+    adp.add_argument("--resume", action="store_true", help="continue after the last block")
+    adp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    adp.set_defaults(func=_adapt)
 
     exp = sub.add_parser(
         "export",

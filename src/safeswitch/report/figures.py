@@ -342,6 +342,52 @@ def traffic_figure(rows: list[dict[str, Any]], presets: tuple[str, ...], path: P
     plt.close(fig)
 
 
+def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Path) -> None:
+    """Learning after deployment (``safeswitch adapt``): per shift, the share of episodes with
+    a safety action and the efficiency against deployment episodes — the deployed episodes of
+    each block and the deterministic policy on held-out scenarios after it, beside the frozen
+    policy's on the same held-out scenarios (dashed); a block with a failure is marked with a
+    red cross. Saved as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = [summaries] if isinstance(summaries, dict) else summaries
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.4), layout="constrained")
+    for run in runs:
+        blocks = run["blocks"]
+        x = np.cumsum([b["episodes"] for b in blocks])
+        label = ", ".join(run["shift"]) or "no shift"
+        safety = [b["safety_activation_episodes"] / b["episodes"] for b in blocks]
+        held = [b["held_out"]["safety_activation_episodes"] / b["held_out"]["episodes"]
+                for b in blocks]  # fmt: skip
+        frozen = run["frozen_held_out"]
+        (line,) = left.plot(x, safety, marker="o", label=f"{label}: deployed")
+        color = line.get_color()
+        left.plot(x, held, marker="s", ls=":", color=color, label=f"{label}: held out")
+        left.axhline(frozen["safety_activation_episodes"] / frozen["episodes"], color=color,
+                     ls="--", lw=1, label=f"{label}: frozen policy")  # fmt: skip
+        right.plot(x, [b.get("mean_efficiency", np.nan) for b in blocks], marker="o", color=color)
+        right.plot(x, [b["held_out"]["mean_efficiency"] for b in blocks], marker="s", ls=":",
+                   color=color)  # fmt: skip
+        right.axhline(frozen["mean_efficiency"], color=color, ls="--", lw=1)
+        failed = np.array([b["failures"] for b in blocks]) > 0
+        if failed.any():
+            left.scatter(x[failed], np.asarray(safety)[failed], marker="x", s=80, color="red",
+                         zorder=5, linewidths=2, label="a block with a failure")  # fmt: skip
+    left.set_title("episodes with a safety action", fontsize=10)
+    left.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
+    right.set_title("efficiency against the oracle", fontsize=10)
+    for ax in (left, right):
+        ax.set_xlabel("deployment episodes")
+        ax.grid(alpha=0.3)
+    handles, labels = left.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def frames_strip(trace: Trace, episode: int, count: int = 6) -> Image.Image:
     """A strip of ``count`` animation frames, evenly spaced (for the Markdown report)."""
     frames = trace.frames[episode]

@@ -88,6 +88,24 @@ class SwitchPPO(PPO):
             groups, lr=self.lr_schedule(1.0), **policy.optimizer_kwargs
         )
 
+    def schedule_actor(self, rate: float | None, frozen_steps: int, ramp_steps: int) -> None:
+        """From now on the actor learns on its own schedule (see the module docstring), with
+        ``frozen_steps`` and ``ramp_steps`` counted from the current timestep: the optimiser
+        is rebuilt with the actor in its own group (its moments start afresh) — what a loaded
+        policy that keeps learning elsewhere needs while its value function catches up."""
+        self.actor_learning_rate = rate
+        self.actor_frozen_steps = self.num_timesteps + frozen_steps
+        self.actor_ramp_steps = ramp_steps
+        policy = self.policy
+        actor = self.actor_parameters()
+        mine = {id(p) for p in actor}
+        rest = [p for p in policy.parameters() if p.requires_grad and id(p) not in mine]
+        optimizer_class: Any = policy.optimizer_class
+        policy.optimizer = optimizer_class(
+            [{"params": rest}, {"params": actor}], lr=self.lr_schedule(1.0),
+            **policy.optimizer_kwargs,
+        )  # fmt: skip
+
     def actor_parameters(self) -> list[torch.nn.Parameter]:
         """The parameters of the action distribution's mean (and its log std if learned)."""
         policy = self.policy

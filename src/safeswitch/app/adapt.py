@@ -1,0 +1,357 @@
+"""``safeswitch adapt``: learning after deployment — the policy keeps learning from what it
+meets in the field while the switching logic stays authoritative (the paper leaves this out,
+its Remark 1).
+
+The trained policy is deployed episode after episode on a distribution described by
+``--set env.KEY=VALUE`` (a *shift*: a faster oncoming car, other starting speeds, …) under a
+switching logic (``certified`` by default: nothing the policy learns can make it collide while
+the logic's assumptions hold). Every episode it drives is experience: PPO continues from the
+policy's own weights and observation statistics, with the reward it was trained
+with (``R_ADAS`` for each tick the safety action runs, and its constraints' costs at the
+multipliers its training ended with) and the exploration noise its training ended with. The
+guard against forgetting is a trust region: the value function learns the shift first, the
+actor then moves at a fifth of the training rate in PPO's clipped steps, and the observation
+statistics stay frozen (the network keeps seeing the original distribution's coordinates);
+the original distribution is evaluated after adapting (``summary.json``: ``original``).
+
+Deployment runs in blocks of ``block`` episodes; after each, the block's deployed episodes
+are summarised (``blocks``: ``episodes``, ``collisions``, ``failures``,
+``safety_activation_episodes``, ``speeding_episodes``, ``mean_efficiency`` against the oracle on
+the same scenarios) together with the deterministic policy's evaluation on held-out scenarios of
+the shift (``held_out``), and a checkpoint is written whole: ``--resume`` continues after the
+last complete block (Ctrl-C leaves the last one). The adapted policy is a run directory
+(``model.zip``, ``vecnormalize.pkl``, ``config.yaml``) that ``safeswitch evaluate --model``
+accepts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from safeswitch.app.evaluate import scene_settings
+from safeswitch.io import prepare_output_dir, write_atomic, write_json
+from safeswitch.progress import Progress
+
+#: The actor's schedule while it adapts (measured in docs/deploy.md's adaptation section: with
+#: the training's own rate and no warm-up the policy needed the safety action more often after
+#: 2,000 episodes than before): the value function alone for this many steps, then the actor's
+#: rate rises to a fifth of the training rate over as many.
+ACTOR_FROZEN_STEPS = 60_000
+ACTOR_RAMP_STEPS = 60_000
+ACTOR_LEARNING_RATE = 1e-4
+
+#: ``adapt.json``'s fields: what a ``--resume`` must ask again.
+ARGUMENTS = ("model", "switching", "settings", "episodes", "block", "n_envs", "seed",
+             "eval_episodes", "eval_seed")  # fmt: skip
+
+
+class AdaptError(ValueError):
+    """An adaptation cannot run as asked; the message says why."""
+
+
+def _evaluation(policy: Any, config: Any, traffic: Any, episodes: int, seed: int) -> dict[str, Any]:
+    """The deterministic policy's summary on ``episodes`` scenarios of ``config`` (``seed``)."""
+    from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
+    from safeswitch.leftturn.make import build_task
+
+    task = build_task(None, config, traffic=traffic)
+    scenarios = task.scenario_set(seed, episodes)
+    result, plan = run_controller(task, policy.as_policy(), scenarios, trace=False)
+    return summary_against_oracle(result, plan, task.config.episode.horizon_s)
+
+
+def _brief(summary: dict[str, Any]) -> dict[str, Any]:
+    keys = (
+        "episodes", "collisions", "failures", "safety_activation_episodes", "speeding_episodes",
+        "cleared_episodes", "mean_efficiency", "max_speed_kmh",
+    )  # fmt: skip
+    return {k: summary.get(k) for k in keys}
+
+
+def adapt(
+    model: str | Path,
+    out: str | Path,
+    *,
+    switching: str = "certified",
+    settings: Sequence[str] = (),
+    episodes: int = 10_000,
+    block: int = 1_000,
+    n_envs: int = 16,
+    seed: int = 0,
+    eval_episodes: int = 1_000,
+    eval_seed: int = 1_000_003,
+    resume: bool = False,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Deploy ``model`` on the shift and let it keep learning (see the module docstring);
+    returns ``summary.json``'s contents.
+
+    Raises:
+        AdaptError: Bad arguments, a folder that holds another adaptation, or (``resume``) one
+            with nothing to resume.
+        ConfigError: A bad ``--set``.
+    """
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from safeswitch.core.registry import logic_names
+    from safeswitch.training.config import TrainConfig, dump_config
+    from safeswitch.training.policies import TrainedPolicy, load_policy
+    from safeswitch.training.ppo import SwitchPPO
+    from safeswitch.training.run import LearningEnv, learner_env
+
+    asked = {"model": str(model), "switching": switching, "settings": list(settings),
+             "episodes": episodes, "block": block, "n_envs": n_envs, "seed": seed,
+             "eval_episodes": eval_episodes, "eval_seed": eval_seed}  # fmt: skip
+    for name in ("episodes", "block", "n_envs", "eval_episodes"):
+        if asked[name] < 1:
+            raise AdaptError(f"--{name.replace('_', '-')} must be at least 1, got {asked[name]}")
+    if switching not in logic_names():
+        raise AdaptError(
+            f"--switching {switching!r} is not a registered logic "
+            f"(known: {', '.join(logic_names())})"
+        )
+    folder = Path(out)
+    checkpoint = folder / "checkpoint"
+    if resume:
+        record = folder / "adapt.json"
+        if not record.is_file():
+            raise AdaptError(f"--resume: {folder} holds no adaptation (no adapt.json)")
+        if json.loads(record.read_text(encoding="utf-8")) != json.loads(json.dumps(asked)):
+            raise AdaptError(
+                f"--resume: {folder} holds an adaptation asked differently; ask the same "
+                "(--model, --switching, --set, --episodes, --block, --seed)"
+            )
+        if (folder / "summary.json").is_file():
+            raise AdaptError(f"--resume: the adaptation in {folder} is already complete")
+        if not (checkpoint / "state.json").is_file():
+            raise AdaptError(
+                f"--resume: {folder} has no complete block yet; delete it and start again"
+            )
+    policy = load_policy(model)
+    config = policy.config
+    if not isinstance(config, TrainConfig):
+        raise AdaptError(
+            f"the policy in {policy.path} was trained on {config.env_id}; adapt serves the "
+            "left turn's policies"
+        )
+    original = dataclasses.replace(config.deployed_env, switching=switching)
+    shifted = scene_settings(original, settings)  # a bad --set fails before anything is written
+    traffic = config.traffic_settings
+    if not resume:
+        prepare_output_dir(folder)
+        write_json(folder / "adapt.json", asked)
+    torch.set_num_threads(1)
+
+    from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+
+    vec = LeftTurnVecEnv(n_envs, config=shifted, seed=seed, traffic=traffic)
+    learning = LearningEnv(vec, config.shaping, config.ppo.gamma, config.constraints, switching)
+    source = checkpoint if resume else policy.path
+    state: dict[str, Any] = {"blocks": [], "frozen": None}
+    if resume:
+        state = json.loads((checkpoint / "state.json").read_text(encoding="utf-8"))
+        vec.episode_counters = np.asarray(state["episode_counters"], dtype=np.int64)
+        learning.restore(state)
+    else:
+        trained = policy.path / "metrics.json"  # the multipliers its training ended with
+        if trained.is_file():
+            learning.restore(json.loads(trained.read_text(encoding="utf-8")))
+    env = VecNormalize.load(str(source / "vecnormalize.pkl"), learning.env)
+    env.training = False  # the observation statistics stay the original's
+    ppo = SwitchPPO.load(source / "model.zip", env=learner_env(env, config), device="cpu")
+    # Exploration as training left it: the annealed noise's final size, held (its schedule
+    # runs over one learn call; here progress would restart it at log_std_init).
+    if not resume and ppo.log_std_final is not None:
+        with torch.no_grad():
+            ppo.policy.log_std.fill_(ppo.log_std_final)
+    ppo.log_std_final = None
+    # The trust region: the value function, trained on the original distribution, learns the
+    # shift's returns before the actor moves, and the actor then moves slowly.
+    # (A checkpoint keeps the schedule and the optimiser's moments: a resumed run goes on.)
+    if not resume:
+        ppo.schedule_actor(ACTOR_LEARNING_RATE, ACTOR_FROZEN_STEPS, ACTOR_RAMP_STEPS)
+
+    def current() -> TrainedPolicy:
+        return TrainedPolicy(ppo, env if config.ppo.normalize_observations else None, config,
+                             folder)  # fmt: skip
+
+    held_out_seed = eval_seed + 1
+    if state["frozen"] is None:  # the frozen policy, measured once before it learns
+        state["frozen"] = {
+            "shifted": _brief(_evaluation(policy, shifted, traffic, eval_episodes, eval_seed)),
+            "original": _brief(_evaluation(policy, original, traffic, eval_episodes, eval_seed)),
+            "held_out": _brief(_evaluation(policy, shifted, traffic, eval_episodes, held_out_seed)),
+        }
+    bar = Progress(episodes, "adapt", enabled=progress)
+    deployed = sum(b["episodes"] for b in state["blocks"])
+    bar.update(deployed)
+
+    def finish_block(stats: dict[str, Any]) -> None:
+        stats["held_out"] = _brief(
+            _evaluation(current(), shifted, traffic, eval_episodes, held_out_seed)
+        )
+        state["blocks"].append(stats)
+        bar.update(stats["episodes"])
+        state.update(episode_counters=vec.episode_counters.tolist(), **learning.state())
+        _save(checkpoint, ppo, env, state)
+
+    monitor = DeploymentMonitor(vec, shifted, traffic, block, episodes - deployed, finish_block)
+    started = time.perf_counter()
+    try:
+        if deployed < episodes:
+            ppo.learn(
+                total_timesteps=10**12, callback=CallbackList([monitor, *learning.schedules()]),
+                reset_num_timesteps=False, progress_bar=False,
+            )  # fmt: skip
+    finally:
+        bar.close()
+    wall = time.perf_counter() - started
+    _save_policy(
+        folder, ppo, env, dump_config(dataclasses.replace(config, deploy_switching=switching))
+    )
+    adapted = load_policy(folder)
+    summary = {
+        **asked,
+        "shift": list(settings),
+        "blocks": state["blocks"],
+        "shifted": {
+            "frozen": state["frozen"]["shifted"],
+            "adapted": _brief(_evaluation(adapted, shifted, traffic, eval_episodes, eval_seed)),
+        },
+        "original": {
+            "frozen": state["frozen"]["original"],
+            "adapted": _brief(_evaluation(adapted, original, traffic, eval_episodes, eval_seed)),
+        },
+        "frozen_held_out": state["frozen"]["held_out"],
+        "collisions": sum(b["collisions"] for b in state["blocks"]),
+        "failures": sum(b["failures"] for b in state["blocks"]),
+        "wall_time_s": round(wall, 1),
+        "torch_threads": 1,
+    }
+    write_json(folder / "summary.json", summary)
+    try:
+        from safeswitch.report.figures import adaptation_figure
+
+        adaptation_figure(summary, folder / "adaptation.png")
+    except Exception as exc:  # a figure must never cost a finished adaptation
+        print(f"warning: adaptation.png not written: {exc}")
+    return summary
+
+
+def _save(folder: Path, model: Any, env: Any, state: dict[str, Any]) -> None:
+    """The checkpoint: model, statistics and state, written into a temporary folder and
+    renamed whole."""
+    tmp = folder.with_name(f".{folder.name}.tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    model.save(tmp / "model.zip")
+    env.save(str(tmp / "vecnormalize.pkl"))
+    (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
+    old = folder.with_name(f".{folder.name}.old")
+    shutil.rmtree(old, ignore_errors=True)
+    if folder.exists():
+        os.replace(folder, old)
+    os.replace(tmp, folder)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _save_policy(folder: Path, model: Any, env: Any, config_text: str) -> None:
+    """The adapted policy as a run directory ``evaluate --model`` accepts."""
+    write_atomic(folder / "config.yaml", config_text)
+    model.save(folder / "model.tmp.zip")
+    os.replace(folder / "model.tmp.zip", folder / "model.zip")
+    env.save(str(folder / "vecnormalize.pkl.tmp"))
+    os.replace(folder / "vecnormalize.pkl.tmp", folder / "vecnormalize.pkl")
+
+
+class DeploymentMonitor(BaseCallback):
+    """Counts the deployed episodes block by block; at the end of the rollout in which a block
+    fills, hands its summary to ``finish`` (see :meth:`summary`); once ``episodes`` have been
+    deployed, stops PPO (after it has learned from the last rollout).
+
+    Args:
+        vec: The batched environment (its ``reset_infos`` name each episode's scenario).
+        config: The scene deployed in (the oracle's, for the efficiency).
+        traffic: Its traffic (``None``: the paper's scene).
+        block: Episodes per block.
+        episodes: Episodes to deploy.
+        finish: Called with each block's summary.
+    """
+
+    def __init__(
+        self, vec: Any, config: Any, traffic: Any, block: int, episodes: int,
+        finish: Callable[[dict[str, Any]], None],
+    ) -> None:  # fmt: skip
+        super().__init__()
+        self.vec, self.config, self.traffic = vec, config, traffic
+        self.size, self.remaining, self.finish = block, episodes, finish
+        self.rows: list[dict[str, Any]] = []
+        self._scenario: list[dict[str, float]] = []
+        self._stop = False
+
+    def _on_training_start(self) -> None:
+        # after SB3's reset: every environment's current episode
+        self._scenario = [dict(info["scenario"]) for info in self.vec.reset_infos]
+
+    def _on_step(self) -> bool:
+        if self._stop:
+            return False
+        infos, dones = self.locals["infos"], self.locals["dones"]
+        for i in np.flatnonzero(dones):
+            if self.remaining - len(self.rows) > 0:
+                episode = infos[i]["episode"]
+                kept = ("collision", "lost_control", "safety_steps", "speeding_steps",
+                        "time_to_clear")  # fmt: skip
+                self.rows.append({"scenario": self._scenario[i], **{k: episode[k] for k in kept}})
+            self._scenario[i] = dict(self.vec.reset_infos[i]["scenario"])
+        return True
+
+    def _on_rollout_end(self) -> None:
+        while len(self.rows) >= min(self.size, self.remaining) > 0:
+            take = min(self.size, self.remaining)
+            block, self.rows = self.rows[:take], self.rows[take:]
+            self.remaining -= take
+            self.finish(self.summary(block))
+        if self.remaining <= 0:
+            self._stop = True
+
+    def summary(self, rows: list[dict[str, Any]]) -> dict[str, Any]:
+        """A block's deployed episodes, summarised (efficiency against the oracle on the same
+        scenarios, in the paper's scene)."""
+        from safeswitch.evaluation.oracle import Oracle, efficiency
+        from safeswitch.leftturn.make import build_task
+        from safeswitch.leftturn.scenarios import Scenarios
+
+        collision = np.array([bool(r["collision"]) for r in rows])
+        lost = np.array([bool(r["lost_control"]) for r in rows])
+        out: dict[str, Any] = {
+            "episodes": len(rows),
+            "collisions": int(collision.sum()),
+            "failures": int((collision | lost).sum()),
+            "safety_activation_episodes": int(sum(r["safety_steps"] > 0 for r in rows)),
+            "speeding_episodes": int(sum(r["speeding_steps"] > 0 for r in rows)),
+        }
+        if self.traffic is None:
+            task = build_task(None, self.config)
+            fields = ("ego_start_distance", "ego_speed", "north_speed", "arrival_offset")
+            scenarios = Scenarios(
+                *(np.array([r["scenario"][f] for r in rows], dtype=np.float64) for f in fields)
+            )
+            oracle = Oracle(task).plan(scenarios, full=False).time_to_clear
+            time = np.array([float(r["time_to_clear"]) for r in rows])
+            out["mean_efficiency"] = float(
+                np.nanmean(efficiency(oracle, time, task.config.episode.horizon_s))
+            )
+        return out
