@@ -5,9 +5,10 @@ Shifts (each one where the frozen policy needs the safety action in at least 10 
 episodes):
 
 * ``ego-fast``: the shipped ``certified`` policy, the ego arriving at 28–30 km/h (trained on
-  20–30 km/h);
+  18–25 km/h);
 * ``north-fast``: the shipped ``paper`` policy deployed under ``certified``, the oncoming car at
-  38–45 km/h (trained on 25–35 km/h).
+  36–43 km/h (trained on 20–32 km/h; at 45 km/h some arrivals would start the car before its
+  route).
 
 Each run deploys ``--episodes`` episodes in blocks of ``--block`` (the issue's budget: at most
 20,000 episodes and 10 minutes); the table gives, per shift and seed, the collisions while
@@ -16,7 +17,8 @@ scenarios), the efficiency on the shift, and the original distribution's before 
 One torch thread per run; runs go two at a time (two cores). The figure is written beside
 the JSON (``--out``).
 
-Run: ``python benchmarks/adapt.py [--episodes 5000] [--out results/adapt.json]``.
+Run: ``python benchmarks/adapt.py [--episodes 5000] [--out results/adapt.json]``
+(``--replot results/adapt.json`` redraws the figure of a saved result).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import _common
 
 SHIFTS = {
     "ego-fast": ("certified", ["env.scenarios.ego_speed_kmh=[28, 30]"]),
-    "north-fast": ("paper", ["env.scenarios.north_speed_kmh=[38, 45]"]),
+    "north-fast": ("paper", ["env.scenarios.north_speed_kmh=[36, 43]"]),
 }
 SEEDS = (1, 2, 3)
 
@@ -43,7 +45,7 @@ def one(job: tuple[str, int, int, int, str]) -> dict[str, object]:
     model, settings = SHIFTS[shift]
     summary = adapt(model, Path(folder) / f"{shift}_seed{seed}", settings=settings,
                     episodes=episodes, block=block, seed=seed)  # fmt: skip
-    return {"shift": shift, "model": model, "seed": seed, **summary}
+    return {**summary, "name": shift, "model": model, "seed": seed}
 
 
 def main() -> None:
@@ -52,7 +54,19 @@ def main() -> None:
     parser.add_argument("--block", type=int, default=1_000)
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--json", action="store_true")
+    parser.add_argument(
+        "--replot", type=Path, help="redraw the figure of a saved result (no adaptation run)"
+    )
     args = parser.parse_args()
+    if args.replot is not None:
+        import json
+
+        from safeswitch.report.figures import adaptation_figure
+
+        saved = json.loads(args.replot.read_text(encoding="utf-8"))
+        first = [r for r in saved["runs"] if r["seed"] == SEEDS[0]]
+        adaptation_figure(first, args.replot.with_suffix(".png"))
+        return
     with tempfile.TemporaryDirectory() as tmp:
         jobs = [(s, seed, args.episodes, args.block, tmp) for s in SHIFTS for seed in SEEDS]
         with ProcessPoolExecutor(2) as pool:
@@ -62,7 +76,7 @@ def main() -> None:
         last = run["blocks"][-1]
         shifted, original = run["shifted"], run["original"]
         rows.append({
-            "shift": run["shift"], "model": run["model"], "seed": run["seed"],
+            "shift": run["name"], "model": run["model"], "seed": run["seed"],
             "collisions": run["collisions"], "failures": run["failures"],
             "frozen_safety_held_out": run["frozen_held_out"]["safety_activation_episodes"],
             "last_block_safety": last["safety_activation_episodes"],

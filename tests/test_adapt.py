@@ -92,10 +92,29 @@ def test_resume_continues_after_the_last_complete_block(tmp_path, monkeypatch):
 
 
 def test_a_bad_shift_is_refused_before_anything_is_written(tmp_path, capsys):
-    with pytest.raises(ConfigError, match="env.scenarios has no key 'ego_speed'"):
+    with pytest.raises(ConfigError, match=r"env\.scenarios has no key 'ego_speed'"):
         adapt("certified", tmp_path / "a", settings=["env.scenarios.ego_speed=[1, 2]"])
     assert not (tmp_path / "a").exists()
     code = main(["adapt", "--model", "certified", "--out", str(tmp_path / "b"), "--set",
                  "ppo.gamma=0.9"])  # fmt: skip
     assert code == 2 and "env.KEY=VALUE" in capsys.readouterr().err
     assert not (tmp_path / "b").exists()
+
+
+def test_the_training_terms_follow_the_deployment_logic():
+    """The paper policy was trained under ``guarded`` with penalties and a safety constraint
+    on guarded's reasons; deployed under ``certified`` they keep what certified has."""
+    from safeswitch.app.adapt import learning_terms
+    from safeswitch.app.evaluate import controller_setup
+    from safeswitch.leftturn.task import LeftTurnTask
+
+    config = load_policy("paper").config
+    assert config.shaping.reason_penalties and config.constraints.safety.reasons
+    reasons = LeftTurnTask(controller_setup("rule", None, "certified")[0]).reasons
+    shaping, constraints = learning_terms(config, reasons)
+    assert shaping.reason_penalties == {} and shaping.counterfactual_penalty == 0.0
+    assert constraints.safety.reasons == ()  # every safety action of certified counts
+    assert constraints.safety.budget == config.constraints.safety.budget
+    assert constraints.overrule is None
+    same, _ = learning_terms(config, (*reasons, *config.shaping.reason_penalties))
+    assert same.reason_penalties == config.shaping.reason_penalties

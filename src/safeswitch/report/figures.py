@@ -358,7 +358,7 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
     for run in runs:
         blocks = run["blocks"]
         x = np.cumsum([b["episodes"] for b in blocks])
-        label = ", ".join(run["shift"]) or "no shift"
+        label = run.get("name") or ", ".join(run["shift"]) or "no shift"
         safety = [b["safety_activation_episodes"] / b["episodes"] for b in blocks]
         held = [b["held_out"]["safety_activation_episodes"] / b["held_out"]["episodes"]
                 for b in blocks]  # fmt: skip
@@ -376,6 +376,8 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
         if failed.any():
             left.scatter(x[failed], np.asarray(safety)[failed], marker="x", s=80, color="red",
                          zorder=5, linewidths=2, label="a block with a failure")  # fmt: skip
+    fig.suptitle(f"learning after deployment under {runs[0]['switching']} "
+                 "(dashed: the frozen policy on the held-out scenarios)", fontsize=10)  # fmt: skip
     left.set_title("episodes with a safety action", fontsize=10)
     left.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
     right.set_title("efficiency against the oracle", fontsize=10)
