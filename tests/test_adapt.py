@@ -42,6 +42,7 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, mo
     assert adapted.act(np.zeros((1, 6), dtype=np.float32))[0] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_the_summary_reports_both_distributions_and_the_policy_evaluates(tmp_path, capsys):
     out = tmp_path / "a"
     args = ["adapt", "--model", "certified", "--out", str(out), "--set", SHIFT[0],
@@ -65,6 +66,7 @@ def test_the_summary_reports_both_distributions_and_the_policy_evaluates(tmp_pat
     assert json.loads(capsys.readouterr().out)["switching"] == "certified"
 
 
+@pytest.mark.slow
 def test_resume_continues_after_the_last_complete_block(tmp_path, monkeypatch):
     out = tmp_path / "a"
     blocks_done = []

@@ -57,6 +57,7 @@ def test_only_training_draws_from_train_scenarios(monkeypatch, tmp_path):
     """``train_scenarios`` is the training environments' distribution; the validation and the
     evaluations keep ``env.scenarios``."""
     from safeswitch.training import run as run_module
+    from safeswitch.training import train
     from safeswitch.training.config import TrainConfig
     from safeswitch.training.validation import Validator
 
@@ -80,7 +81,7 @@ def test_only_training_draws_from_train_scenarios(monkeypatch, tmp_path):
 
     monkeypatch.setattr(run_module, "LeftTurnVecEnv", capture)
     with pytest.raises(Stop):
-        run_module.train(config, tmp_path / "run", progress_bar=False)
+        train(config, tmp_path / "run", progress_bar=False)
     assert seen[0].scenarios.focus_share == 0.5
 
 
