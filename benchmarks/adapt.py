@@ -88,6 +88,12 @@ def main() -> None:
                                     original["adapted"]["mean_efficiency"]],
             "original_safety": [original["frozen"]["safety_activation_episodes"],
                                 original["adapted"]["safety_activation_episodes"]],
+            "shift_speeding": [shifted["frozen"]["speeding_episodes"],
+                               shifted["adapted"]["speeding_episodes"]],
+            "shift_comfort": [shifted["frozen"]["comfort_violation_fraction"],
+                              shifted["adapted"]["comfort_violation_fraction"]],
+            "shift_failures": [shifted["frozen"]["failures"], shifted["adapted"]["failures"]],
+            "last_block_speeding": last["speeding_episodes"],
             "wall_time_s": run["wall_time_s"],
         })  # fmt: skip
     result = {"machine": _common.machine(), "episodes": args.episodes, "block": args.block,
@@ -99,14 +105,17 @@ def main() -> None:
         adaptation_figure(first, args.out.with_suffix(".png"))
     if not _common.publish(result, args.out, args.json):
         print("shift       seed  collisions  safety (frozen → last block, held out; deployed)"
-              "  efficiency on shift  original: efficiency, safety  wall")  # fmt: skip
+              "  efficiency on shift  speeding, comfort on shift  original: efficiency, safety"
+              "  wall")  # fmt: skip
         for r in rows:
             e, o, s = r["shift_efficiency"], r["original_efficiency"], r["original_safety"]
             print(
                 f"{r['shift']:<11} {r['seed']:>4}  {r['collisions']:>10}  "
                 f"{r['frozen_safety_held_out']:>4} → {r['last_block_held_out_safety']:>4} of 1,000;"
                 f" {r['last_block_safety']:>4} of {r['last_block_episodes']:,}"
-                f"   {e[0]:.3f} → {e[1]:.3f}   {o[0]:.3f} → {o[1]:.3f}, {s[0]} → {s[1]}"
+                f"   {e[0]:.3f} → {e[1]:.3f}   {r['shift_speeding'][0]} → "
+                f"{r['shift_speeding'][1]}, {r['shift_comfort'][0]:.2%} → "
+                f"{r['shift_comfort'][1]:.2%}   {o[0]:.3f} → {o[1]:.3f}, {s[0]} → {s[1]}"
                 f"  {r['wall_time_s']:.0f} s"
             )
 

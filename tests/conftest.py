@@ -2,6 +2,7 @@ import pytest
 
 from safeswitch.training import train
 from safeswitch.training.callbacks import TrainingMonitor
+from safeswitch.training.generic import EnvMonitor
 
 
 @pytest.fixture
@@ -10,16 +11,22 @@ def interrupted_training(monkeypatch):
     raised after a rollout's bookkeeping, as a user's would land); resuming is left to the test."""
 
     def run(config, out, at):
-        original = TrainingMonitor._on_rollout_end
+        monitors = (TrainingMonitor, EnvMonitor)  # the left turn's and any plant's
+        originals = [m._on_rollout_end for m in monitors]
 
-        def interrupt(self):
-            original(self)
-            if self.num_timesteps >= at:
-                raise KeyboardInterrupt
+        def interrupting(original):
+            def interrupt(self):
+                original(self)
+                if self.num_timesteps >= at:
+                    raise KeyboardInterrupt
 
-        monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", interrupt)
+            return interrupt
+
+        for monitor, original in zip(monitors, originals, strict=True):
+            monkeypatch.setattr(monitor, "_on_rollout_end", interrupting(original))
         with pytest.raises(KeyboardInterrupt):
             train(config, out, progress_bar=False)
-        monkeypatch.setattr(TrainingMonitor, "_on_rollout_end", original)
+        for monitor, original in zip(monitors, originals, strict=True):
+            monkeypatch.setattr(monitor, "_on_rollout_end", original)
 
     return run

@@ -176,30 +176,19 @@ def test_a_plants_named_costs_are_constraints_whose_multipliers_move(tmp_path, c
     assert code == 2 and "are the left turn's" in error_line(capsys)
 
 
-def test_an_interrupted_constrained_run_resumes_with_its_multipliers(tmp_path, monkeypatch,
-                                                                     forgotten):  # fmt: skip
-    from safeswitch.training import train
+def test_an_interrupted_constrained_run_resumes_with_its_multipliers(
+    tmp_path, monkeypatch, forgotten, interrupted_training
+):
     from safeswitch.training.config import ConstraintConfig, EnvTrainConfig
     from safeswitch.training.constraints import NamedCostConstraints
-    from safeswitch.training.generic import EnvMonitor
 
     config = EnvTrainConfig(
         env_id=f"{MODULE}:{ENV_ID}", switching=LOGIC, timesteps=2048, n_envs=2,
         checkpoint_every=512, eval_episodes=0,
         constraints={"speeding": ConstraintConfig(budget=0.01, integral_gain=2.0)},
     )  # fmt: skip
-    original = EnvMonitor._on_rollout_end
-
-    def interrupt(self):
-        original(self)
-        if self.num_timesteps >= 1024:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(EnvMonitor, "_on_rollout_end", interrupt)
     run = tmp_path / "run"
-    with pytest.raises(KeyboardInterrupt):
-        train(config, run, progress_bar=False)
-    monkeypatch.setattr(EnvMonitor, "_on_rollout_end", original)
+    interrupted_training(config, run, at=1024)
     assert not (run / "metrics.json").exists()
     saved = sorted(run.glob("checkpoints/*/state.json"))
     assert saved, "the interrupt left no checkpoint"

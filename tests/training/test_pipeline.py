@@ -76,23 +76,13 @@ def test_what_only_the_left_turn_has_is_refused_on_a_plant(wall):
         plant_for(TrainConfig(), make_env=lambda: gym.make(wall.ENV_ID))
 
 
-def test_an_interrupted_validated_run_resumes_with_its_best_policy(wall, tmp_path, monkeypatch):
-    from safeswitch.training.generic import EnvMonitor
-
+def test_an_interrupted_validated_run_resumes_with_its_best_policy(
+    wall, tmp_path, interrupted_training
+):
     config = wall_config(validation=ValidationConfig(every=512, episodes=2, seed=5),
                          checkpoint_every=512)  # fmt: skip
-    original = EnvMonitor._on_rollout_end
-
-    def interrupt(self):
-        original(self)
-        if self.num_timesteps >= 1024:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(EnvMonitor, "_on_rollout_end", interrupt)
     run = tmp_path / "run"
-    with pytest.raises(KeyboardInterrupt):
-        train(config, run, progress_bar=False)
-    monkeypatch.setattr(EnvMonitor, "_on_rollout_end", original)
+    interrupted_training(config, run, at=1024)
     best_before = json.loads((run / "best" / "state.json").read_text())
     metrics = train(config, run, resume=True, progress_bar=False)
     assert metrics["timesteps"] == 2048

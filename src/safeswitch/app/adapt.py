@@ -75,7 +75,7 @@ def _evaluation(policy: Any, config: Any, traffic: Any, episodes: int, seed: int
 def _brief(summary: dict[str, Any]) -> dict[str, Any]:
     keys = (
         "episodes", "collisions", "failures", "safety_activation_episodes", "speeding_episodes",
-        "cleared_episodes", "mean_efficiency", "max_speed_kmh",
+        "cleared_episodes", "mean_efficiency", "max_speed_kmh", "comfort_violation_fraction",
     )  # fmt: skip
     return {k: summary.get(k) for k in keys}
 
