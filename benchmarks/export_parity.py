@@ -1,0 +1,42 @@
+"""ONNX parity of every shipped policy (``safeswitch export``, issue #42): the largest
+|ONNX − torch| action difference on 100,000 observations of the policy's own evaluation
+episodes (seed 1,000,003), onnxruntime and torch on one thread each.
+
+Run: ``python benchmarks/export_parity.py [--out results/export_parity.json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+import _common
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--observations", type=int, default=100_000)
+    parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    from safeswitch.deploy.export import export
+    from safeswitch.training.shipped import SHIPPED, SHIPPED_DIR
+
+    names = sorted(n for n, f in SHIPPED.items()
+                   if n != "shipped" and (SHIPPED_DIR / f / "model.zip").is_file())  # fmt: skip
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in names:
+            result = export(name, Path(tmp) / name, observations=args.observations)
+            rows[name] = {"max_abs_diff": result.max_abs_diff,
+                          "observations": result.observations}  # fmt: skip
+    out = {"machine": _common.machine(), "tolerance": 1e-5, "policies": rows}
+    if not _common.publish(out, args.out, args.json):
+        for name, row in rows.items():
+            print(f"{name:>18}: max |ONNX - torch| = {row['max_abs_diff']:.2e} on "
+                  f"{row['observations']:,} observations")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
