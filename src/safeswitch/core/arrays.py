@@ -136,6 +136,9 @@ def take_rows(batch: Any, rows: NDArray[Any]) -> Any:
     values = {}
     for f in fields(batch):
         value = getattr(batch, f.name)
+        if value is None:  # an optional part the batch does not have
+            values[f.name] = None
+            continue
         array = isinstance(value, np.ndarray)
         values[f.name] = value[rows] if array else take_rows(value, rows)
     return type(batch)(**values)

@@ -141,6 +141,10 @@ class CertifiedConfig:
             control. 5 m/s² takes the 11.75 m turn at up to 27.6 km/h (above the speed limit
             and the paper's 3 m/s² comfort limit, so a comfortable driver never meets it) and
             leaves the tyres ``√((μ·g)² − 5²)`` = 7.3 m/s² for braking in it.
+        perception: ``declared`` — the filter assumes the scene's ``perception`` bounds and
+            keeps its guarantee for any errors within them (what it sees is widened into the
+            set of states consistent with every sighting so far); ``perfect`` — it takes what it
+            sees as the truth (the paper's Remark 2; a baseline that breaks under errors).
     """
 
     #: Old key → new key: configurations written before the rename still load.
@@ -158,11 +162,78 @@ class CertifiedConfig:
     lag_ticks: Annotated[int, Bounds(1, 100)] = 10
     clear_speed_cap: Annotated[float, Bounds(5, 60, unit="m/s")] = 20.0
     curve_lateral_accel: Annotated[float, Bounds(0, 10, low_open=True, unit="m/s²")] = 5.0
+    perception: Literal["declared", "perfect"] = "declared"
 
     def __post_init__(self) -> None:
         check_bounds(self, "certified")
+        check(self.perception in ("declared", "perfect"), "certified", "perception",
+              self.perception, "must be 'declared' or 'perfect'")  # fmt: skip
         check(2 * self.ego_max_lateral_m <= self.zone_margin_m, "certified", "zone_margin_m",
               self.zone_margin_m, "must be at least 2 · ego_max_lateral_m")  # fmt: skip
+
+
+PerceptionErrors = Literal["random", "adversarial"]
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """How the ego perceives the other vehicles (the paper assumes perfect perception, its
+    Remark 2; every default here is perfect perception).
+
+    The plant, collisions and every metric use the truth; the switching logic, the Safety
+    controller's window and the policy's observation use what is seen
+    (:mod:`safeswitch.leftturn.perception`). The same bounds are what the certified logic is
+    told (``certified.perception: declared``): it keeps its guarantee for any errors within them.
+
+    Attributes:
+        position_error_m: Bound on ``|seen − true|`` position of another vehicle along its
+            path [m].
+        speed_error_mps: Bound on ``|seen − true|`` speed [m/s].
+        latency_s: What is seen is exactly this old [s]; a whole number of ticks.
+        dropout_prob: Chance per tick that a seen vehicle starts being missed.
+        dropout_max_s: A missed vehicle is missed for at most this long [s] (then seen for at
+            least one tick).
+        sight_distance_m: Vehicles farther than this from their conflict point, along their
+            path, are not seen [m] (``null``: no limit).
+        errors: ``random`` — independent, uniform within the bounds on every tick, a miss
+            lasting a uniform number of ticks up to ``dropout_max_s``; ``adversarial`` — on every
+            tick the error within the bounds that makes the other vehicle look least dangerous
+            (farther back and slower before its conflict zone, farther on and faster from its
+            entry, as if it were leaving), every miss as long as allowed.
+    """
+
+    position_error_m: Annotated[float, Bounds(0, 50, unit="m")] = 0.0
+    speed_error_mps: Annotated[float, Bounds(0, 20, unit="m/s")] = 0.0
+    latency_s: Annotated[float, Bounds(0, 2, unit="s")] = 0.0
+    dropout_prob: Annotated[float, Bounds(0, 1)] = 0.0
+    dropout_max_s: Annotated[float, Bounds(0, 10, unit="s")] = 0.0
+    sight_distance_m: Annotated[float | None, Bounds(0, 10_000, low_open=True, unit="m")] = None
+    errors: PerceptionErrors = "random"
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "perception")
+        check(self.errors in ("random", "adversarial"), "perception", "errors", self.errors,
+              "must be 'random' or 'adversarial'")  # fmt: skip
+        check(self.dropout_prob == 0.0 or self.dropout_max_s > 0.0, "perception",
+              "dropout_prob", self.dropout_prob,
+              "needs dropout_max_s > 0 (a miss lasts at least one tick)")  # fmt: skip
+
+    @property
+    def perfect(self) -> bool:
+        """Everything is seen exactly, at once."""
+        return (
+            self.position_error_m == 0.0 and self.speed_error_mps == 0.0
+            and self.latency_s == 0.0 and self.dropout_prob == 0.0
+            and self.sight_distance_m is None
+        )  # fmt: skip
+
+    def ticks(self, seconds: float, dt: float, name: str) -> int:
+        """``seconds`` as a whole number of ticks of ``dt``; else a :class:`ConfigError`
+        naming the key."""
+        ticks = round(seconds / dt)
+        check(abs(ticks * dt - seconds) <= 1e-9 * max(1.0, seconds), "perception", name,
+              seconds, f"must be a whole number of ticks ({dt} s)")  # fmt: skip
+        return ticks
 
 
 def _check_piecewise(
@@ -480,6 +551,7 @@ class LeftTurnConfig:
         scenarios: The random scenario distribution.
         geometry: The intersection.
         vehicle: Vehicle parameters (both cars).
+        perception: How the ego sees the other vehicles (default: perfectly).
     """
 
     switching: str = "paper"
@@ -494,6 +566,7 @@ class LeftTurnConfig:
     scenarios: ScenarioConfig = field(default_factory=ScenarioConfig)
     geometry: IntersectionGeometry = field(default_factory=IntersectionGeometry)
     vehicle: VehicleParams = field(default_factory=VehicleParams)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
 
     def __post_init__(self) -> None:
         if not isinstance(self.switching, str) or self.switching not in logic_names():
@@ -514,6 +587,11 @@ class LeftTurnConfig:
               self.certified.curve_lateral_accel,
               f"must be below the tyres' μ·g ({grip:.2f} m/s²): the filter's braking in a "
               "curve needs the rest")  # fmt: skip
+        dt = self.episode.dt
+        self.perception.ticks(self.perception.latency_s, dt, "latency_s")
+        if self.perception.dropout_prob > 0.0:
+            check(self.perception.dropout_max_s >= dt, "perception", "dropout_max_s",
+                  self.perception.dropout_max_s, f"must be at least one tick ({dt} s)")  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: dict[str, Any] | None) -> LeftTurnConfig:

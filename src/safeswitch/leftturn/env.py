@@ -52,6 +52,11 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             from one) or a ``TrafficConfig``: other vehicles on every approach
             (:mod:`safeswitch.leftturn.traffic`; ``safeswitch/LeftTurnTraffic-v0`` defaults to
             ``"medium"``).
+        perception: How the ego sees the north car: a dict of
+            :class:`~safeswitch.leftturn.config.PerceptionConfig` keys (``position_error_m``,
+            ``speed_error_mps``, ``latency_s``, ``dropout_prob``, ``dropout_max_s``,
+            ``sight_distance_m``, ``errors``) or a ``PerceptionConfig``; left out, the
+            configuration's (perfect perception by default). The paper's scene only.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}  # noqa: RUF012
@@ -66,10 +71,12 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         env_index: int = 0,
         learned_scope: str = FROM_CONFIG,
         traffic: Any = None,
+        perception: Any = FROM_CONFIG,
     ) -> None:
         self.task = self.make_task(
             render_mode, config, learned_scope, traffic, switching=switching,
             adas_penalty=adas_penalty, scenario=scenario,
+            perception=perception,
         )  # fmt: skip
         self.config = self.task.config
         self.render_mode = render_mode

@@ -40,6 +40,7 @@ from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import Supervision, SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.perception import Perception, PerceptionState, episode_keys
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
@@ -98,6 +99,8 @@ class TaskState:
             (``PID_b``'s feedback).
         tick: Ticks since the episode started ``[B]``.
         outcome: Who crossed first, a code of :data:`OUTCOMES` ``[B]``.
+        perception: What the ego's sensor and tracker know of the north car
+            (:mod:`~safeswitch.leftturn.perception`); ``None`` with perfect perception.
     """
 
     world: WorldState
@@ -109,6 +112,7 @@ class TaskState:
     accel_lon: FloatArray
     tick: NDArray[np.int64]
     outcome: NDArray[np.int8]
+    perception: PerceptionState | None
 
     @property
     def batch_size(self) -> int:
@@ -131,7 +135,7 @@ def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> 
         mine, theirs = getattr(target, f.name), getattr(source, f.name)
         if isinstance(mine, np.ndarray):
             mine[index] = theirs
-        else:
+        elif mine is not None:
             _replace_arrays(mine, index, theirs)
 
 
@@ -319,6 +323,13 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             self.conflict.s_point_a, self.conflict.zone_a, cert.zone_a, self.conflict.s_point_b,
             self.conflict.zone_b, cert.zone_b, config.episode.approach_distance_m,
         )  # fmt: skip
+        #: The ego's sensor and tracker of the north car (``None``: perfect perception).
+        self.perception: Perception | None = None
+        if not config.perception.perfect:
+            self.perception = Perception(
+                config, self.world.route_set, self.conflict.s_point_b, self.conflict.zone_b[0],
+                int(self.world.route_base[1]),
+            )  # fmt: skip
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
         ctrl = config.controllers
@@ -441,6 +452,10 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         speed = np.stack([scenarios.ego_speed, scenarios.north_speed], axis=1)
         world = self.world.place(progress, speed)
         memory = self.controller_memory(batch)
+        perception = None
+        if self.perception is not None:
+            key = episode_keys([getattr(scenarios, f.name) for f in fields(Scenarios)])
+            perception = self.perception.initial(progress[:, 1], speed[:, 1], key)
         return TaskState(
             world=world,
             scenarios=Scenarios(*(getattr(scenarios, f.name).copy() for f in fields(Scenarios))),
@@ -451,6 +466,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             accel_lon=np.zeros(batch),
             tick=np.zeros(batch, dtype=np.int64),
             outcome=np.zeros(batch, dtype=np.int8),
+            perception=perception,
         )
 
     def controller_memory(self, batch: int) -> ControllerMemory:
@@ -490,24 +506,42 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         return OBSERVATION_LOW, OBSERVATION_HIGH
 
     def observe(self, state: TaskState) -> NDArray[np.float32]:
-        """The paper's state ``s = (x_e, y_e, v_e, x_n, y_n, v_n)``, ``[B, 6]`` float32."""
+        """The paper's state ``s = (x_e, y_e, v_e, x_n, y_n, v_n)``, ``[B, 6]`` float32 (the
+        north car as the ego sees it)."""
         v = state.world.vehicles
         out = np.empty((state.batch_size, 6), dtype=np.float32)
         for j, (field, slot) in enumerate(_OBSERVED):
             out[:, j] = getattr(v, field)[:, slot]
-        return out
+        return self.seen_north(state, out)
+
+    @staticmethod
+    def seen_north(state: TaskState, observation: NDArray[np.float32]) -> NDArray[np.float32]:
+        """``observation`` with the north car's values as the ego sees them (in place)."""
+        seen = state.perception
+        if seen is not None:
+            observation[:, 3], observation[:, 4], observation[:, 5] = seen.x, seen.y, seen.speed
+        return observation
 
     def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
         return at_intersection(ego_progress, north_progress, self.north_conflict)
 
-    def view(self, state: TaskState, window: BoolArray | None = None) -> ConflictView:
+    def view(
+        self, state: TaskState, window: BoolArray | None = None, truth: bool = False
+    ) -> ConflictView:
         """What the switching logics see of ``state``: the ego and its conflicts (here one, the
-        north car's). ``window``: Algorithm 1's While condition if already known."""
-        v, progress = state.world.vehicles, state.world.progress
+        north car's), the others as perceived (``truth``: as they are, for measures).
+        ``window``: Algorithm 1's While condition if already known."""
+        v, progress, seen = state.world.vehicles, state.world.progress, state.perception
+        if seen is None or truth:
+            return north_view(
+                self.north_conflict, progress[:, 0], v.speed[:, 0], v.throttle[:, 0],
+                v.brake[:, 0], progress[:, 1], v.speed[:, 1], state.scenarios.north_speed, window,
+            )  # fmt: skip
         return north_view(
             self.north_conflict, progress[:, 0], v.speed[:, 0], v.throttle[:, 0], v.brake[:, 0],
-            progress[:, 1], v.speed[:, 1], state.scenarios.north_speed, window,
+            seen.progress, seen.speed, state.scenarios.north_speed, window,
+            Perception.uncertainty(seen),
         )  # fmt: skip
 
     def phantoms(self) -> Phantoms:
@@ -577,7 +611,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         start = np.empty((batch, 2))
         arrays: list[NDArray[Any]] = []
         for tick, state in enumerate(self.states_without_ego(scenarios)):
-            view = self.view(state)
+            view = self.view(state, truth=True)
             if not tick:
                 start[:, 0] = state.world.progress[:, 0]
                 start[:, 1] = state.world.vehicles.speed[:, 0]
@@ -599,8 +633,9 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
                                 speed)  # fmt: skip
 
     def conflicts(self, state: TaskState) -> ConflictArrays:
-        """The ego's conflict with every other vehicle, for measures taken at them."""
-        v = self.view(state)
+        """The ego's conflict with every other vehicle, for measures taken at them (the
+        truth, whatever the ego perceives)."""
+        v = self.view(state, truth=True)
         return ConflictArrays(
             ego_progress=v.ego_progress.copy(), ego_speed=v.ego_speed.copy(),
             present=v.present, ego_zone=v.ego_zone, other_progress=v.other_progress.copy(),
@@ -675,12 +710,14 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
         v = world.vehicles
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
+        seen = state.perception
+        seen_north = np.ascontiguousarray(world.progress[:, 1]) if seen is None else seen.progress
         out = ControllerOutputs.empty(batch)
         _controllers_entry(
             self._controller_constants,
             tuple(ControllerInputs(
                 learned_throttle, v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress,
-                state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
+                seen_north, state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
                 (th.integral, th.prev_error, th.derivative, br.integral, br.prev_error,
                  br.derivative, no.integral, no.prev_error, no.derivative),
                 (la.integral, la.prev_error, la.derivative),
@@ -759,6 +796,12 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         if self._ends_episode is not None:
             ended = sup.safety_active & self._ends_episode[reason]
             terminated, truncated = terminated | ended, truncated & ~ended
+        perception = None
+        if self.perception is not None:
+            assert state.perception is not None
+            perception = self.perception.sense(
+                state.perception, tick, new_world.progress[:, 1], speed[:, 1]
+            )
 
         new_state = self.make_state(
             TaskState(
@@ -771,11 +814,12 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
                 outputs.accel_lon[:, 0],
                 tick,
                 outcome,
+                perception,
             ),
             others,
         )
         record = StepRecord(
-            observation=self.extend_observation(new_state, observation),
+            observation=self.extend_observation(new_state, self.seen_north(new_state, observation)),
             reward=reward,
             terms=terms,
             terminated=terminated,
@@ -951,6 +995,8 @@ class ControllerInputs(NamedTuple):
         sin_yaw: Heading's sine ``[B, 2]``.
         speed: ``[B, 2]`` [m/s].
         progress: Arc length along each route ``[B, 2]`` [m].
+        seen_north: The north car's arc length as the ego sees it ``[B]`` [m] (Algorithm 1's
+            window reads it).
         accel_lon: The ego's last longitudinal acceleration ``[B]`` [m/s²].
         north_target: The north car's target speed ``[B]`` [m/s].
         throttle: The actual throttle ``[B, 2]`` (held in place of an invalid learned action).
@@ -967,6 +1013,7 @@ class ControllerInputs(NamedTuple):
     sin_yaw: FloatArray
     speed: FloatArray
     progress: FloatArray
+    seen_north: FloatArray
     accel_lon: FloatArray
     north_target: FloatArray
     throttle: FloatArray
@@ -1050,6 +1097,7 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
     pid, lane, g, north = i.pids, i.lane, c.gains, c.north
     learned, x, y, cos_yaw, sin_yaw = i.learned_throttle, i.x, i.y, i.cos_yaw, i.sin_yaw
     speed, progress, accel_lon, target = i.speed, i.progress, i.accel_lon, i.north_target
+    seen_north = i.seen_north
     held_throttle, held_brake = i.throttle, i.brake
     pid_th, pid_b, pid_n, pid_lka = out.pid_throttle, out.pid_brake, out.pid_north, out.pid_lane
     safety_brake, north_throttle, north_brake = (
@@ -1081,7 +1129,7 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
                 g.lane, c.dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
             pid_lka[0, b, j], pid_lka[1, b, j], pid_lka[2, b, j] = integral, error, derivative
-        at = at_intersection(progress[b, 0], progress[b, 1], north)
+        at = at_intersection(progress[b, 0], seen_north[b], north)
         in_charge = at if c.scope == 0 else c.scope == 1
         both[b], charge[b] = at, in_charge
         proposed[b, 0], proposed[b, 1] = (learned[b] if in_charge else rule), 0.0

@@ -128,6 +128,11 @@ class LeftTurnTrafficTask(LeftTurnTask):
     """
 
     def __init__(self, config: LeftTurnConfig, traffic: TrafficConfig) -> None:
+        if not config.perception.perfect:
+            raise ConfigError(
+                f"perception={config.perception!r}: a perception model exists for the paper's "
+                "scene (the north car alone) only so far; traffic is perceived perfectly"
+            )
         super().__init__(config)
         self.traffic = traffic
         footprint = (config.vehicle.length, config.vehicle.width)
@@ -339,9 +344,12 @@ class LeftTurnTrafficTask(LeftTurnTask):
 
     # -- the hooks ------------------------------------------------------------------------------
 
-    def view(self, state: TaskState, window: BoolArray | None = None) -> ConflictView:
+    def view(
+        self, state: TaskState, window: BoolArray | None = None, truth: bool = False
+    ) -> ConflictView:
         """Every conflict of the ego: column 0 the north car, then every slot (``present``
-        false where the slot is empty or its route does not cross the ego's)."""
+        false where the slot is empty or its route does not cross the ego's). Traffic is
+        perceived perfectly: ``truth`` changes nothing."""
         assert isinstance(state, TrafficTaskState)
         tr = state.traffic
         batch, slots = tr.route.shape
@@ -362,7 +370,8 @@ class LeftTurnTrafficTask(LeftTurnTask):
             ego_brake=v.brake[:, 0], present=present, window=inside, ego_point=points[0],
             ego_zone=zones[0], ego_cert_zone=zones[1], other_progress=other[0],
             other_point=points[1], other_zone=zones[2], other_cert_zone=zones[3],
-            other_speed=other[1], other_top=other[2],
+            other_speed=other[1], other_top=other[2], other_lead=np.zeros((batch, c)),
+            other_lag=np.zeros((batch, c)), other_speed_high=other[1],
         )  # fmt: skip
 
     def crossing_zones(self) -> FloatArray:

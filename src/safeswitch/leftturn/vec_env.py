@@ -59,6 +59,7 @@ class LeftTurnVecEnv(VecEnv):
         learned_scope: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv`.
         traffic: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv` (``None``: the paper's
             scene, bit for bit).
+        perception: As for :class:`~safeswitch.leftturn.env.LeftTurnEnv`.
         stagger: Truncate each environment's first episode after a random number of ticks
             (uniform over the horizon, drawn from ``seed``), as a time limit (SB3 bootstraps
             it). Every episode of the left turn lasts the whole horizon, so without this all
@@ -81,6 +82,7 @@ class LeftTurnVecEnv(VecEnv):
         render_mode: str | None = None,
         learned_scope: str = FROM_CONFIG,
         traffic: Any = None,
+        perception: Any = FROM_CONFIG,
         stagger: bool = False,
     ) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
@@ -88,6 +90,7 @@ class LeftTurnVecEnv(VecEnv):
         self.task = build_task(
             render_mode, config, learned_scope, traffic, switching=switching,
             adas_penalty=adas_penalty, scenario=scenario,
+            perception=perception,
         )  # fmt: skip
         self.config = self.task.config
         self.render_mode = render_mode

@@ -59,6 +59,14 @@ class ConflictView(NamedTuple):
         other_speed: Its speed [m/s] ``[B, C]``.
         other_top: Its top speed in the scenario [m/s] ``[B, C]`` (the certificate assumes
             its own bound instead).
+        other_lead: How far the vehicle may truly be ahead of ``other_progress`` [m]
+            ``[B, C]`` (0 with perfect perception; see :mod:`~safeswitch.leftturn.perception`).
+        other_lag: How far it may truly be behind ``other_progress`` [m] ``[B, C]``.
+        other_speed_high: Bound on its true speed [m/s] ``[B, C]`` (``other_speed`` with
+            perfect perception).
+
+    ``other_progress`` and ``other_speed`` are what the ego sees (a point estimate); a logic
+    that must hold for every error within the declared bounds reads the other three.
     """
 
     ego_progress: FloatArray
@@ -76,6 +84,9 @@ class ConflictView(NamedTuple):
     other_cert_zone: FloatArray
     other_speed: FloatArray
     other_top: FloatArray
+    other_lead: FloatArray
+    other_lag: FloatArray
+    other_speed_high: FloatArray
 
     # -- the north car's conflict (column 0) in the paper's terms ------------------------------
 
@@ -163,6 +174,7 @@ class _NorthColumns(NamedTuple):
     other_point: FloatArray
     other_zone: FloatArray
     other_cert_zone: FloatArray
+    zero: FloatArray
 
 
 _FIXED: dict[tuple[NorthConflict, int], _NorthColumns] = {}
@@ -185,7 +197,7 @@ def _north_columns(geometry: NorthConflict, batch: int) -> _NorthColumns:
         cached = _NorthColumns(
             np.ones((batch, 1), dtype=np.bool_), column(g.ego_point), zone(g.ego_zone),
             zone(g.ego_cert_zone), column(g.north_point), zone(g.north_zone),
-            zone(g.north_cert_zone),
+            zone(g.north_cert_zone), column(0.0),
         )  # fmt: skip
         for array in cached:
             array.setflags(write=False)
@@ -205,9 +217,12 @@ def north_view(
     north_speed: FloatArray,
     north_top: FloatArray,
     window: BoolArray | None = None,
+    uncertainty: tuple[FloatArray, FloatArray, FloatArray] | None = None,
 ) -> ConflictView:
     """The view of the paper's scene: one conflict, the north car (``C = 1``). ``window``:
-    Algorithm 1's While condition if already known (else computed from the arc lengths)."""
+    Algorithm 1's While condition if already known (else computed from the arc lengths);
+    ``uncertainty``: the north car's lead, lag and speed bound ``[B]`` each (see
+    :class:`ConflictView`; ``None``: perfect perception)."""
     batch = ego_progress.shape[0]
     fixed = _north_columns(geometry, batch)
     if window is None:
@@ -228,6 +243,12 @@ def north_view(
         other_cert_zone=fixed.other_cert_zone,
         other_speed=north_speed.reshape(batch, 1),
         other_top=north_top.reshape(batch, 1),
+        other_lead=fixed.zero if uncertainty is None else uncertainty[0].reshape(batch, 1),
+        other_lag=fixed.zero if uncertainty is None else uncertainty[1].reshape(batch, 1),
+        other_speed_high=(
+            north_speed.reshape(batch, 1) if uncertainty is None
+            else uncertainty[2].reshape(batch, 1)
+        ),
     )
 
 

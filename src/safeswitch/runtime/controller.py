@@ -326,6 +326,7 @@ class Controller:
             np.array([m.ego_accel_lon]),
             np.array([self._tick]),
             np.zeros(1, dtype=np.int8),
+            None,
         )
 
 

@@ -135,6 +135,10 @@ class CertifiedConstants(NamedTuple):
         gb_last: Last partial sum of ``ρ_b^k``.
         gt_sum: Sum of the partial sums of ``ρ_t^k``.
         gb_sum: Sum of the partial sums of ``ρ_b^k``.
+        robust: 1 under ``perception: declared`` (the other vehicles' states are read as the
+            worst case the tracker allows: ahead by ``other_lead``, at ``other_speed_high``,
+            left only once ``other_lag`` behind the estimate is past the zone), 0 under
+            ``perfect`` (the estimate is taken as the truth).
     """
 
     dt: float
@@ -162,6 +166,7 @@ class CertifiedConstants(NamedTuple):
     gb_last: float
     gt_sum: float
     gb_sum: float
+    robust: float
 
 
 class Bounds(NamedTuple):
@@ -437,17 +442,28 @@ def _clear_slack(
 
 
 @jit
-def _arrivals(
-    present: BoolArray, other_progress: FloatArray, other_speed: FloatArray,
-    other_zones: FloatArray, b: int, c: CertifiedConstants, out: FloatArray,
-) -> None:  # fmt: skip
+def _seen_arrival(v: ConflictView, b: int, j: int, c: CertifiedConstants) -> float:
+    """:func:`_arrival` of conflict ``j`` of episode ``b`` as the view shows it: under declared
+    perception the worst case the tracker allows (the vehicle ``other_lead`` ahead of its
+    estimate, at ``other_speed_high``, and left only once ``other_lag`` behind the estimate is
+    past the zone), else the estimate itself."""
+    r = c.robust
+    lead, lag = r * v.other_lead[b, j], r * v.other_lag[b, j]
+    speed = v.other_speed[b, j] + r * (v.other_speed_high[b, j] - v.other_speed[b, j])
+    zone = v.other_cert_zone
+    return _arrival(v.other_progress[b, j] + lead, speed, zone[b, j, 0],
+                    zone[b, j, 1] + lead + lag, c)  # fmt: skip
+
+
+@jit
+def _arrivals(v: ConflictView, b: int, c: CertifiedConstants, out: FloatArray) -> None:
     """Each conflict's earliest entry into its zone in episode ``b`` (``inf``: no conflict, or
     its vehicle has left) into ``out`` ``[C]``."""
+    present = v.present
     for j in range(out.shape[0]):
         out[j] = math.inf
         if present[b, j]:
-            out[j] = _arrival(other_progress[b, j], other_speed[b, j], other_zones[b, j, 0],
-                              other_zones[b, j, 1], c)  # fmt: skip
+            out[j] = _seen_arrival(v, b, j, c)
 
 
 @jit
@@ -551,6 +567,7 @@ def _decide(
     )  # fmt: skip
     present, zones = v.present, v.ego_cert_zone
     other_progress, other_speed, other_zones = v.other_progress, v.other_speed, v.other_cert_zone
+    lead_of, lag_of, speed_high = v.other_lead, v.other_lag, v.other_speed_high
     phantom_zones, phantom_entry = phantoms.ego_zone, phantoms.entry
     c = t.c
     step = c.dt * c.progress_factor
@@ -565,8 +582,13 @@ def _decide(
         for j in range(conflicts):
             arrivals[j] = math.inf
             if present[b, j]:
-                arrivals[j] = _arrival(other_progress[b, j], other_speed[b, j],
-                                       other_zones[b, j, 0], other_zones[b, j, 1], c)  # fmt: skip
+                # As _seen_arrival, written out (see the screen's note).
+                lead, lag = c.robust * lead_of[b, j], c.robust * lag_of[b, j]
+                seen = other_speed[b, j]
+                arrivals[j] = _arrival(other_progress[b, j] + lead,
+                                       seen + c.robust * (speed_high[b, j] - seen),
+                                       other_zones[b, j, 0], other_zones[b, j, 1] + lead + lag,
+                                       c)  # fmt: skip
                 if not math.isinf(arrivals[j]) and s <= zones[b, j, 1]:
                     first = min(first, zones[b, j, 0])
         for p in range(phantom_zones.shape[0]):
@@ -617,13 +639,12 @@ def _decide(
 @jit
 def _margins(v: ConflictView, t: Bounds, arrival: FloatArray, slack: FloatArray) -> None:
     """Fill :meth:`CertifiedSwitching.margins` (``inf`` where there is no conflict)."""
-    present, zones, other = v.present, v.other_cert_zone, v.other_progress
+    present = v.present
     for b in range(present.shape[0]):
         for j in range(present.shape[1]):
             if not present[b, j]:
                 continue
-            arrive = _arrival(other[b, j], v.other_speed[b, j], zones[b, j, 0], zones[b, j, 1],
-                              t.c)  # fmt: skip
+            arrive = _seen_arrival(v, b, j, t.c)
             arrival[b, j] = arrive
             if not math.isinf(arrive):
                 slack[b, j] = _clear_slack(
@@ -640,7 +661,7 @@ def _screen(
     present, zones = v.present, v.ego_cert_zone
     arrivals = np.empty(present.shape[1])
     for b in range(present.shape[0]):
-        _arrivals(present, v.other_progress, v.other_speed, v.other_cert_zone, b, c, arrivals)
+        _arrivals(v, b, c, arrivals)
         s, speed = v.ego_progress[b], v.ego_speed[b]
         first = _first_entry(s, present, zones, arrivals, b, phantoms.ego_zone)
         top = speed + c.accel_max * c.dt
@@ -661,7 +682,7 @@ def _certificate(
     present, zones = v.present, v.ego_cert_zone
     arrivals = np.empty(present.shape[1])
     for b in range(present.shape[0]):
-        _arrivals(present, v.other_progress, v.other_speed, v.other_cert_zone, b, t.c, arrivals)
+        _arrivals(v, b, t.c, arrivals)
         s = v.ego_progress[b]
         speed, throttle, brake = v.ego_speed[b], v.ego_throttle[b], v.ego_brake[b]
         low, high, shift = s, s, 0.0
@@ -797,6 +818,7 @@ class CertifiedSwitching:
             gb_last=float(gb[-1]),
             gt_sum=float(gt.sum()),
             gb_sum=float(gb.sum()),
+            robust=1.0 if config.perception == "declared" else 0.0,
         )
         self._c = c
         #: Everything the compiled bounds read: constants, ρ_t^k and ρ_b^k.
