@@ -198,8 +198,8 @@ class PerceptionConfig:
         errors: ``random`` — independent, uniform within the bounds on every tick, a miss
             lasting a uniform number of ticks up to ``dropout_max_s``; ``adversarial`` — on every
             tick the error within the bounds that makes the other vehicle look least dangerous
-            (farther back and slower before its conflict zone, farther on and faster from its
-            entry, as if it were leaving), every miss as long as allowed.
+            (farther back and slower, until the error can show it past its conflict zone: then
+            farther on and faster, as if it had left), every miss as long as allowed.
     """
 
     position_error_m: Annotated[float, Bounds(0, 50, unit="m")] = 0.0

@@ -8,8 +8,8 @@ keep the truth, and everything that decides reads what is seen (:class:`Percepti
   ``latency_s`` ago (exactly: the episode's first ticks see the car's constant-speed approach
   before the episode, extrapolated back), with a position error within ``position_error_m``
   along its path and a speed error within ``speed_error_mps`` — independent and uniform, or, with
-  ``errors: adversarial``, the worst case on every tick (farther back and slower before its
-  conflict zone, farther on and faster from its entry); it misses a seen vehicle with
+  ``errors: adversarial``, the worst case on every tick (farther back and slower, until the
+  error can show it past its conflict zone: then farther on and faster, as if it had left); it misses a seen vehicle with
   probability ``dropout_prob`` per tick for up to ``dropout_max_s``, then sees it for at least a
   tick; it never sees a vehicle farther than ``sight_distance_m`` from its conflict point.
   Random numbers are a pure function of the scenario and the tick, so a scenario replays
@@ -72,7 +72,7 @@ class PerceptionConstants(NamedTuple):
         sight: Sight distance from the conflict point [m] (``inf``: none).
         adversarial: Worst-case errors instead of random ones.
         point: The vehicle's conflict point on its route [m].
-        entry: Entry of its conflict zone on its route [m] (where adversarial errors turn).
+        exit: Exit of its conflict zone on its route [m] (where adversarial errors turn).
         other_accel: Assumed largest acceleration of the vehicle [m/s²].
         other_top: Assumed top speed [m/s].
         unseen_high: Upper bound on the progress of a vehicle never seen [m].
@@ -91,7 +91,7 @@ class PerceptionConstants(NamedTuple):
     sight: float
     adversarial: bool
     point: float
-    entry: float
+    exit: float
     other_accel: float
     other_top: float
     unseen_high: float
@@ -144,12 +144,12 @@ class Perception:
             assumptions on other vehicles, the tick and the speed limit).
         routes: The world's routes (for the point estimate's position).
         point: The other vehicle's conflict point on its route [m].
-        entry: Entry of its conflict zone on its route [m].
+        exit_: Exit of its conflict zone on its route [m].
         base: Flat index of its route's first waypoint.
     """
 
     def __init__(
-        self, config: LeftTurnConfig, routes: RouteSet, point: float, entry: float, base: int
+        self, config: LeftTurnConfig, routes: RouteSet, point: float, exit_: float, base: int
     ) -> None:
         p, dt = config.perception, config.episode.dt
         self.config = p
@@ -168,7 +168,7 @@ class Perception:
             sight=sight,
             adversarial=p.errors == "adversarial",
             point=point,
-            entry=entry,
+            exit=exit_,
             other_accel=config.certified.other_max_accel,
             other_top=top,
             unseen_high=unseen,
@@ -331,7 +331,9 @@ def _sense(
         seen[b] = visible
         if visible:
             if c.adversarial:
-                sign = -1.0 if true_p < c.entry else 1.0
+                # Farther back and slower, until the error can show it past its zone: then
+                # farther on and faster, as if it had left.
+                sign = 1.0 if true_p + c.position_error > c.exit else -1.0
                 ep, ev = sign * c.position_error, sign * c.speed_error
             else:
                 ep = (2.0 * _uniform(key[b], t, 2) - 1.0) * c.position_error

@@ -327,7 +327,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         self.perception: Perception | None = None
         if not config.perception.perfect:
             self.perception = Perception(
-                config, self.world.route_set, self.conflict.s_point_b, self.conflict.zone_b[0],
+                config, self.world.route_set, self.conflict.s_point_b, self.conflict.zone_b[1],
                 int(self.world.route_base[1]),
             )  # fmt: skip
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
