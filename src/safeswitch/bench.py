@@ -9,6 +9,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+from typing import Any
+
 import numpy as np
 
 from safeswitch.core.pid import PIDState, pid_step
@@ -70,11 +72,14 @@ def sim_steps_per_s(batch: int, seconds: float = 1.0) -> float:
     return batch / time_per_call(sim_stepper(batch), seconds)
 
 
-def vec_env_steps_per_s(num_envs: int, switching: str = "paper", seconds: float = 1.0) -> float:
-    """Environment steps per second of the batched VecEnv (random actions)."""
+def vec_env_steps_per_s(
+    num_envs: int, switching: str = "paper", seconds: float = 1.0, **env_kwargs: Any
+) -> float:
+    """Environment steps per second of the batched VecEnv (random actions); ``env_kwargs`` as
+    for :func:`~safeswitch.leftturn.make_vec_env` (e.g. ``perception``)."""
     from safeswitch.leftturn import make_vec_env
 
-    env = make_vec_env(num_envs, switching=switching, seed=0)
+    env = make_vec_env(num_envs, switching=switching, seed=0, **env_kwargs)
     env.reset()
     actions = np.random.default_rng(0).uniform(-1, 1, (16, num_envs, 1))
     counter = {"k": 0}

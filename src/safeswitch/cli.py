@@ -611,6 +611,56 @@ def _export_scenario(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate_perception(args: argparse.Namespace) -> int:
+    from safeswitch.app.calibrate import calibrate_perception
+
+    result = calibrate_perception(
+        args.out, pairs=args.pairs, sensor=args.simulate, alpha=args.alpha, count=args.count,
+        seed=args.seed, holdout=args.holdout, overwrite=args.overwrite,
+    )  # fmt: skip
+    print(
+        f"bounds for 1 - alpha = {1 - args.alpha:g}: position {result.position_error_m:.4g} m, "
+        f"speed {result.speed_error_mps:.4g} m/s (from {result.calibration_pairs:,} pairs); "
+        f"held-out coverage {result.coverage_position:.4f} / {result.coverage_speed:.4f} "
+        f"(both {result.coverage_both:.4f}, {result.holdout_pairs:,} pairs); wrote "
+        f"{args.out}/perception.yaml (use it with --perception)"
+    )
+    return 0
+
+
+def perception_file(text: str) -> str:
+    """``--perception FILE``: a YAML file with a ``perception:`` block (as
+    ``calibrate-perception`` writes) or its keys alone, checked now and turned into the setting
+    ``env.perception=…`` (it joins ``--set``, in order: a later ``--set`` can change a key)."""
+    import json
+
+    import yaml
+
+    from safeswitch.core.config import ConfigError, from_dict, to_dict
+    from safeswitch.leftturn.config import PerceptionConfig
+
+    try:
+        with open(text, encoding="utf-8") as handle:
+            data = yaml.safe_load(handle)
+    except (OSError, yaml.YAMLError) as exc:
+        raise argparse.ArgumentTypeError(f"cannot read {text}: {exc}") from None
+    if isinstance(data, dict) and set(data) == {"perception"}:
+        data = data["perception"]
+    try:
+        block = to_dict(from_dict(PerceptionConfig, data, where="perception"))
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(f"{text}: {exc}") from None
+    return "env.perception=" + json.dumps(block)
+
+
+def _perception(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--perception", dest="set", action="append", type=perception_file, metavar="FILE",
+        help="how the ego sees the north car: a YAML perception block (e.g. from "
+        "calibrate-perception); the same as --set env.perception.KEY=VALUE for each key",
+    )  # fmt: skip
+
+
 def scenarios_value(text: str) -> str:
     """``--scenarios``: ``paper``, ``random`` or ``openscenario:PATH``."""
     if text in ("paper", "random") or (text.startswith("openscenario:") and len(text) > 13):
@@ -674,6 +724,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="change one configuration setting (repeatable): a dotted key and a YAML value, "
         "e.g. env.scenarios.north_speed_kmh=[30,45] or ppo.gamma=0.995; checked like a file",
     )  # fmt: skip
+    _perception(train)
     train.add_argument("--torch-threads", type=at_least(1), help="CPU threads for torch")
     train.add_argument("--out", required=True, help="run directory")
     train.add_argument(
@@ -706,6 +757,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="change the scene (repeatable): env.KEY=VALUE with a dotted key of the left "
         "turn's configuration and a YAML value, e.g. env.scenarios.north_speed_kmh=[30,45]",
     )  # fmt: skip
+    _perception(ev)
     ev.add_argument(
         "--scenarios", type=scenarios_value, metavar="{paper,random,openscenario:PATH}",
         help="the paper's three (cut, yield1, yield2), random ones (default), or the scenarios "
@@ -768,6 +820,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="change the scene of every cell (repeatable): env.KEY=VALUE, e.g. "
         "env.scenarios.north_speed_kmh=[30,45]",
     )  # fmt: skip
+    _perception(camp)
     camp.add_argument("--episodes", type=at_least(1), default=100_000, help="random scenarios")
     camp.add_argument("--seed", type=seed_value, default=0, help="seed of the random scenarios")
     camp.add_argument(
@@ -833,6 +886,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--set", action="append", metavar="KEY=VALUE",
         help="the shift (repeatable): env.KEY=VALUE, e.g. env.scenarios.north_speed_kmh=[40,50]",
     )  # fmt: skip
+    _perception(adp)
     adp.add_argument("--episodes", type=at_least(1), default=10_000, help="deployment episodes")
     adp.add_argument("--block", type=at_least(1), default=1_000, help="episodes per block")
     adp.add_argument("--n-envs", type=at_least(1), default=16, help="environments at once")
@@ -888,6 +942,30 @@ def build_parser() -> argparse.ArgumentParser:
     xsc.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
     xsc.add_argument("--no-progress", action="store_true", help="no progress bar")
     xsc.set_defaults(func=_export_scenario)
+
+    cal = sub.add_parser(
+        "calibrate-perception",
+        help="perception bounds that hold with probability 1 - alpha (split conformal)",
+    )
+    source = cal.add_mutually_exclusive_group(required=True)
+    source.add_argument(
+        "--pairs", metavar="CSV",
+        help="logged pairs: columns seen_position_m, true_position_m, seen_speed_mps, "
+        "true_speed_mps (positions along the vehicle's path)",
+    )  # fmt: skip
+    source.add_argument(
+        "--simulate", metavar="YAML",
+        help="a sensor model to simulate: position_sigma_m, speed_sigma_mps, distribution "
+        "(gaussian|laplace), and latency_s, dropout_prob, dropout_max_s, sight_distance_m "
+        "carried as declared",
+    )  # fmt: skip
+    cal.add_argument("--alpha", type=float, default=0.05, help="miscoverage (default 0.05)")
+    cal.add_argument("--holdout", type=float, default=0.5, help="share of pairs held out")
+    cal.add_argument("--count", type=at_least(10), default=100_000, help="simulated pairs")
+    cal.add_argument("--seed", type=seed_value, default=0, help="seed of the split and sensor")
+    cal.add_argument("--out", required=True, help="output folder")
+    cal.add_argument("--overwrite", action="store_true", help="replace files in a used --out")
+    cal.set_defaults(func=_calibrate_perception)
 
     bench = sub.add_parser("bench", help="throughput figures of the simulator and environments")
     bench.add_argument("--json", action="store_true", help="print one JSON object")
