@@ -193,6 +193,24 @@ def test_the_raw_results_hold_one_row_per_episode(report):
 
 
 @pytest.mark.slow
+def test_the_report_measures_perception_errors(report):
+    """Every controller at every level, random and adversarial; the certified logic told the
+    bounds never fails, and the page shows the table and the figure."""
+    summary = json.loads((report / "summary.json").read_text())
+    rows = summary["perception"]["rows"]
+    assert {(r["level"], r["errors"]) for r in rows} == {
+        (x, e) for x in (0.0, 1.0, 2.0, 3.0) for e in ("random", "adversarial")
+    }
+    declared = [r for r in rows if r["controller"].endswith("declared bounds")]
+    assert len(declared) == 8 and all(r["failures"] == 0 for r in declared)
+    assert all(r["episodes"] == summary["perception"]["episodes"] for r in rows)
+    page = (report / "report.html").read_text()
+    assert "Perception (the paper's Remark 2)" in page
+    assert 'alt="failures and efficiency against the perception error level"' in page
+    assert (report / "figures" / "perception.png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
 def test_reproduce_refuses_to_overwrite_a_report_without_overwrite(report, capsys):
     args = ["reproduce", "--quick", "--out", str(report), "--episodes", "2"]
     assert main(args) == 2

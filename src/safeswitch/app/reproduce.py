@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from safeswitch.app.evaluate import controller_setup
+from safeswitch.app.perception_study import REFERENCE, study, together
 from safeswitch.evaluation.adversaries import constant
 from safeswitch.evaluation.evaluate import (
     episodes_csv,
@@ -45,6 +46,7 @@ from safeswitch.report.figures import (
     comparison_figure,
     episode_figure,
     frames_strip,
+    perception_figure,
     traffic_figure,
 )
 from safeswitch.report.training import training_curves, training_story
@@ -229,6 +231,17 @@ def _training_curves(model_dir: str, label: str, folder: Path) -> dict[str, Any]
         return None
     training_curves(progress, folder / "figures" / "training_curves.png")
     return {"label": label, "story": training_story(progress)}
+
+
+def perception_section(episodes: int, folder: Path) -> dict[str, Any]:
+    """The shipped controllers under every bounded perception error at once
+    (:mod:`safeswitch.app.perception_study`), random and adversarial, at levels 0–3 of the
+    reference bounds; the figure ``perception.png``."""
+    cells = [("together", level, {**together(level, errors), "errors": errors})
+             for errors in ("adversarial", "random") for level in (0.0, 1.0, 2.0, 3.0)]  # fmt: skip
+    rows = study(cells, episodes, EVAL_SEED)
+    perception_figure(rows, folder / "figures" / "perception.png")
+    return {"episodes": episodes, "unit": REFERENCE, "rows": rows}
 
 
 def _reckless(episodes: int) -> list[dict[str, Any]]:
@@ -485,6 +498,9 @@ def reproduce(
         f"({max(10, episodes // 100)} in traffic)"
     )
     sumo = sumo_study(sumo_episodes, log, max(10, episodes // 100))
+    perception_episodes = max(100, episodes // 5)
+    log(f"  perception errors: {perception_episodes} random scenarios per level")
+    perception = perception_section(perception_episodes, folder)
     log(f"stage {stages}/{stages}: figures and the report")
     comparison_figure(
         rows, oracle_random, offsets, horizon_s, folder / "figures" / "comparison.png"
@@ -509,6 +525,7 @@ def reproduce(
         "reckless_full_throttle": reckless,
         "traffic": {"episodes": traffic_episodes, "rows": traffic},
         "sumo": sumo,
+        "perception": perception,
         "wall_time_s": round(time.perf_counter() - began, 1),
     }
     write_json(folder / "summary.json", summary)

@@ -281,6 +281,30 @@ def traffic_table(summary: dict[str, Any]) -> Table:
     return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
 
 
+#: Columns of the perception table.
+PERCEPTION = (
+    ("failures", "failures", "{:d}"),
+    ("collisions", "collisions", "{:d}"),
+    ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("speeding_episodes", "speeding", "{:d}"),
+    ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("cleared_episodes", "cleared", "{:d}"),
+    ("mean_efficiency", "efficiency", "{:.3f}"),
+)
+
+
+def perception_table(summary: dict[str, Any]) -> Table:
+    """The perception study's rows: level, errors, controller, then :data:`PERCEPTION`."""
+    rows, alert, bad = [], [], []
+    for r in summary.get("perception", {}).get("rows", []):
+        cells, flags = _columns(r, PERCEPTION, 3)
+        rows.append([f"{r['level']:g}", r["errors"], r["controller"], *cells])
+        alert.append(r["failures"] > 0)
+        bad.append(flags)
+    header = ["level", "errors", "controller", *(h for _, h, _ in PERCEPTION)]
+    return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
+
+
 #: Columns of the cross-simulator table.
 SIMULATORS = (
     ("failures", "failures", "{:d}"),
@@ -333,6 +357,7 @@ def _context(summary: dict[str, Any]) -> dict[str, Any]:
         "reckless": reckless_table(summary),
         "traffic": traffic_table(summary),
         "sumo": sumo_table(summary),
+        "perception": perception_table(summary),
         "figures": figure_list(summary),
         "scenario_names": SCENARIO_NAMES,
     }

@@ -390,6 +390,62 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
     plt.close(fig)
 
 
+#: Axis labels of the perception sweeps (by sweep name).
+PERCEPTION_AXES = {
+    "together": "level × (1 m, 1 m/s, 0.2 s)",
+    "position_error_m": "position error bound [m]",
+    "speed_error_mps": "speed error bound [m/s]",
+    "latency_s": "latency [s]",
+    "dropout_max_s": "longest miss [s] (5 % per tick)",
+    "sight_distance_m": "sight distance [m] (0: unlimited)",
+}
+
+
+def perception_figure(rows: list[dict[str, Any]], path: Path) -> None:
+    """Perception errors (:mod:`safeswitch.app.perception_study`): per sweep (a column),
+    collisions per 1,000 episodes (top) and efficiency against the oracle (bottom) against the
+    error level, one colour per controller, solid for adversarial errors and dashed for random
+    ones. Saved as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sweeps = list(dict.fromkeys(r["sweep"] for r in rows))
+    controllers = list(dict.fromkeys(r["controller"] for r in rows))
+    width = max(9.0, 3.6 * len(sweeps) + 1)
+    fig, axes = plt.subplots(2, len(sweeps), figsize=(width, 6.8), layout="constrained",
+                             squeeze=False)  # fmt: skip
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for col, sweep in enumerate(sweeps):
+        top, bottom = axes[0, col], axes[1, col]
+        for k, controller in enumerate(controllers):
+            for errors, style in (("adversarial", "-"), ("random", "--")):
+                cell = sorted((r for r in rows if r["sweep"] == sweep
+                               and r["controller"] == controller and r["errors"] == errors),
+                              key=lambda r: r["level"])  # fmt: skip
+                if not cell:
+                    continue
+                x = [r["level"] for r in cell]
+                rate = [1000.0 * r["failures"] / r["episodes"] for r in cell]
+                label = f"{controller} ({errors})"
+                top.plot(x, rate, style, marker="o", color=colours[k], label=label)
+                bottom.plot(x, [r["mean_efficiency"] for r in cell], style, marker="o",
+                            color=colours[k])  # fmt: skip
+        top.set_title(sweep.replace("_", " "), fontsize=10)
+        top.set_ylabel("failures per 1,000 episodes" if col == 0 else "")
+        bottom.set_ylabel("efficiency against the oracle" if col == 0 else "")
+        bottom.set_xlabel(PERCEPTION_AXES.get(sweep, sweep))
+        for ax in (top, bottom):
+            ax.grid(alpha=0.3)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=8)
+    fig.suptitle("perception errors: failures (on the truth) and efficiency\n"
+                 "solid: adversarial errors, dashed: random errors", fontsize=10)  # fmt: skip
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def frames_strip(trace: Trace, episode: int, count: int = 6) -> Image.Image:
     """A strip of ``count`` animation frames, evenly spaced (for the Markdown report)."""
     frames = trace.frames[episode]

@@ -1,0 +1,193 @@
+"""Perception errors (the paper's Remark 2): what they do, what the certified guarantee holds
+against, what it costs, and how fast the environment stays.
+
+1. **Sweeps** — each perception key on its own and all bounded errors together, random and
+   adversarial errors, for the paper policy under the paper logic and the certified policy under
+   the certified logic assuming perfect perception or the declared bounds
+   (:mod:`safeswitch.app.perception_study`); 1,000 unseen random scenarios (seed 1000003) per
+   cell. Collisions and failures use the truth; efficiency is against the oracle (truth).
+2. **Guarantee** — the certified logic with declared bounds against every adversary family of
+   the single-car scene (``safeswitch.evaluation.adversaries``; the adversary drives the whole
+   episode), adversarial errors with every key at once (100,800 episodes), then larger bounds
+   with random and adversarial errors; beside it the logic that assumes perfect perception.
+3. **Speed** — ``VecEnv`` steps per second at 4,096 environments with and without perception
+   (every key on), measured alternately in one run (median of three).
+4. **Calibration** — held-out coverage of split-conformal bounds on simulated sensors.
+
+Run: ``python benchmarks/perception.py [--episodes N] [--guarantee N]`` (one core, one torch
+thread; about 12 minutes); writes ``benchmarks/results/perception.json`` and
+``docs/perception.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import _common
+from safeswitch.app.perception_study import CONTROLLERS, study, together
+from safeswitch.bench import vec_env_steps_per_s
+from safeswitch.evaluation.adversaries import catalogue
+from safeswitch.evaluation.calibration import SensorModel, calibrate, simulate_pairs
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn.config import resolve_config
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.report.figures import perception_figure
+from safeswitch.training.policies import load_policy
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results" / "perception.json"
+FIGURE = ROOT / "docs" / "perception.png"
+SEED = 1_000_003
+
+#: Every key at once, adversarial: the guarantee's main set.
+EVERYTHING = {
+    "position_error_m": 1.0, "speed_error_mps": 1.0, "latency_s": 0.2, "dropout_prob": 0.05,
+    "dropout_max_s": 0.5, "sight_distance_m": 40.0, "errors": "adversarial",
+}  # fmt: skip
+LARGE = {
+    "position_error_m": 3.0, "speed_error_mps": 3.0, "latency_s": 0.5, "dropout_prob": 0.1,
+    "dropout_max_s": 1.0, "sight_distance_m": 25.0,
+}  # fmt: skip
+
+
+def sweeps() -> list[tuple[str, float, dict[str, object]]]:
+    """Every cell: (sweep, level, perception). Level 0 is perfect perception (``errors`` alone
+    changes nothing; it places the point on both lines)."""
+    cells: list[tuple[str, float, dict[str, object]]] = []
+    for errors in ("adversarial", "random"):
+        cells += [("together", x, {**together(x, errors), "errors": errors})
+                  for x in (0.0, 0.5, 1.0, 2.0, 3.0)]  # fmt: skip
+        for key, levels in (
+            ("position_error_m", (0.0, 0.5, 1.0, 2.0, 4.0)),
+            ("speed_error_mps", (0.0, 0.5, 1.0, 2.0, 4.0)),
+            ("latency_s", (0.0, 0.1, 0.2, 0.4, 0.8)),
+        ):
+            cells += [(key, x, {key: x, "errors": errors}) for x in levels]
+        cells += [
+            ("dropout_max_s", x,
+             {"dropout_prob": 0.05 if x else 0.0, "dropout_max_s": x, "errors": errors})
+            for x in (0.0, 0.25, 0.5, 1.0, 2.0)
+        ]  # fmt: skip
+        cells += [
+            ("sight_distance_m", x, {"sight_distance_m": x or None, "errors": errors})
+            for x in (0.0, 60.0, 40.0, 25.0)
+        ]
+    return cells
+
+
+def guarantee(count: int, small: int) -> list[dict[str, object]]:
+    trained = load_policy("certified").act
+    rows = []
+    for name, perception, assume, episodes in (
+        ("every key, adversarial", EVERYTHING, "declared", count),
+        ("larger bounds, random", {**LARGE, "errors": "random"}, "declared", small),
+        ("larger bounds, adversarial", {**LARGE, "errors": "adversarial"}, "declared", small),
+        ("every key, adversarial", EVERYTHING, "perfect", small),
+    ):
+        config = resolve_config(
+            {"episode": {"learned_scope": "episode"}, "certified": {"perception": assume}},
+            switching="certified", perception=perception,
+        )  # fmt: skip
+        task = LeftTurnTask(config)
+        scenarios = task.scenario_set(SEED, episodes)
+        families = {}
+        for family, make in catalogue(task, episodes, seed=7, trained=trained).items():
+            result = rollout(task, scenarios, make())
+            families[family] = {
+                "episodes": episodes,
+                "collisions": int(result.collision.sum()),
+                "failures": int((result.collision | result.lost_control).sum()),
+                "safety_activation_episodes": int((result.safety_steps > 0).sum()),
+            }
+        total = sum(f["episodes"] for f in families.values())
+        failures = sum(f["failures"] for f in families.values())
+        rows.append({"bounds": name, "perception": perception, "certified_perception": assume,
+                     "episodes": total, "failures": failures, "families": families})  # fmt: skip
+        print(f"  certified ({assume:8s}) {name:28s} {failures:5d} failures in {total:,} "
+              f"episodes over {len(families)} adversary families", file=sys.stderr)
+    return rows
+
+
+def speed(rounds: int, seconds: float) -> dict[str, object]:
+    perception = dict(EVERYTHING)
+    runs: dict[str, list[float]] = {}
+    for _ in range(rounds):
+        for switching in ("paper", "certified"):
+            for on in (False, True):
+                kwargs = {"perception": perception} if on else {}
+                key = f"{switching}, perception {'on' if on else 'off'}"
+                runs.setdefault(key, []).append(
+                    vec_env_steps_per_s(4096, switching, seconds, **kwargs)
+                )
+    medians = {k: statistics.median(v) for k, v in runs.items()}
+    return {
+        "num_envs": 4096, "rounds": rounds, "median_steps_per_s": medians, "runs": runs,
+        "ratio": {s: medians[f"{s}, perception on"] / medians[f"{s}, perception off"]
+                  for s in ("paper", "certified")},
+    }  # fmt: skip
+
+
+def coverage() -> list[dict[str, object]]:
+    rows = []
+    for distribution in ("gaussian", "laplace"):
+        for alpha in (0.05, 0.01):
+            sensor = SensorModel(position_sigma_m=0.5, speed_sigma_mps=0.3,
+                                 distribution=distribution)  # fmt: skip
+            r = calibrate(*simulate_pairs(sensor, 100_000, seed=1), alpha=alpha, seed=1)
+            rows.append({"distribution": distribution, "alpha": alpha,
+                         "position_error_m": r.position_error_m,
+                         "speed_error_mps": r.speed_error_mps,
+                         "coverage_position": r.coverage_position,
+                         "coverage_speed": r.coverage_speed, "coverage_both": r.coverage_both,
+                         "holdout_pairs": r.holdout_pairs})  # fmt: skip
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--episodes", type=int, default=1000, help="scenarios per sweep cell")
+    parser.add_argument("--guarantee", type=int, default=11_200,
+                        help="scenarios per adversary family, main set (9 families)")
+    parser.add_argument("--replot", action="store_true", help="redraw the figure only")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    if args.replot:
+        import json
+
+        perception_figure(json.loads(RESULTS.read_text())["sweeps"], FIGURE)
+        return
+    began = time.perf_counter()
+    print("sweeps", file=sys.stderr)
+    rows = study(sweeps(), args.episodes, SEED, CONTROLLERS,
+                 log=lambda line: print(line, file=sys.stderr))  # fmt: skip
+    print("guarantee", file=sys.stderr)
+    proof = guarantee(args.guarantee, max(1000, args.guarantee // 5))
+    print("speed", file=sys.stderr)
+    fast = speed(3, 1.5)
+    calibrated = coverage()
+    result = {
+        "machine": _common.machine(),
+        "torch_threads": 1,
+        "seed": SEED,
+        "episodes_per_cell": args.episodes,
+        "sweeps": rows,
+        "guarantee": proof,
+        "speed": fast,
+        "calibration": calibrated,
+        "wall_time_s": round(time.perf_counter() - began, 1),
+    }
+    _common.publish(result, RESULTS, as_json=False)
+    perception_figure(rows, FIGURE)
+    print(f"wrote {RESULTS} and {FIGURE} ({result['wall_time_s']} s)", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    np.seterr(all="ignore")
+    main()
