@@ -130,8 +130,9 @@ class LeftTurnTrafficTask(LeftTurnTask):
     def __init__(self, config: LeftTurnConfig, traffic: TrafficConfig) -> None:
         if not config.perception.perfect:
             raise ConfigError(
-                f"perception={config.perception!r}: a perception model exists for the paper's "
-                "scene (the north car alone) only so far; traffic is perceived perfectly"
+                "perception: a perception model exists for the paper's scene (the north car "
+                "alone) only so far; traffic is perceived perfectly (drop the perception "
+                "settings, or the traffic)"
             )
         super().__init__(config)
         self.traffic = traffic

@@ -397,7 +397,7 @@ PERCEPTION_AXES = {
     "speed_error_mps": "speed error bound [m/s]",
     "latency_s": "latency [s]",
     "dropout_max_s": "longest miss [s] (5 % per tick)",
-    "sight_distance_m": "sight distance [m] (0: unlimited)",
+    "sight_distance_m": "sight distance [m]",
 }
 
 
@@ -419,6 +419,13 @@ def perception_figure(rows: list[dict[str, Any]], path: Path) -> None:
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for col, sweep in enumerate(sweeps):
         top, bottom = axes[0, col], axes[1, col]
+        levels = sorted({r["level"] for r in rows if r["sweep"] == sweep})
+        # an unlimited sight distance (level 0) sits to the right of the longest one
+        unlimited = max(levels) * 1.4 if sweep == "sight_distance_m" and levels[0] == 0 else None
+
+        def place(level: float, unlimited: float | None = unlimited) -> float:
+            return unlimited if unlimited is not None and level == 0 else level
+
         for k, controller in enumerate(controllers):
             for errors, style in (("adversarial", "-"), ("random", "--")):
                 cell = sorted((r for r in rows if r["sweep"] == sweep
@@ -426,7 +433,8 @@ def perception_figure(rows: list[dict[str, Any]], path: Path) -> None:
                               key=lambda r: r["level"])  # fmt: skip
                 if not cell:
                     continue
-                x = [r["level"] for r in cell]
+                cell.sort(key=lambda r: place(r["level"]))
+                x = [place(r["level"]) for r in cell]
                 rate = [1000.0 * r["failures"] / r["episodes"] for r in cell]
                 label = f"{controller} ({errors})"
                 top.plot(x, rate, style, marker="o", color=colours[k], label=label)
@@ -436,6 +444,11 @@ def perception_figure(rows: list[dict[str, Any]], path: Path) -> None:
         top.set_ylabel("failures per 1,000 episodes" if col == 0 else "")
         bottom.set_ylabel("efficiency against the oracle" if col == 0 else "")
         bottom.set_xlabel(PERCEPTION_AXES.get(sweep, sweep))
+        if unlimited is not None:
+            ticks = [place(x) for x in levels]
+            names = ["none" if x == 0 else f"{x:g}" for x in levels]
+            for ax in (top, bottom):
+                ax.set_xticks(ticks, names)
         for ax in (top, bottom):
             ax.grid(alpha=0.3)
     handles, labels = axes[0, 0].get_legend_handles_labels()
