@@ -110,8 +110,11 @@ def guarantee(count: int, small: int) -> list[dict[str, object]]:
         failures = sum(f["failures"] for f in families.values())
         rows.append({"bounds": name, "perception": perception, "certified_perception": assume,
                      "episodes": total, "failures": failures, "families": families})  # fmt: skip
-        print(f"  certified ({assume:8s}) {name:28s} {failures:5d} failures in {total:,} "
-              f"episodes over {len(families)} adversary families", file=sys.stderr)
+        print(
+            f"  certified ({assume:8s}) {name:28s} {failures:5d} failures in {total:,} "
+            f"episodes over {len(families)} adversary families",
+            file=sys.stderr,
+        )
     return rows
 
 
@@ -153,8 +156,12 @@ def coverage() -> list[dict[str, object]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--episodes", type=int, default=1000, help="scenarios per sweep cell")
-    parser.add_argument("--guarantee", type=int, default=11_200,
-                        help="scenarios per adversary family, main set (9 families)")
+    parser.add_argument(
+        "--guarantee",
+        type=int,
+        default=11_200,
+        help="scenarios per adversary family, main set (9 families)",
+    )
     parser.add_argument("--replot", action="store_true", help="redraw the figure only")
     args = parser.parse_args()
     torch.set_num_threads(1)

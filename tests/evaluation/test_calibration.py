@@ -45,7 +45,7 @@ def test_bad_pairs_are_refused_with_their_row():
     seen = np.array([1.0, 2.0, np.nan, 4.0])
     with pytest.raises(ConfigError, match="seen_position_m is nan in row 3"):
         calibrate(seen, seen, seen, seen)
-    with pytest.raises(ConfigError, match="alpha=0.01 needs at least 99"):
+    with pytest.raises(ConfigError, match=r"alpha=0\.01 needs at least 99"):
         calibrate(*(np.zeros(50),) * 4, alpha=0.01)
 
 
@@ -55,8 +55,12 @@ def test_calibrate_perception_writes_a_block_that_evaluate_reads(tmp_path, capsy
     speed = rng.uniform(5, 12, 4000)
     pairs = tmp_path / "pairs.csv"
     rows = ["seen_position_m,true_position_m,seen_speed_mps,true_speed_mps"]
-    rows += [f"{p + e},{p},{v + f},{v}" for p, v, e, f in
-             zip(truth, speed, rng.normal(0, 0.5, 4000), rng.normal(0, 0.2, 4000), strict=True)]
+    rows += [
+        f"{p + e},{p},{v + f},{v}"
+        for p, v, e, f in zip(
+            truth, speed, rng.normal(0, 0.5, 4000), rng.normal(0, 0.2, 4000), strict=True
+        )
+    ]
     pairs.write_text("\n".join(rows) + "\n")
     assert main(["calibrate-perception", "--pairs", str(pairs), "--alpha", "0.1",
                  "--out", str(tmp_path / "cal")]) == 0  # fmt: skip
@@ -65,8 +69,20 @@ def test_calibrate_perception_writes_a_block_that_evaluate_reads(tmp_path, capsy
     assert block["position_error_m"] == pytest.approx(0.5 * 1.645, rel=0.1)
     assert abs(report["coverage_position"] - 0.9) <= 0.02
     out = tmp_path / "eval"
-    code = main(["evaluate", "--model", "certified", "--episodes", "20", "--perception",
-                 str(tmp_path / "cal" / "perception.yaml"), "--no-progress", "--out", str(out)])
+    code = main(
+        [
+            "evaluate",
+            "--model",
+            "certified",
+            "--episodes",
+            "20",
+            "--perception",
+            str(tmp_path / "cal" / "perception.yaml"),
+            "--no-progress",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
     setting = summary["settings"][0]

@@ -105,7 +105,8 @@ def test_vehicles_beyond_the_sight_distance_are_not_seen():
     "perception",
     [
         {"position_error_m": 1.0, "speed_error_mps": 1.0, "latency_s": 0.2},
-        {"position_error_m": 2.0, "speed_error_mps": 2.0, "latency_s": 0.4, "errors": "adversarial"},
+        {"position_error_m": 2.0, "speed_error_mps": 2.0, "latency_s": 0.4,
+         "errors": "adversarial"},
         {"position_error_m": 0.5, "dropout_prob": 0.1, "dropout_max_s": 1.0,
          "sight_distance_m": 30.0, "errors": "adversarial"},
     ],

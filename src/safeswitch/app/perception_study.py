@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Literal
 
 from safeswitch.app.evaluate import controller_setup
 from safeswitch.core.config import from_dict
@@ -35,7 +35,7 @@ class Controller:
 
     name: str
     model: str
-    assume: str | None
+    assume: Literal["declared", "perfect"] | None
 
 
 CONTROLLERS = (

@@ -133,7 +133,7 @@ def concat_rows(batches: list[Any]) -> Any:
 def take_rows(batch: Any, rows: NDArray[Any]) -> Any:
     """A copy of a batch dataclass with every array field ``f[rows]`` (indices or a mask;
     repeats allowed), recursing into dataclass fields."""
-    values = {}
+    values: dict[str, Any] = {}
     for f in fields(batch):
         value = getattr(batch, f.name)
         if value is None:  # an optional part the batch does not have

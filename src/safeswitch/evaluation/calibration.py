@@ -145,7 +145,7 @@ def calibrate(
         if bad.size:
             raise ConfigError(f"pairs: {name} is {float(column[bad[0]])!r} in row {bad[0] + 1}")
     order = np.random.default_rng(seed).permutation(count)
-    held = int(round(count * holdout))
+    held = round(count * holdout)
     test, fit = order[:held], order[held:]
     need = math.ceil(1.0 / alpha) - 1
     if fit.size < need or test.size == 0:
@@ -184,7 +184,9 @@ def read_pairs(path: str | Path) -> tuple[FloatArray, FloatArray, FloatArray, Fl
                 rows.append([float(row[c]) for c in PAIR_COLUMNS])
             except (TypeError, ValueError):
                 bad = next(c for c in PAIR_COLUMNS if not _is_number(row[c]))
-                raise ConfigError(f"{path}: line {line}: {bad}={row[bad]!r} is not a number") from None
+                raise ConfigError(
+                    f"{path}: line {line}: {bad}={row[bad]!r} is not a number"
+                ) from None
     table = np.asarray(rows, dtype=np.float64).reshape(-1, 4)
     return table[:, 0], table[:, 1], table[:, 2], table[:, 3]
 

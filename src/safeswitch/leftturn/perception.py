@@ -9,11 +9,11 @@ keep the truth, and everything that decides reads what is seen (:class:`Percepti
   before the episode, extrapolated back), with a position error within ``position_error_m``
   along its path and a speed error within ``speed_error_mps`` — independent and uniform, or, with
   ``errors: adversarial``, the worst case on every tick (farther back and slower, until the
-  error can show it past its conflict zone: then farther on and faster, as if it had left); it misses a seen vehicle with
-  probability ``dropout_prob`` per tick for up to ``dropout_max_s``, then sees it for at least a
-  tick; it never sees a vehicle farther than ``sight_distance_m`` from its conflict point.
-  Random numbers are a pure function of the scenario and the tick, so a scenario replays
-  exactly.
+  error can show it past its conflict zone: then farther on and faster, as if it had left); it
+  misses a seen vehicle with probability ``dropout_prob`` per tick for up to ``dropout_max_s``,
+  then sees it for at least a tick; it never sees a vehicle farther than ``sight_distance_m``
+  from its conflict point. Random numbers are a pure function of the scenario and the tick, so
+  a scenario replays exactly.
 * **Point estimate** (what the paper's logic, the Safety controller's window and the policy's
   observation read): the latest sighting, held while the vehicle is missed; before the first
   one, a vehicle at the edge of the sight distance at the speed limit.
@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -154,7 +154,7 @@ class Perception:
         p, dt = config.perception, config.episode.dt
         self.config = p
         latency = p.ticks(p.latency_s, dt, "latency_s")
-        dropout = int(math.floor(p.dropout_max_s / dt + 1e-9)) if p.dropout_prob > 0 else 0
+        dropout = math.floor(p.dropout_max_s / dt + 1e-9) if p.dropout_prob > 0 else 0
         top = config.certified.other_max_speed_kmh / 3.6
         sight = math.inf if p.sight_distance_m is None else p.sight_distance_m
         unseen = point - sight + top * (latency + dropout + 1) * dt

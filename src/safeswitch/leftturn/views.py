@@ -246,7 +246,8 @@ def north_view(
         other_lead=fixed.zero if uncertainty is None else uncertainty[0].reshape(batch, 1),
         other_lag=fixed.zero if uncertainty is None else uncertainty[1].reshape(batch, 1),
         other_speed_high=(
-            north_speed.reshape(batch, 1) if uncertainty is None
+            north_speed.reshape(batch, 1)
+            if uncertainty is None
             else uncertainty[2].reshape(batch, 1)
         ),
     )
