@@ -186,6 +186,27 @@ def test_the_observation_and_the_paper_logic_see_what_is_seen():
                                   state.world.progress[:, 1])  # fmt: skip
 
 
+def test_the_vec_env_resets_perception_with_its_episodes():
+    from safeswitch.leftturn import make_vec_env
+
+    perception = {"position_error_m": 1.0, "latency_s": 0.2, "sight_distance_m": 50.0,
+                  "dropout_prob": 0.1, "dropout_max_s": 0.2}  # fmt: skip
+    env = make_vec_env(6, switching="certified", seed=3, perception=perception)
+    env.reset()
+    low, high = env.observation_space.low, env.observation_space.high
+    ended = np.zeros(6, dtype=bool)
+    for _ in range(env.task.config.episode.horizon_ticks + 30):
+        obs, _, done, _ = env.step(np.zeros((6, 1)))
+        assert np.all((obs >= low) & (obs <= high))
+        ended |= done
+    assert ended.all()
+    # every new episode's sensor history is its own: the north car's past, never the old
+    # episode's (which ended far along its route)
+    seen = env.state.perception
+    assert np.all(seen.history[:, :, 0] <= env.state.world.progress[:, 1:2] + 1e-9)
+    assert np.all(seen.high >= env.state.world.progress[:, 1] - 1e-9)
+
+
 def test_perfect_perception_keeps_no_perception_state():
     task = task_with({})
     assert task.perception is None

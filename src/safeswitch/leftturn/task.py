@@ -516,10 +516,13 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
 
     @staticmethod
     def seen_north(state: TaskState, observation: NDArray[np.float32]) -> NDArray[np.float32]:
-        """``observation`` with the north car's values as the ego sees them (in place)."""
+        """``observation`` with the north car's values as the ego sees them (in place; within
+        the observation's bounds: a car not yet seen stands at the edge of the sight distance,
+        which may lie beyond them)."""
         seen = state.perception
         if seen is not None:
-            observation[:, 3], observation[:, 4], observation[:, 5] = seen.x, seen.y, seen.speed
+            low, high = OBSERVATION_LOW[3:], OBSERVATION_HIGH[3:]
+            observation[:, 3:] = np.clip(np.stack([seen.x, seen.y, seen.speed], 1), low, high)
         return observation
 
     def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
