@@ -1,6 +1,8 @@
 """Perception (the paper's Remark 2): what the ego sees of the north car, and the certified
 logic's guarantee for any errors within the declared bounds."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -22,6 +24,14 @@ def task_with(perception, switching="certified", assume="declared", scope="episo
     return build_task(None, config)
 
 
+def north(perception):
+    """The north car's column of a perception state."""
+    return SimpleNamespace(**{
+        name: getattr(perception, name)[:, 0]
+        for name in ("progress", "speed", "seen", "ever", "low", "high", "speed_high")
+    })  # fmt: skip
+
+
 def trace(task, count=200, seed=3, action=0.2):
     """Every tick of ``count`` episodes under a constant action: the truth (north progress and
     speed), the perception state, and the scenario set."""
@@ -30,7 +40,7 @@ def trace(task, count=200, seed=3, action=0.2):
     truth, seen = [], []
     for _ in range(task.config.episode.horizon_ticks):
         truth.append((state.world.progress[:, 1].copy(), state.world.vehicles.speed[:, 1].copy()))
-        seen.append(state.perception)
+        seen.append(north(state.perception))
         state, _ = task.step(state, np.full(count, action))
     return truth, seen
 
@@ -170,12 +180,14 @@ def test_the_observation_and_the_paper_logic_see_what_is_seen():
     scenarios = task.scenario_set(2, 50)
     state = task.initial(scenarios)
     obs = task.observe(state)
-    np.testing.assert_allclose(obs[:, 5], state.perception.speed, rtol=1e-6)
+    np.testing.assert_allclose(obs[:, 5], state.perception.speed[:, 0], rtol=1e-6)
     for _ in range(40):
         state, record = task.step(state, np.zeros(50))
-    seen = state.perception
-    np.testing.assert_allclose(record.observation[:, 3], seen.x, rtol=1e-6, atol=1e-4)
-    np.testing.assert_allclose(record.observation[:, 4], seen.y, rtol=1e-6, atol=1e-4)
+    seen = north(state.perception)
+    xy, _ = task.world.routes[1].pose_at(seen.progress)
+    x, y = xy[:, 0], xy[:, 1]
+    np.testing.assert_allclose(record.observation[:, 3], x, rtol=1e-6, atol=1e-4)
+    np.testing.assert_allclose(record.observation[:, 4], y, rtol=1e-6, atol=1e-4)
     # the north car drives along y: half a second late it is seen metres behind
     behind = np.abs(record.observation[:, 4] - state.world.vehicles.y[:, 1])
     assert np.all(behind > 1.0)
@@ -203,8 +215,8 @@ def test_the_vec_env_resets_perception_with_its_episodes():
     # every new episode's sensor history is its own: the north car's past, never the old
     # episode's (which ended far along its route)
     seen = env.state.perception
-    assert np.all(seen.history[:, :, 0] <= env.state.world.progress[:, 1:2] + 1e-9)
-    assert np.all(seen.high >= env.state.world.progress[:, 1] - 1e-9)
+    assert np.all(seen.history[:, 0, :, 0] <= env.state.world.progress[:, 1:2] + 1e-9)
+    assert np.all(seen.high[:, 0] >= env.state.world.progress[:, 1] - 1e-9)
 
 
 def test_perfect_perception_keeps_no_perception_state():

@@ -37,17 +37,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import jit
-from safeswitch.sim.geometry import pose
 
 if TYPE_CHECKING:
     from safeswitch.leftturn.config import LeftTurnConfig
-    from safeswitch.sim.geometry import RouteSet
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -71,15 +69,11 @@ class PerceptionConstants(NamedTuple):
         speed_error: Bound on the speed error [m/s].
         sight: Sight distance from the conflict point [m] (``inf``: none).
         adversarial: Worst-case errors instead of random ones.
-        point: The vehicle's conflict point on its route [m].
-        exit: Exit of its conflict zone on its route [m] (where adversarial errors turn).
-        other_accel: Assumed largest acceleration of the vehicle [m/s²].
+        other_accel: Assumed largest acceleration of a vehicle [m/s²].
         other_top: Assumed top speed [m/s].
-        unseen_high: Upper bound on the progress of a vehicle never seen [m].
         unseen_speed: Speed of the point estimate of a vehicle never seen [m/s].
-        spacing: Waypoint spacing of the routes [m].
-        k_max: Last segment index of a route.
-        base: Flat index of the vehicle's route's first waypoint.
+        unseen_reach: How far a vehicle never seen may have come since it was beyond the sight
+            distance or not yet in the scene: ``other_top · (latency + dropout + 1) · dt`` [m].
     """
 
     dt: float
@@ -90,36 +84,56 @@ class PerceptionConstants(NamedTuple):
     speed_error: float
     sight: float
     adversarial: bool
-    point: float
-    exit: float
     other_accel: float
     other_top: float
-    unseen_high: float
     unseen_speed: float
-    spacing: float
-    k_max: int
-    base: int
+    unseen_reach: float
+
+
+class Sighted(NamedTuple):
+    """The vehicles a tick of the sensor looks at, ``[B, V]`` each (``V``: the north car, then
+    in traffic every slot).
+
+    Attributes:
+        progress: True arc length along its route [m].
+        speed: True speed [m/s].
+        exists: The vehicle is in the scene.
+        fresh: A new vehicle took the slot on this tick (its sensor and track start over).
+        point: Its conflict point with the ego on its route [m] (``nan``: its route does not
+            cross the ego's).
+        exit: Exit of its conflict zone on its route [m] (where adversarial errors turn).
+        bounded: A vehicle never seen is known to be no farther on than the sight edge plus
+            ``unseen_reach`` (the paper's north car, always in the scene); else it is left to
+            the phantoms of the certified logic (a vehicle of the streams).
+    """
+
+    progress: FloatArray
+    speed: FloatArray
+    exists: BoolArray
+    fresh: BoolArray
+    point: FloatArray
+    exit: FloatArray
+    bounded: BoolArray
 
 
 @dataclass
 class PerceptionState:
-    """The sensor's and the tracker's state for ``B`` episodes (the other vehicle, slot 1).
+    """The sensor's and the tracker's state for ``B`` episodes and ``V`` vehicles (column 0 the
+    north car, then in traffic every slot), arrays ``[B, V]``.
 
     Attributes:
-        history: The true (progress, speed) of the last ``latency + 1`` ticks, a ring indexed
-            by tick ``[B, L + 1, 2]``.
+        history: The true (progress, speed, in the scene) of the last ``latency + 1`` ticks, a
+            ring indexed by tick ``[B, V, L + 1, 3]``.
         key: The episode's random key ``[B]``.
         missed: Ticks of the current miss still to come (0: none; -1: a miss just ended, the
-            vehicle is seen this tick) ``[B]``.
-        ever: The vehicle has been seen ``[B]``.
-        seen: It was seen on the last tick ``[B]``.
-        progress: Point estimate of its progress [m] ``[B]``.
-        speed: Point estimate of its speed [m/s] ``[B]``.
-        x: The point estimate's position on the route [m] ``[B]``.
-        y: ``[B]``.
-        low: Lower bound on its true progress [m] ``[B]`` (``-FAR``: unknown).
-        high: Upper bound on its true progress [m] ``[B]``.
-        speed_high: Upper bound on its true speed [m/s] ``[B]``.
+            vehicle is seen this tick).
+        ever: The vehicle has been seen.
+        seen: It was seen on the last tick.
+        progress: Point estimate of its progress [m].
+        speed: Point estimate of its speed [m/s].
+        low: Lower bound on its true progress [m] (``-FAR``: unknown).
+        high: Upper bound on its true progress [m].
+        speed_high: Upper bound on its true speed [m/s].
     """
 
     history: FloatArray
@@ -129,35 +143,33 @@ class PerceptionState:
     seen: BoolArray
     progress: FloatArray
     speed: FloatArray
-    x: FloatArray
-    y: FloatArray
     low: FloatArray
     high: FloatArray
     speed_high: FloatArray
 
+    def copy(self) -> PerceptionState:
+        """A copy to advance (the key is shared: it never changes)."""
+        return PerceptionState(
+            self.history.copy(), self.key, self.missed.copy(), self.ever.copy(),
+            self.seen.copy(), self.progress.copy(), self.speed.copy(), self.low.copy(),
+            self.high.copy(), self.speed_high.copy(),
+        )  # fmt: skip
+
 
 class Perception:
-    """The sensor and the tracker of a left-turn scene with one other vehicle (the paper's).
+    """The sensor and the tracker of a left-turn scene.
 
     Args:
         config: The scene's configuration (its ``perception`` block, the certified logic's
             assumptions on other vehicles, the tick and the speed limit).
-        routes: The world's routes (for the point estimate's position).
-        point: The other vehicle's conflict point on its route [m].
-        exit_: Exit of its conflict zone on its route [m].
-        base: Flat index of its route's first waypoint.
     """
 
-    def __init__(
-        self, config: LeftTurnConfig, routes: RouteSet, point: float, exit_: float, base: int
-    ) -> None:
+    def __init__(self, config: LeftTurnConfig) -> None:
         p, dt = config.perception, config.episode.dt
         self.config = p
         latency = p.ticks(p.latency_s, dt, "latency_s")
         dropout = math.floor(p.dropout_max_s / dt + 1e-9) if p.dropout_prob > 0 else 0
         top = config.certified.other_max_speed_kmh / 3.6
-        sight = math.inf if p.sight_distance_m is None else p.sight_distance_m
-        unseen = point - sight + top * (latency + dropout + 1) * dt
         self.constants = PerceptionConstants(
             dt=dt,
             latency=latency,
@@ -165,76 +177,76 @@ class Perception:
             dropout_prob=p.dropout_prob,
             position_error=p.position_error_m,
             speed_error=p.speed_error_mps,
-            sight=sight,
+            sight=math.inf if p.sight_distance_m is None else p.sight_distance_m,
             adversarial=p.errors == "adversarial",
-            point=point,
-            exit=exit_,
             other_accel=config.certified.other_max_accel,
             other_top=top,
-            unseen_high=unseen,
             unseen_speed=config.controllers.speed_limit,
-            spacing=routes.spacing,
-            k_max=routes.size - 2,
-            base=int(base),
+            unseen_reach=top * (latency + dropout + 1) * dt,
         )
-        self._tables = routes.tables
 
-    def initial(
-        self, progress: FloatArray, speed: FloatArray, key: NDArray[np.uint64]
-    ) -> PerceptionState:
-        """The state at an episode's start, the vehicle at ``progress`` with ``speed`` ``[B]``
-        (driving at that speed before: the latency's history), its first sighting taken."""
+    def phantom_entry(self, entry: FloatArray, point: FloatArray, zone_entry: FloatArray) -> Any:
+        """The certified logic's phantoms under this perception: a vehicle not yet seen may be
+        just beyond the sight edge, or have entered or come within sight ``latency + dropout``
+        ticks ago — its distance to its zone (``entry`` from the start of its approach; its
+        route's ``point`` and ``zone_entry``) shortened accordingly, never below 0 [m]."""
         c = self.constants
-        batch = progress.shape[0]
-        back = np.arange(c.latency + 1)[None, :]  # ticks before the start
-        slots = (-back) % (c.latency + 1)
-        history = np.empty((batch, c.latency + 1, 2))
-        history[:, slots[0], 0] = progress[:, None] - speed[:, None] * back * c.dt
-        history[:, slots[0], 1] = speed[:, None]
-        empty = np.zeros(batch)
+        beyond = zone_entry - (point - c.sight)
+        return np.maximum(np.minimum(entry, beyond) - c.unseen_reach, 0.0)
+
+    def initial(self, sighted: Sighted, key: NDArray[np.uint64]) -> PerceptionState:
+        """The state at an episode's start, its first sighting taken: the vehicles in the scene
+        drove at their speed before it (the latency's history)."""
+        c = self.constants
+        batch, count = sighted.progress.shape
+        ring = c.latency + 1
+        back = np.arange(ring)  # ticks before the start
+        history = np.zeros((batch, count, ring, 3))
+        slots = (-back) % ring
+        history[:, :, slots, 0] = sighted.progress[..., None] - sighted.speed[..., None] * (
+            back * c.dt
+        )
+        history[:, :, slots, 1] = sighted.speed[..., None]
+        history[:, :, slots, 2] = sighted.exists[..., None]
+        empty = np.zeros((batch, count))
         state = PerceptionState(
             history=history, key=np.asarray(key, dtype=np.uint64).copy(),
-            missed=np.zeros(batch, dtype=np.int64), ever=np.zeros(batch, dtype=np.bool_),
-            seen=np.zeros(batch, dtype=np.bool_), progress=empty.copy(), speed=empty.copy(),
-            x=empty.copy(), y=empty.copy(), low=empty.copy(), high=empty.copy(),
-            speed_high=empty.copy(),
+            missed=np.zeros((batch, count), dtype=np.int64),
+            ever=np.zeros((batch, count), dtype=np.bool_),
+            seen=np.zeros((batch, count), dtype=np.bool_), progress=empty.copy(),
+            speed=empty.copy(), low=empty.copy(), high=empty.copy(), speed_high=empty.copy(),
         )  # fmt: skip
-        self._sense(state, np.zeros(batch, dtype=np.int64), progress, speed, first=True)
+        self._sense(state, np.zeros(batch, dtype=np.int64), sighted, first=True)
         return state
 
     def sense(
-        self, state: PerceptionState, tick: NDArray[np.int64], progress: FloatArray,
-        speed: FloatArray,
-    ) -> PerceptionState:  # fmt: skip
-        """The state after the tick that brought the vehicle to ``progress`` and ``speed``
-        (tick ``tick`` of each episode); ``state`` is not modified."""
-        new = PerceptionState(
-            history=state.history.copy(), key=state.key, missed=state.missed.copy(),
-            ever=state.ever.copy(), seen=np.empty_like(state.seen),
-            progress=state.progress.copy(), speed=state.speed.copy(), x=state.x.copy(),
-            y=state.y.copy(), low=state.low.copy(), high=state.high.copy(),
-            speed_high=state.speed_high.copy(),
-        )  # fmt: skip
-        self._sense(new, tick, progress, speed, first=False)
+        self, state: PerceptionState, tick: NDArray[np.int64], sighted: Sighted
+    ) -> PerceptionState:
+        """The state after the tick that brought the vehicles to ``sighted`` (tick ``tick`` of
+        each episode); ``state`` is not modified."""
+        new = state.copy()
+        self._sense(new, tick, sighted, first=False)
         return new
 
     def _sense(
-        self, s: PerceptionState, tick: NDArray[np.int64], progress: FloatArray,
-        speed: FloatArray, first: bool,
-    ) -> None:  # fmt: skip
+        self, s: PerceptionState, tick: NDArray[np.int64], v: Sighted, first: bool
+    ) -> None:
+        f64 = np.float64
         _sense(
-            self.constants, self._tables, first, np.ascontiguousarray(tick),
-            np.ascontiguousarray(progress, dtype=np.float64),
-            np.ascontiguousarray(speed, dtype=np.float64), s.history, s.key, s.missed, s.ever,
-            s.seen, s.progress, s.speed, s.x, s.y, s.low, s.high, s.speed_high,
+            self.constants, first, np.ascontiguousarray(tick),
+            np.ascontiguousarray(v.progress, dtype=f64), np.ascontiguousarray(v.speed, dtype=f64),
+            np.ascontiguousarray(v.exists), np.ascontiguousarray(v.fresh),
+            np.ascontiguousarray(v.point, dtype=f64), np.ascontiguousarray(v.exit, dtype=f64),
+            np.ascontiguousarray(v.bounded), s.history, s.key, s.missed, s.ever, s.seen,
+            s.progress, s.speed, s.low, s.high, s.speed_high,
         )  # fmt: skip
 
     @staticmethod
     def uncertainty(state: PerceptionState) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """What the tracker knows beyond the point estimate ``[B]`` each: how far the vehicle
+        """What the tracker knows beyond the point estimate ``[B, V]`` each: how far a vehicle
         may be ahead of it (``high − progress``) and behind it (``progress − low``, ``FAR`` if
         unknown) [m], and the bound on its speed [m/s]."""
-        lead = state.high - state.progress
+        lead = np.minimum(state.high - state.progress, FAR)
         lag = np.minimum(state.progress - state.low, FAR)
         return lead, lag, state.speed_high
 
@@ -290,65 +302,76 @@ def _speed_after(speed: float, time: float, accel: float, top: float) -> float:
 
 @jit
 def _sense(
-    c: PerceptionConstants, tables: FloatArray, first: bool, tick: NDArray[np.int64],
-    progress: FloatArray, speed: FloatArray, history: FloatArray, key: NDArray[np.uint64],
+    c: PerceptionConstants, first: bool, tick: NDArray[np.int64], progress: FloatArray,
+    speed: FloatArray, exists: BoolArray, fresh: BoolArray, point: FloatArray,
+    exit_: FloatArray, bounded: BoolArray, history: FloatArray, key: NDArray[np.uint64],
     missed: NDArray[np.int64], ever: BoolArray, seen: BoolArray, est_progress: FloatArray,
-    est_speed: FloatArray, est_x: FloatArray, est_y: FloatArray, low: FloatArray,
-    high: FloatArray, speed_high: FloatArray,
+    est_speed: FloatArray, low: FloatArray, high: FloatArray, speed_high: FloatArray,
 ) -> None:  # fmt: skip
-    """One tick of the sensor and the tracker for every episode, in place (see the module
-    docstring)."""
+    """One tick of the sensor and the tracker for every vehicle of every episode, in place (see
+    the module docstring)."""
     ring = c.latency + 1
     a, top = c.other_accel, c.other_top
     for b in range(progress.shape[0]):
         t = tick[b]
-        if not first:
-            history[b, t % ring, 0], history[b, t % ring, 1] = progress[b], speed[b]
-        m = (t + 1) % ring  # the slot of tick t − latency
-        true_p, true_v = history[b, m, 0], history[b, m, 1]
-        visible = c.point - true_p <= c.sight
-        # Missed detections: a miss starts with dropout_prob on a tick the vehicle is not
-        # already missed, lasts up to dropout_ticks, and is followed by a tick seen.
-        if missed[b] > 0:
-            visible = False
-            missed[b] -= 1
-            if missed[b] == 0:
-                missed[b] = -1
-        elif missed[b] == -1:
-            missed[b] = 0
-        elif not first and c.dropout_ticks > 0 and _uniform(key[b], t, 0) < c.dropout_prob:
-            visible = False
-            length = c.dropout_ticks
-            if not c.adversarial:
-                length = 1 + min(int(_uniform(key[b], t, 1) * c.dropout_ticks), c.dropout_ticks - 1)
-            missed[b] = length - 1 if length > 1 else -1
-        # The tracker's interval, propagated over the tick (unknown before the first tick).
-        if first:
-            hi, lo, vh = math.inf, -FAR, max(top, true_v)
-        else:
-            hi = high[b] + reach(speed_high[b], c.dt, a, top)
-            lo, vh = low[b], _speed_after(speed_high[b], c.dt, a, top)
-        seen[b] = visible
-        if visible:
-            if c.adversarial:
-                # Farther back and slower, until the error can show it past its zone: then
-                # farther on and faster, as if it had left.
-                sign = 1.0 if true_p + c.position_error > c.exit else -1.0
-                ep, ev = sign * c.position_error, sign * c.speed_error
+        for v in range(progress.shape[1]):
+            k = key[b] ^ (np.uint64(v) * np.uint64(0xD1B54A32D192ED03))
+            new = first or fresh[b, v]
+            if fresh[b, v] and not first:
+                # A new vehicle in the slot: nothing of it was there before.
+                for j in range(ring):
+                    history[b, v, j, 2] = 0.0
+                missed[b, v], ever[b, v] = 0, False
+            if not first:
+                slot = t % ring
+                history[b, v, slot, 0], history[b, v, slot, 1] = progress[b, v], speed[b, v]
+                history[b, v, slot, 2] = 1.0 if exists[b, v] else 0.0
+            m = (t + 1) % ring  # the slot of tick t − latency
+            true_p, true_v = history[b, v, m, 0], history[b, v, m, 1]
+            visible = history[b, v, m, 2] > 0.5 and point[b, v] - true_p <= c.sight
+            # Missed detections: a miss starts with dropout_prob on a tick the vehicle is not
+            # already missed, lasts up to dropout_ticks, and is followed by a tick seen.
+            if missed[b, v] > 0:
+                visible = False
+                missed[b, v] -= 1
+                if missed[b, v] == 0:
+                    missed[b, v] = -1
+            elif missed[b, v] == -1:
+                missed[b, v] = 0
+            elif not new and c.dropout_ticks > 0 and _uniform(k, t, 0) < c.dropout_prob:
+                visible = False
+                length = c.dropout_ticks
+                if not c.adversarial:
+                    draw = int(_uniform(k, t, 1) * c.dropout_ticks)
+                    length = 1 + min(draw, c.dropout_ticks - 1)
+                missed[b, v] = length - 1 if length > 1 else -1
+            # The tracker's interval, propagated over the tick (unknown for a new vehicle).
+            if new:
+                hi, lo, vh = math.inf, -FAR, top
             else:
-                ep = (2.0 * _uniform(key[b], t, 2) - 1.0) * c.position_error
-                ev = (2.0 * _uniform(key[b], t, 3) - 1.0) * c.speed_error
-            mp, mv = true_p + ep, max(true_v + ev, 0.0)
-            est_progress[b], est_speed[b] = mp, mv
-            ever[b] = True
-            # What this sighting alone says about now: its errors, then the latency.
-            age = c.latency * c.dt
-            v_then = mv + c.speed_error
-            hi = min(hi, mp + c.position_error + reach(v_then, age, a, top))
-            vh = min(vh, _speed_after(v_then, age, a, top))
-            lo = max(lo, mp - c.position_error)
-        elif not ever[b]:
-            est_progress[b], est_speed[b] = c.point - c.sight, c.unseen_speed
-            hi = min(hi, c.unseen_high)
-        high[b], low[b], speed_high[b] = hi, lo, vh
-        est_x[b], est_y[b], _ = pose(tables, c.spacing, c.k_max, c.base, est_progress[b])
+                hi = high[b, v] + reach(speed_high[b, v], c.dt, a, top)
+                lo, vh = low[b, v], _speed_after(speed_high[b, v], c.dt, a, top)
+            seen[b, v] = visible
+            if visible:
+                if c.adversarial:
+                    # Farther back and slower, until the error can show it past its zone:
+                    # then farther on and faster, as if it had left.
+                    sign = 1.0 if true_p + c.position_error > exit_[b, v] else -1.0
+                    ep, ev = sign * c.position_error, sign * c.speed_error
+                else:
+                    ep = (2.0 * _uniform(k, t, 2) - 1.0) * c.position_error
+                    ev = (2.0 * _uniform(k, t, 3) - 1.0) * c.speed_error
+                mp, mv = true_p + ep, max(true_v + ev, 0.0)
+                est_progress[b, v], est_speed[b, v] = mp, mv
+                ever[b, v] = True
+                # What this sighting alone says about now: its errors, then the latency.
+                age = c.latency * c.dt
+                v_then = mv + c.speed_error
+                hi = min(hi, mp + c.position_error + reach(v_then, age, a, top))
+                vh = min(vh, _speed_after(v_then, age, a, top))
+                lo = max(lo, mp - c.position_error)
+            elif not ever[b, v]:
+                est_progress[b, v], est_speed[b, v] = point[b, v] - c.sight, c.unseen_speed
+                if bounded[b, v]:
+                    hi = min(hi, point[b, v] - c.sight + c.unseen_reach)
+            high[b, v], low[b, v], speed_high[b, v] = hi, lo, vh

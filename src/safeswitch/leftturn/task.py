@@ -40,7 +40,7 @@ from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import Supervision, SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.config import LeftTurnConfig
-from safeswitch.leftturn.perception import Perception, PerceptionState, episode_keys
+from safeswitch.leftturn.perception import Perception, PerceptionState, Sighted, episode_keys
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
@@ -99,8 +99,9 @@ class TaskState:
             (``PID_b``'s feedback).
         tick: Ticks since the episode started ``[B]``.
         outcome: Who crossed first, a code of :data:`OUTCOMES` ``[B]``.
-        perception: What the ego's sensor and tracker know of the north car
-            (:mod:`~safeswitch.leftturn.perception`); ``None`` with perfect perception.
+        perception: What the ego's sensor and tracker know of the other vehicles, column 0 the
+            north car (:mod:`~safeswitch.leftturn.perception`); ``None`` with perfect
+            perception.
     """
 
     world: WorldState
@@ -326,10 +327,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         #: The ego's sensor and tracker of the north car (``None``: perfect perception).
         self.perception: Perception | None = None
         if not config.perception.perfect:
-            self.perception = Perception(
-                config, self.world.route_set, self.conflict.s_point_b, self.conflict.zone_b[1],
-                int(self.world.route_base[1]),
-            )  # fmt: skip
+            self.perception = Perception(config)
         self.autopilot = AutopilotParams(steer_gains=config.controllers.lane_pid)
         self._ego_route_end = self.world.routes[0].length - 1.0
         ctrl = config.controllers
@@ -455,7 +453,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         perception = None
         if self.perception is not None:
             key = episode_keys([getattr(scenarios, f.name) for f in fields(Scenarios)])
-            perception = self.perception.initial(progress[:, 1], speed[:, 1], key)
+            perception = self.perception.initial(self.sighted(world, None, None), key)
         return TaskState(
             world=world,
             scenarios=Scenarios(*(getattr(scenarios, f.name).copy() for f in fields(Scenarios))),
@@ -514,16 +512,41 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             out[:, j] = getattr(v, field)[:, slot]
         return self.seen_north(state, out)
 
-    @staticmethod
-    def seen_north(state: TaskState, observation: NDArray[np.float32]) -> NDArray[np.float32]:
+    def seen_north(self, state: TaskState, observation: NDArray[np.float32]) -> NDArray[np.float32]:
         """``observation`` with the north car's values as the ego sees them (in place; within
         the observation's bounds: a car not yet seen stands at the edge of the sight distance,
         which may lie beyond them)."""
         seen = state.perception
         if seen is not None:
+            progress = seen.progress[:, 0]
+            x, y, _ = self.world.route_set.pose_at_flat(self.world.route_base[1], progress)
             low, high = OBSERVATION_LOW[3:], OBSERVATION_HIGH[3:]
-            observation[:, 3:] = np.clip(np.stack([seen.x, seen.y, seen.speed], 1), low, high)
+            observation[:, 3:] = np.clip(np.stack([x, y, seen.speed[:, 0]], 1), low, high)
         return observation
+
+    def sighted(self, world: WorldState, others: Any, before: TaskState | None) -> Sighted:
+        """What the sensor looks at after a tick that led to ``world`` (and ``others``, the
+        other traffic; ``before``: the state before the tick, ``None`` at an episode's start):
+        here the north car alone, always in the scene."""
+        batch = world.progress.shape[0]
+        column = self._north_column(batch)
+        return Sighted(
+            world.progress[:, 1:2], world.vehicles.speed[:, 1:2], column.exists, column.fresh,
+            column.point, column.exit, column.exists,
+        )  # fmt: skip
+
+    def _north_column(self, batch: int) -> Sighted:
+        """The fixed columns of the north car's :class:`Sighted` for ``batch`` episodes."""
+        cached = self.__dict__.get("_north_sighted")
+        if cached is None or cached.exists.shape[0] != batch:
+            ones = np.ones((batch, 1), dtype=np.bool_)
+            cached = Sighted(
+                np.empty((batch, 1)), np.empty((batch, 1)), ones, np.zeros_like(ones),
+                np.full((batch, 1), self.conflict.s_point_b),
+                np.full((batch, 1), self.conflict.zone_b[1]), ones,
+            )  # fmt: skip
+            self.__dict__["_north_sighted"] = cached
+        return cast(Sighted, cached)
 
     def both_at_intersection(self, ego_progress: FloatArray, north_progress: FloatArray) -> Any:
         """Algorithm 1's While condition for arc lengths of any (common) shape."""
@@ -543,8 +566,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             )  # fmt: skip
         return north_view(
             self.north_conflict, progress[:, 0], v.speed[:, 0], v.throttle[:, 0], v.brake[:, 0],
-            seen.progress, seen.speed, state.scenarios.north_speed, window,
-            Perception.uncertainty(seen),
+            seen.progress[:, 0], seen.speed[:, 0], state.scenarios.north_speed, window,
+            tuple(a[:, 0] for a in Perception.uncertainty(seen)),  # type: ignore[arg-type]
         )  # fmt: skip
 
     def phantoms(self) -> Phantoms:
@@ -714,7 +737,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         v = world.vehicles
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
         seen = state.perception
-        seen_north = np.ascontiguousarray(world.progress[:, 1]) if seen is None else seen.progress
+        seen_north = np.ascontiguousarray(world.progress[:, 1] if seen is None else seen.progress[:, 0])
         out = ControllerOutputs.empty(batch)
         _controllers_entry(
             self._controller_constants,
@@ -803,7 +826,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         if self.perception is not None:
             assert state.perception is not None
             perception = self.perception.sense(
-                state.perception, tick, new_world.progress[:, 1], speed[:, 1]
+                state.perception, tick, self.sighted(new_world, others, state)
             )
 
         new_state = self.make_state(
