@@ -240,10 +240,60 @@ def test_bad_perception_settings_are_refused_by_name(perception, message):
         task_with(perception)
 
 
-def test_traffic_refuses_a_perception_model_it_does_not_have():
-    config = resolve_config(perception={"position_error_m": 1.0})
-    with pytest.raises(ConfigError, match="paper's scene"):
-        build_task(None, config, traffic="light")
+def traffic_task(perception, assume="declared", preset="medium", observe="nearest"):
+    config = resolve_config(
+        {"episode": {"learned_scope": "episode"}, "certified": {"perception": assume}},
+        switching="certified", perception=perception,
+    )  # fmt: skip
+    return build_task(None, config, traffic={"preset": preset, "observe": observe})
+
+
+def test_in_traffic_every_vehicle_is_tracked_and_its_track_contains_the_truth():
+    task = traffic_task(EVERYTHING)
+    scenarios = task.scenario_set(4, 64)
+    state = task.initial(scenarios)
+    checked = tracked = 0
+    for _ in range(900):
+        state, _ = task.step(state, np.zeros(64))
+        seen, tr = state.perception, state.traffic
+        known = tr.active & seen.ever[:, 1:]
+        truth = tr.progress[known]
+        assert np.all(seen.low[:, 1:][known] <= truth + 1e-9)
+        assert np.all(truth <= seen.high[:, 1:][known] + 1e-9)
+        assert np.all(tr.speed[known] <= seen.speed_high[:, 1:][known] + 1e-9)
+        within = tr.active & (task._slot_point[tr.route] - tr.progress <= 40.0)
+        checked += int(within.sum())
+        tracked += int((known & within).sum())
+    # nearly every vehicle within sight is tracked (the rest: just come within it, or missed)
+    assert 0.9 * checked < tracked < checked
+    # the logic sees them where the sensor put them, not where they are
+    view, true_view = task.view(state), task.view(state, truth=True)
+    both = view.present[:, 1:] & true_view.present[:, 1:]
+    assert both.any() and not np.allclose(view.other_progress[:, 1:][both],
+                                          true_view.other_progress[:, 1:][both])  # fmt: skip
+
+
+def test_in_traffic_the_phantoms_come_closer_by_what_the_sensor_may_miss():
+    perfect, perceived = traffic_task({}), traffic_task(EVERYTHING)
+    plain, wary = perfect.phantoms(), perceived.phantoms()
+    np.testing.assert_array_equal(plain.ego_zone, wary.ego_zone)
+    reach = 50 / 3.6 * (10 + 25 + 1) * DT  # top speed over latency, a miss and a tick
+    assert np.all(wary.entry <= np.maximum(plain.entry - reach, 0.0) + 1e-9)
+    assert np.all(wary.entry >= 0.0) and np.any(wary.entry < plain.entry - reach - 1e-9)
+    trusting = traffic_task(EVERYTHING, assume="perfect").phantoms()
+    np.testing.assert_array_equal(trusting.entry, plain.entry)
+
+
+def test_in_traffic_the_nearest_vehicles_are_observed_where_they_are_seen():
+    task = traffic_task({"latency_s": 0.4}, observe="nearest")
+    truthful = traffic_task({}, observe="nearest")
+    scenarios = task.scenario_set(2, 16)
+    late, now = task.initial(scenarios), truthful.initial(scenarios)
+    for _ in range(200):
+        late, rec_late = task.step(late, np.zeros(16))
+        now, rec_now = truthful.step(now, np.zeros(16))
+    assert rec_late.observation.shape == rec_now.observation.shape
+    assert not np.allclose(rec_late.observation[:, 6:], rec_now.observation[:, 6:])
 
 
 # -- the guarantee ------------------------------------------------------------------------------
@@ -295,3 +345,21 @@ def test_the_guarantee_holds_on_many_scenarios(perception, trained):
     task = task_with(perception)
     found = collisions_by_adversary(task, 3000, trained, seed=17)
     assert sum(found.values()) == 0, found
+
+
+def test_in_traffic_certified_with_declared_bounds_never_collides():
+    found = collisions_by_adversary(traffic_task(EVERYTHING, preset="heavy"), 48, None)
+    assert len(found) == 8 and sum(found.values()) == 0, found
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", ["light", "medium", "heavy", "test"])
+def test_in_traffic_the_guarantee_holds_at_every_density(preset):
+    found = collisions_by_adversary(traffic_task(EVERYTHING, preset=preset), 256, None, seed=9)
+    assert sum(found.values()) == 0, found
+
+
+@pytest.mark.slow
+def test_in_traffic_trusting_what_it_sees_collides():
+    found = collisions_by_adversary(traffic_task(EVERYTHING, assume="perfect"), 512, None)
+    assert sum(found.values()) > 0, found

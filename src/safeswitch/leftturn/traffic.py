@@ -35,6 +35,7 @@ from safeswitch.core.arrays import jit, plain
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn.config import LeftTurnConfig, TrafficConfig
 from safeswitch.leftturn.logics.certified import CertifiedSwitching, certified_logic
+from safeswitch.leftturn.perception import Perception, Sighted
 from safeswitch.leftturn.scenarios import Scenarios, counter_uniforms, named_scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.leftturn.views import ConflictView, Phantoms, approaching
@@ -51,6 +52,7 @@ from safeswitch.sim.streams import (
     RightOfWay,
     StreamConstants,
     TrafficState,
+    _place,
     network_tables,
     npc_separations,
     place,
@@ -128,12 +130,6 @@ class LeftTurnTrafficTask(LeftTurnTask):
     """
 
     def __init__(self, config: LeftTurnConfig, traffic: TrafficConfig) -> None:
-        if not config.perception.perfect:
-            raise ConfigError(
-                "perception: a perception model exists for the paper's scene (the north car "
-                "alone) only so far; traffic is perceived perfectly (drop the perception "
-                "settings, or the traffic)"
-            )
         super().__init__(config)
         self.traffic = traffic
         footprint = (config.vehicle.length, config.vehicle.width)
@@ -179,6 +175,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
             np.array([n.ego_zone, n.ego_cert_zone, n.north_zone, n.north_cert_zone]),
             np.array([n.ego_point, n.north_point]), n.approach_distance,
         ))  # fmt: skip
+        #: Per movement, its conflict point and its zone's exit (paper margin) with the ego's
+        #: route, on its own route [m] — for a movement that does not cross the ego's, where it
+        #: enters its first conflict zone and where it leaves the junction: what the sensor's
+        #: sight distance and adversarial errors are measured from.
+        crossing = self.network.conflicts[:, self.ego_route]
+        middles = _zone_middles(self.network)[:, self.ego_route]
+        self._slot_point = np.where(np.isnan(middles), self.tables.zones_from, middles)
+        self._slot_exit = np.where(np.isnan(crossing[:, 1]), self.tables.box_exits,
+                                   crossing[:, 1])  # fmt: skip
         low: list[float]
         high: list[float]
         if traffic.observe in ("conflicts", "margins"):
@@ -337,11 +342,42 @@ class LeftTurnTrafficTask(LeftTurnTask):
         base = super().initial(scenarios)
         batch = base.batch_size
         fields = {f: getattr(base, f) for f in base.__dataclass_fields__}
-        return TrafficTaskState(
+        state = TrafficTaskState(
             **fields, traffic=scenarios.traffic.copy(schedule=True),
             npc_collisions=np.zeros(batch, dtype=np.int64),
             ghost_ego=np.zeros(batch, dtype=np.bool_),
         )  # fmt: skip
+        if self.perception is not None:
+            assert base.perception is not None
+            sighted = self.sighted(state.world, state.traffic, None)
+            state.perception = self.perception.initial(sighted, base.perception.key)
+        return state
+
+    def sighted(self, world: WorldState, others: Any, before: TaskState | None) -> Sighted:
+        """The north car (column 0), then every slot: a slot's vehicle is new when the slot was
+        empty, or holds another movement or a vehicle farther back than before (the one that
+        left, replaced within the tick)."""
+        north = super().sighted(world, None, before)
+        if others is None:  # the base scene's start, before the traffic is placed
+            return north
+        traffic: TrafficState = others[0] if isinstance(others, tuple) else others
+        route, active = traffic.route, traffic.active
+        fresh = np.zeros_like(active)
+        if before is not None:
+            assert isinstance(before, TrafficTaskState)
+            old = before.traffic
+            fresh = active & (~old.active | (old.route != route) | (traffic.progress < old.progress))
+        point = self._slot_point[route]
+        exit_ = self._slot_exit[route]
+        return Sighted(
+            np.concatenate([north.progress, traffic.progress], axis=1),
+            np.concatenate([north.speed, traffic.speed], axis=1),
+            np.concatenate([north.exists, active], axis=1),
+            np.concatenate([north.fresh, fresh], axis=1),
+            np.concatenate([north.point, point], axis=1),
+            np.concatenate([north.exit, exit_], axis=1),
+            np.concatenate([north.bounded, np.zeros_like(active)], axis=1),
+        )
 
     # -- the hooks ------------------------------------------------------------------------------
 
@@ -349,8 +385,8 @@ class LeftTurnTrafficTask(LeftTurnTask):
         self, state: TaskState, window: BoolArray | None = None, truth: bool = False
     ) -> ConflictView:
         """Every conflict of the ego: column 0 the north car, then every slot (``present``
-        false where the slot is empty or its route does not cross the ego's). Traffic is
-        perceived perfectly: ``truth`` changes nothing."""
+        false where the slot is empty or its route does not cross the ego's), as the ego
+        perceives them (``truth``: as they are)."""
         assert isinstance(state, TrafficTaskState)
         tr = state.traffic
         batch, slots = tr.route.shape
@@ -361,18 +397,31 @@ class LeftTurnTrafficTask(LeftTurnTask):
             e((2, batch, c)), e((3, batch, c)),
         )  # fmt: skip
         present, inside, zones, points, other = out
-        v, progress = state.world.vehicles, state.world.progress
+        v, progress, seen = state.world.vehicles, state.world.progress, state.perception
         north = (np.ascontiguousarray(progress[:, 1]), np.ascontiguousarray(v.speed[:, 1]),
                  state.scenarios.north_speed)  # fmt: skip
-        _conflict_view_entry(self._conflict_tables, tuple(Drivers.of(tr)),
+        drivers = Drivers.of(tr)
+        lead, lag, speed_high = np.zeros((batch, c)), np.zeros((batch, c)), None
+        if seen is not None and not truth:
+            # What the ego sees: each vehicle once sighted, at its point estimate (a vehicle
+            # not yet seen is left to the phantoms).
+            north = (np.ascontiguousarray(seen.progress[:, 0]),
+                     np.ascontiguousarray(seen.speed[:, 0]), state.scenarios.north_speed)  # fmt: skip
+            drivers = drivers._replace(
+                progress=np.ascontiguousarray(seen.progress[:, 1:]),
+                speed=np.ascontiguousarray(seen.speed[:, 1:]),
+                active=tr.active & seen.ever[:, 1:],
+            )
+            lead, lag, speed_high = Perception.uncertainty(seen)
+        _conflict_view_entry(self._conflict_tables, tuple(drivers),
                              np.ascontiguousarray(progress[:, 0]), north, tuple(out))  # fmt: skip
         return ConflictView(
             ego_progress=progress[:, 0], ego_speed=v.speed[:, 0], ego_throttle=v.throttle[:, 0],
             ego_brake=v.brake[:, 0], present=present, window=inside, ego_point=points[0],
             ego_zone=zones[0], ego_cert_zone=zones[1], other_progress=other[0],
             other_point=points[1], other_zone=zones[2], other_cert_zone=zones[3],
-            other_speed=other[1], other_top=other[2], other_lead=np.zeros((batch, c)),
-            other_lag=np.zeros((batch, c)), other_speed_high=other[1],
+            other_speed=other[1], other_top=other[2], other_lead=lead, other_lag=lag,
+            other_speed_high=other[1] if speed_high is None else speed_high,
         )  # fmt: skip
 
     def crossing_zones(self) -> FloatArray:
@@ -402,7 +451,13 @@ class LeftTurnTrafficTask(LeftTurnTask):
         [m] ``[P]`` (a vehicle not yet in the scene can appear there at any moment)."""
         cert = self.cert_network.conflicts
         crossing = np.flatnonzero(np.isfinite(cert[self.ego_route, :, 0]))
-        return Phantoms(cert[self.ego_route, crossing], cert[crossing, self.ego_route, 0])
+        entry = cert[crossing, self.ego_route, 0]
+        if self.perception is not None and self.config.certified.perception == "declared":
+            # A vehicle not yet seen may be beyond the sight edge, or have been in the scene
+            # unseen for the latency and a miss (see Perception.phantom_entry).
+            point = self._slot_point[crossing]
+            entry = self.perception.phantom_entry(entry, point, entry)
+        return Phantoms(cert[self.ego_route, crossing], entry)
 
     def advance_others(
         self, state: TaskState, new_world: WorldState, separation: FloatArray
@@ -479,10 +534,17 @@ class LeftTurnTrafficTask(LeftTurnTask):
                 v.other_cert_zone, v.other_speed, extra, k, out,
             )  # fmt: skip
             return out
-        tr = state.traffic
+        tr, seen = state.traffic, state.perception
+        x, y, cos_yaw, sin_yaw, speed, active = tr.x, tr.y, tr.cos_yaw, tr.sin_yaw, tr.speed, tr.active
+        if seen is not None:  # the vehicles where the ego sees them
+            x, y, cos_yaw, sin_yaw = (np.zeros_like(a) for a in (x, y, cos_yaw, sin_yaw))
+            speed = np.ascontiguousarray(seen.speed[:, 1:])
+            active = tr.active & seen.ever[:, 1:]
+            _place(self.tables, tr.route, np.ascontiguousarray(seen.progress[:, 1:]), active, x,
+                   y, cos_yaw, sin_yaw)  # fmt: skip
         _nearest(
             observation[:, 0].astype(np.float64), observation[:, 1].astype(np.float64),
-            tr.x, tr.y, tr.speed, tr.cos_yaw, tr.sin_yaw, tr.active, k, out,
+            x, y, speed, cos_yaw, sin_yaw, active, k, out,
         )  # fmt: skip
         return out
 
