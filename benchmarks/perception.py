@@ -13,9 +13,12 @@ against, what it costs, and how fast the environment stays.
 3. **Speed** — ``VecEnv`` steps per second at 4,096 environments with and without perception
    (every key on), measured alternately in one run (median of three).
 4. **Calibration** — held-out coverage of split-conformal bounds on simulated sensors.
+5. **Traffic from every leg** — the guarantee at every density (8 adversary families × 4
+   presets × 3,200 scenes, adversarial errors on every key), and the traffic policies under
+   all errors together on the ``test`` family (300 scenes per cell).
 
 Run: ``python benchmarks/perception.py [--episodes N] [--guarantee N]`` (one core, one torch
-thread; about 12 minutes); writes ``benchmarks/results/perception.json`` and
+thread; about 30 minutes); writes ``benchmarks/results/perception.json`` and
 ``docs/perception.png``.
 """
 
@@ -31,13 +34,13 @@ import numpy as np
 import torch
 
 import _common
-from safeswitch.app.perception_study import CONTROLLERS, study, together
+from safeswitch.app.perception_study import CONTROLLERS, TRAFFIC_CONTROLLERS, study, together
 from safeswitch.bench import vec_env_steps_per_s
 from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.calibration import SensorModel, calibrate, simulate_pairs
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn.config import resolve_config
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.make import build_task
 from safeswitch.report.figures import perception_figure
 from safeswitch.training.policies import load_policy
 
@@ -82,23 +85,30 @@ def sweeps() -> list[tuple[str, float, dict[str, object]]]:
     return cells
 
 
-def guarantee(count: int, small: int) -> list[dict[str, object]]:
+def guarantee(count: int, small: int, traffic: int) -> list[dict[str, object]]:
     trained = load_policy("certified").act
     rows = []
-    for name, perception, assume, episodes in (
-        ("every key, adversarial", EVERYTHING, "declared", count),
-        ("larger bounds, random", {**LARGE, "errors": "random"}, "declared", small),
-        ("larger bounds, adversarial", {**LARGE, "errors": "adversarial"}, "declared", small),
-        ("every key, adversarial", EVERYTHING, "perfect", small),
-    ):
+    cases: list[tuple[str, dict[str, object], str, int, str | None]] = [
+        ("every key, adversarial", EVERYTHING, "declared", count, None),
+        ("larger bounds, random", {**LARGE, "errors": "random"}, "declared", small, None),
+        ("larger bounds, adversarial", {**LARGE, "errors": "adversarial"}, "declared", small,
+         None),
+        ("every key, adversarial", EVERYTHING, "perfect", small, None),
+    ]  # fmt: skip
+    for preset in ("light", "medium", "heavy", "test"):
+        cases.append(("every key, adversarial", EVERYTHING, "declared", traffic, preset))
+    cases.append(("every key, adversarial", EVERYTHING, "perfect", traffic // 2, "medium"))
+    for name, perception, assume, episodes, preset in cases:
         config = resolve_config(
             {"episode": {"learned_scope": "episode"}, "certified": {"perception": assume}},
             switching="certified", perception=perception,
         )  # fmt: skip
-        task = LeftTurnTask(config)
+        task = build_task(None, config, traffic=preset)
         scenarios = task.scenario_set(SEED, episodes)
         families = {}
-        for family, make in catalogue(task, episodes, seed=7, trained=trained).items():
+        # the trained adversary is the paper scene's policy (its six observations)
+        adversaries = catalogue(task, episodes, seed=7, trained=None if preset else trained)
+        for family, make in adversaries.items():
             result = rollout(task, scenarios, make())
             families[family] = {
                 "episodes": episodes,
@@ -108,13 +118,12 @@ def guarantee(count: int, small: int) -> list[dict[str, object]]:
             }
         total = sum(f["episodes"] for f in families.values())
         failures = sum(f["failures"] for f in families.values())
-        rows.append({"bounds": name, "perception": perception, "certified_perception": assume,
+        rows.append({"scene": preset or "paper's scene", "bounds": name,
+                     "perception": perception, "certified_perception": assume,
                      "episodes": total, "failures": failures, "families": families})  # fmt: skip
-        print(
-            f"  certified ({assume:8s}) {name:28s} {failures:5d} failures in {total:,} "
-            f"episodes over {len(families)} adversary families",
-            file=sys.stderr,
-        )
+        print(f"  {preset or 'paper':6s} certified ({assume:8s}) {name:28s} {failures:5d} "
+              f"failures in {total:,} episodes over {len(families)} adversary families",
+              file=sys.stderr)  # fmt: skip
     return rows
 
 
@@ -162,6 +171,15 @@ def main() -> None:
         default=11_200,
         help="scenarios per adversary family, main set (9 families)",
     )
+    parser.add_argument(
+        "--traffic",
+        type=int,
+        default=3_200,
+        help="scenes per adversary family and traffic preset (8 × 4)",
+    )
+    parser.add_argument(
+        "--traffic-episodes", type=int, default=300, help="scenes per cell of the traffic sweep"
+    )
     parser.add_argument("--replot", action="store_true", help="redraw the figure only")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -174,8 +192,12 @@ def main() -> None:
     print("sweeps", file=sys.stderr)
     rows = study(sweeps(), args.episodes, SEED, CONTROLLERS,
                  log=lambda line: print(line, file=sys.stderr))  # fmt: skip
+    print("traffic sweep", file=sys.stderr)
+    traffic_cells = [c for c in sweeps() if c[0] == "together"]
+    traffic_rows = study(traffic_cells, args.traffic_episodes, SEED, TRAFFIC_CONTROLLERS,
+                         log=lambda line: print(line, file=sys.stderr))  # fmt: skip
     print("guarantee", file=sys.stderr)
-    proof = guarantee(args.guarantee, max(1000, args.guarantee // 5))
+    proof = guarantee(args.guarantee, max(1000, args.guarantee // 5), args.traffic)
     print("speed", file=sys.stderr)
     fast = speed(3, 1.5)
     calibrated = coverage()
@@ -185,6 +207,8 @@ def main() -> None:
         "seed": SEED,
         "episodes_per_cell": args.episodes,
         "sweeps": rows,
+        "traffic_episodes_per_cell": args.traffic_episodes,
+        "traffic_sweeps": traffic_rows,
         "guarantee": proof,
         "speed": fast,
         "calibration": calibrated,

@@ -14,13 +14,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
-from safeswitch.app.evaluate import controller_setup
+from safeswitch.app.evaluate import controller_setup, fit_observations, traffic_setup
 from safeswitch.core.config import from_dict
 from safeswitch.evaluation.evaluate import run_controller, scenario_set, summary_against_oracle
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import Policy
-from safeswitch.leftturn.config import LeftTurnConfig, PerceptionConfig
-from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.leftturn.config import LeftTurnConfig, PerceptionConfig, TrafficConfig
+from safeswitch.leftturn.make import build_task
 
 
 @dataclass(frozen=True)
@@ -31,11 +31,13 @@ class Controller:
         name: Its name in tables and figures.
         model: The shipped policy.
         assume: The certified logic's ``perception`` (``None``: the paper's logic).
+        traffic: A traffic preset (``None``: the paper's scene).
     """
 
     name: str
     model: str
     assume: Literal["declared", "perfect"] | None
+    traffic: str | None = None
 
 
 CONTROLLERS = (
@@ -43,6 +45,16 @@ CONTROLLERS = (
     Controller("certified policy, certified assuming perfect perception", "certified", "perfect"),
     Controller("certified policy, certified with declared bounds", "certified", "declared"),
 )
+
+#: The same in traffic from every leg (the ``test`` family, the densest): the policies trained
+#: there.
+TRAFFIC_CONTROLLERS = (
+    Controller("traffic-paper policy, paper logic", "traffic-paper", None, "test"),
+    Controller("traffic-certified policy, certified assuming perfect perception",
+               "traffic-certified", "perfect", "test"),
+    Controller("traffic-certified policy, certified with declared bounds", "traffic-certified",
+               "declared", "test"),
+)  # fmt: skip
 
 #: The bounds the issue names for the price of robustness, and each key's unit step of a sweep.
 REFERENCE = {"position_error_m": 1.0, "speed_error_mps": 1.0, "latency_s": 0.2}
@@ -54,15 +66,16 @@ KEPT = (
 )  # fmt: skip
 
 
-def _setup(controller: Controller) -> tuple[LeftTurnConfig, Policy]:
+def _setup(controller: Controller) -> tuple[LeftTurnConfig, Policy, TrafficConfig | None]:
     config, policy = controller_setup("learned", controller.model, None)
+    traffic, _ = traffic_setup("learned", controller.model, controller.traffic)
     assert policy is not None
     if controller.assume is not None:
         config = replace(
             config, switching="certified",
             certified=replace(config.certified, perception=controller.assume),
         )  # fmt: skip
-    return config, policy
+    return config, policy, traffic
 
 
 def study(
@@ -89,17 +102,20 @@ def study(
     """
     rows = []
     for controller in controllers:
-        config, policy = _setup(controller)
-        base = LeftTurnTask(config)
+        config, policy, traffic = _setup(controller)
+        base = build_task(None, config, traffic=traffic)
         batch, _ = scenario_set(base, "random", episodes, seed)
+        policy = fit_observations(policy, controller.model, base)
+        assert policy is not None
         plan: OraclePlan | None = None
         for sweep, level, perception in settings:
             block = from_dict(PerceptionConfig, perception, where="perception")
-            task = LeftTurnTask(replace(config, perception=block))
+            task = build_task(None, replace(config, perception=block), traffic=traffic)
             result, plan = run_controller(task, policy, batch, plan=plan, trace=False)
             summary = summary_against_oracle(result, plan, config.episode.horizon_s)
             rows.append({
-                "controller": controller.name, "sweep": sweep, "level": level,
+                "controller": controller.name, "scene": controller.traffic or "paper's scene",
+                "sweep": sweep, "level": level,
                 "errors": block.errors, "perception": perception,
                 **{k: summary[k] for k in KEPT},
             })  # fmt: skip
