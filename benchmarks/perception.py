@@ -14,12 +14,13 @@ against, what it costs, and how fast the environment stays.
    (every key on), measured alternately in one run (median of three).
 4. **Calibration** — held-out coverage of split-conformal bounds on simulated sensors.
 5. **Traffic from every leg** — the guarantee at every density (8 adversary families × 4
-   presets × 3,200 scenes, adversarial errors on every key), and the traffic policies under
-   all errors together on the ``test`` family (300 scenes per cell).
+   presets × 3,200 scenes, adversarial errors on every key), and the policies trained in
+   traffic under the same sweeps on the ``test`` family (300 scenes per cell).
 
-Run: ``python benchmarks/perception.py [--episodes N] [--guarantee N]`` (one core, one torch
-thread; about 30 minutes); writes ``benchmarks/results/perception.json`` and
-``docs/perception.png``.
+Run: ``python benchmarks/perception.py [--parts sweeps,traffic,guarantee,speed,calibration]``
+(one core, one torch thread; about 35 minutes in all); writes
+``benchmarks/results/perception.json`` (the parts not run are kept from it),
+``docs/perception.png`` and ``docs/perception_traffic.png``.
 """
 
 from __future__ import annotations
@@ -47,6 +48,10 @@ from safeswitch.training.policies import load_policy
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "perception.json"
 FIGURE = ROOT / "docs" / "perception.png"
+TRAFFIC_FIGURE = ROOT / "docs" / "perception_traffic.png"
+PARTS = ("sweeps", "traffic", "guarantee", "speed", "calibration")
+PAPER_SCENE = "in the paper's scene (1,000 scenarios per point)"
+TRAFFIC_SCENE = "in traffic from every leg (test family, 300 scenes per point)"
 SEED = 1_000_003
 
 #: Every key at once, adversarial: the guarantee's main set.
@@ -180,43 +185,59 @@ def main() -> None:
     parser.add_argument(
         "--traffic-episodes", type=int, default=300, help="scenes per cell of the traffic sweep"
     )
-    parser.add_argument("--replot", action="store_true", help="redraw the figure only")
+    parser.add_argument(
+        "--parts", default=",".join(PARTS),
+        help=f"which parts to run, comma-separated ({', '.join(PARTS)}); the others are kept "
+        "from the results file",
+    )  # fmt: skip
+    parser.add_argument("--replot", action="store_true", help="redraw the figures only")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    parts = args.parts.split(",")
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown:
+        parser.error(f"--parts: unknown {unknown} (known: {', '.join(PARTS)})")
     if args.replot:
         import json
 
-        perception_figure(json.loads(RESULTS.read_text())["sweeps"], FIGURE)
+        saved = json.loads(RESULTS.read_text())
+        perception_figure(saved["sweeps"], FIGURE, PAPER_SCENE)
+        perception_figure(saved["traffic_sweeps"], TRAFFIC_FIGURE, TRAFFIC_SCENE)
         return
+    result: dict[str, object] = {}
+    if set(parts) != set(PARTS):
+        import json
+
+        result = json.loads(RESULTS.read_text())
     began = time.perf_counter()
-    print("sweeps", file=sys.stderr)
-    rows = study(sweeps(), args.episodes, SEED, CONTROLLERS,
-                 log=lambda line: print(line, file=sys.stderr))  # fmt: skip
-    print("traffic sweep", file=sys.stderr)
-    traffic_cells = [c for c in sweeps() if c[0] == "together"]
-    traffic_rows = study(traffic_cells, args.traffic_episodes, SEED, TRAFFIC_CONTROLLERS,
-                         log=lambda line: print(line, file=sys.stderr))  # fmt: skip
-    print("guarantee", file=sys.stderr)
-    proof = guarantee(args.guarantee, max(1000, args.guarantee // 5), args.traffic)
-    print("speed", file=sys.stderr)
-    fast = speed(3, 1.5)
-    calibrated = coverage()
-    result = {
-        "machine": _common.machine(),
-        "torch_threads": 1,
-        "seed": SEED,
-        "episodes_per_cell": args.episodes,
-        "sweeps": rows,
-        "traffic_episodes_per_cell": args.traffic_episodes,
-        "traffic_sweeps": traffic_rows,
-        "guarantee": proof,
-        "speed": fast,
-        "calibration": calibrated,
-        "wall_time_s": round(time.perf_counter() - began, 1),
-    }
+    log = lambda line: print(line, file=sys.stderr)  # noqa: E731
+    result.update(machine=_common.machine(), torch_threads=1, seed=SEED)
+    if "sweeps" in parts:
+        log("sweeps")
+        result["episodes_per_cell"] = args.episodes
+        result["sweeps"] = study(sweeps(), args.episodes, SEED, CONTROLLERS, log=log)
+    if "traffic" in parts:
+        log("traffic sweeps")
+        result["traffic_episodes_per_cell"] = args.traffic_episodes
+        result["traffic_sweeps"] = study(
+            sweeps(), args.traffic_episodes, SEED, TRAFFIC_CONTROLLERS, log=log
+        )
+    if "guarantee" in parts:
+        log("guarantee")
+        result["guarantee"] = guarantee(args.guarantee, max(1000, args.guarantee // 5),
+                                        args.traffic)  # fmt: skip
+    if "speed" in parts:
+        log("speed")
+        result["speed"] = speed(3, 1.5)
+    if "calibration" in parts:
+        result["calibration"] = coverage()
+    result[f"wall_time_s_{'_'.join(parts) if len(parts) < len(PARTS) else 'all'}"] = round(
+        time.perf_counter() - began, 1
+    )
     _common.publish(result, RESULTS, as_json=False)
-    perception_figure(rows, FIGURE)
-    print(f"wrote {RESULTS} and {FIGURE} ({result['wall_time_s']} s)", file=sys.stderr)
+    perception_figure(result["sweeps"], FIGURE, PAPER_SCENE)  # type: ignore[arg-type]
+    perception_figure(result["traffic_sweeps"], TRAFFIC_FIGURE, TRAFFIC_SCENE)  # type: ignore[arg-type]
+    log(f"wrote {RESULTS}, {FIGURE} and {TRAFFIC_FIGURE}")
 
 
 if __name__ == "__main__":

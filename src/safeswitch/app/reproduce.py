@@ -240,7 +240,9 @@ def perception_section(episodes: int, folder: Path) -> dict[str, Any]:
     cells = [("together", level, {**together(level, errors), "errors": errors})
              for errors in ("adversarial", "random") for level in (0.0, 1.0, 2.0, 3.0)]  # fmt: skip
     rows = study(cells, episodes, EVAL_SEED)
-    perception_figure(rows, folder / "figures" / "perception.png")
+    perception_figure(
+        rows, folder / "figures" / "perception.png", f"({episodes} scenarios per point)"
+    )
     return {"episodes": episodes, "unit": REFERENCE, "rows": rows}
 
 

@@ -1,10 +1,10 @@
-"""Perception of the other vehicle: a sensor with noise, latency, missed detections and a sight
+"""Perception of the other vehicles: a sensor with noise, latency, missed detections and a sight
 distance, and the tracker that turns its sightings into what the ego's software knows.
 
 The paper assumes perfect perception (its Remark 2). Here the plant, collisions and every metric
 keep the truth, and everything that decides reads what is seen (:class:`PerceptionConfig`):
 
-* **Sensor** (the world's side). On every tick it reports the other vehicle as it was
+* **Sensor** (the world's side). On every tick it reports each other vehicle as it was
   ``latency_s`` ago (exactly: the episode's first ticks see the car's constant-speed approach
   before the episode, extrapolated back), with a position error within ``position_error_m``
   along its path and a speed error within ``speed_error_mps`` — independent and uniform, or, with
@@ -27,10 +27,12 @@ keep the truth, and everything that decides reads what is seen (:class:`Percepti
   each tick's bounds are no worse than the previous tick's propagated, the certificate's
   induction holds as with perfect perception: the vehicle can arrive no sooner than the bound
   said a tick before, and once ``low`` is past its zone it has left. A vehicle missed for any
-  time keeps its propagated interval; one never seen is beyond the sight edge ``latency_s +
-  dropout_max_s`` (and a tick) ago, at most at the top speed since.
+  time keeps its propagated interval; the north car, never seen yet, was beyond the sight edge
+  ``latency_s + dropout_max_s`` (and a tick) ago, at most at the top speed since; a vehicle of
+  the streams never seen is left to the certified logic's phantoms, brought closer by the same
+  reach (:meth:`Perception.phantom_entry`). A vehicle that takes a freed slot starts over.
 
-One compiled loop per tick (:func:`_sense`) does all of it for every episode.
+One compiled loop per tick (:func:`_sense`) does all of it for every vehicle of every episode.
 """
 
 from __future__ import annotations

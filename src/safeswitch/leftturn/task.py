@@ -324,7 +324,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             self.conflict.s_point_a, self.conflict.zone_a, cert.zone_a, self.conflict.s_point_b,
             self.conflict.zone_b, cert.zone_b, config.episode.approach_distance_m,
         )  # fmt: skip
-        #: The ego's sensor and tracker of the north car (``None``: perfect perception).
+        #: The ego's sensor and tracker of the other vehicles (``None``: perfect perception).
         self.perception: Perception | None = None
         if not config.perception.perfect:
             self.perception = Perception(config)

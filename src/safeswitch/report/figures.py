@@ -401,11 +401,11 @@ PERCEPTION_AXES = {
 }
 
 
-def perception_figure(rows: list[dict[str, Any]], path: Path) -> None:
+def perception_figure(rows: list[dict[str, Any]], path: Path, scene: str = "") -> None:
     """Perception errors (:mod:`safeswitch.app.perception_study`): per sweep (a column),
     collisions per 1,000 episodes (top) and efficiency against the oracle (bottom) against the
     error level, one colour per controller, solid for adversarial errors and dashed for random
-    ones. Saved as PNG."""
+    ones; ``scene`` names the scene in the title. Saved as PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -453,7 +453,8 @@ def perception_figure(rows: list[dict[str, Any]], path: Path) -> None:
             ax.grid(alpha=0.3)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=8)
-    fig.suptitle("perception errors: failures (on the truth) and efficiency\n"
+    where = f" {scene}" if scene else ""
+    fig.suptitle(f"perception errors{where}: failures (on the truth) and efficiency\n"
                  "solid: adversarial errors, dashed: random errors", fontsize=10)  # fmt: skip
     fig.savefig(path, dpi=90)
     plt.close(fig)
