@@ -105,13 +105,13 @@ def study(
         config, policy, traffic = _setup(controller)
         base = build_task(None, config, traffic=traffic)
         batch, _ = scenario_set(base, "random", episodes, seed)
-        policy = fit_observations(policy, controller.model, base)
-        assert policy is not None
+        fitted = fit_observations(policy, controller.model, base)
+        assert fitted is not None
         plan: OraclePlan | None = None
         for sweep, level, perception in settings:
             block = from_dict(PerceptionConfig, perception, where="perception")
             task = build_task(None, replace(config, perception=block), traffic=traffic)
-            result, plan = run_controller(task, policy, batch, plan=plan, trace=False)
+            result, plan = run_controller(task, fitted, batch, plan=plan, trace=False)
             summary = summary_against_oracle(result, plan, config.episode.horizon_s)
             rows.append({
                 "controller": controller.name, "scene": controller.traffic or "paper's scene",

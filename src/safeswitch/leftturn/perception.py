@@ -230,9 +230,7 @@ class Perception:
         self._sense(new, tick, sighted, first=False)
         return new
 
-    def _sense(
-        self, s: PerceptionState, tick: NDArray[np.int64], v: Sighted, first: bool
-    ) -> None:
+    def _sense(self, s: PerceptionState, tick: NDArray[np.int64], v: Sighted, first: bool) -> None:
         f64 = np.float64
         _sense(
             self.constants, first, np.ascontiguousarray(tick),

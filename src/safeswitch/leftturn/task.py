@@ -737,7 +737,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         v = world.vehicles
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
         seen = state.perception
-        seen_north = np.ascontiguousarray(world.progress[:, 1] if seen is None else seen.progress[:, 0])
+        north = world.progress[:, 1] if seen is None else seen.progress[:, 0]
+        seen_north = np.ascontiguousarray(north)
         out = ControllerOutputs.empty(batch)
         _controllers_entry(
             self._controller_constants,

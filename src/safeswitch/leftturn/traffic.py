@@ -366,7 +366,8 @@ class LeftTurnTrafficTask(LeftTurnTask):
         if before is not None:
             assert isinstance(before, TrafficTaskState)
             old = before.traffic
-            fresh = active & (~old.active | (old.route != route) | (traffic.progress < old.progress))
+            replaced = (old.route != route) | (traffic.progress < old.progress)
+            fresh = active & (~old.active | replaced)
         point = self._slot_point[route]
         exit_ = self._slot_exit[route]
         return Sighted(
@@ -405,8 +406,11 @@ class LeftTurnTrafficTask(LeftTurnTask):
         if seen is not None and not truth:
             # What the ego sees: each vehicle once sighted, at its point estimate (a vehicle
             # not yet seen is left to the phantoms).
-            north = (np.ascontiguousarray(seen.progress[:, 0]),
-                     np.ascontiguousarray(seen.speed[:, 0]), state.scenarios.north_speed)  # fmt: skip
+            north = (
+                np.ascontiguousarray(seen.progress[:, 0]),
+                np.ascontiguousarray(seen.speed[:, 0]),
+                state.scenarios.north_speed,
+            )
             drivers = drivers._replace(
                 progress=np.ascontiguousarray(seen.progress[:, 1:]),
                 speed=np.ascontiguousarray(seen.speed[:, 1:]),
@@ -535,7 +539,8 @@ class LeftTurnTrafficTask(LeftTurnTask):
             )  # fmt: skip
             return out
         tr, seen = state.traffic, state.perception
-        x, y, cos_yaw, sin_yaw, speed, active = tr.x, tr.y, tr.cos_yaw, tr.sin_yaw, tr.speed, tr.active
+        x, y, cos_yaw, sin_yaw = tr.x, tr.y, tr.cos_yaw, tr.sin_yaw
+        speed, active = tr.speed, tr.active
         if seen is not None:  # the vehicles where the ego sees them
             x, y, cos_yaw, sin_yaw = (np.zeros_like(a) for a in (x, y, cos_yaw, sin_yaw))
             speed = np.ascontiguousarray(seen.speed[:, 1:])
