@@ -352,6 +352,7 @@ def test_the_quick_stop_bound_never_undercuts_the_exact_one_nor_the_plant(logic)
     assert (state.x <= exact + 1e-9).all()
 
 
+@pytest.mark.slow
 def test_the_clear_time_bound_is_never_beaten_by_the_plant(logic):
     """The clear backup on the plant itself — full throttle below its holding speed, closed
     above it — covers the distance no later than the bound says, from any state the filter
