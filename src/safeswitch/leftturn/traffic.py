@@ -52,7 +52,6 @@ from safeswitch.sim.streams import (
     RightOfWay,
     StreamConstants,
     TrafficState,
-    _place,
     network_tables,
     npc_separations,
     place,
@@ -539,17 +538,17 @@ class LeftTurnTrafficTask(LeftTurnTask):
             )  # fmt: skip
             return out
         tr, seen = state.traffic, state.perception
-        x, y, cos_yaw, sin_yaw = tr.x, tr.y, tr.cos_yaw, tr.sin_yaw
-        speed, active = tr.speed, tr.active
-        if seen is not None:  # the vehicles where the ego sees them
-            x, y, cos_yaw, sin_yaw = (np.zeros_like(a) for a in (x, y, cos_yaw, sin_yaw))
-            speed = np.ascontiguousarray(seen.speed[:, 1:])
-            active = tr.active & seen.ever[:, 1:]
-            _place(self.tables, tr.route, np.ascontiguousarray(seen.progress[:, 1:]), active, x,
-                   y, cos_yaw, sin_yaw)  # fmt: skip
+        if seen is not None:  # the vehicles where the ego sees them, posed on their routes
+            zeros = np.zeros_like(tr.x)
+            tr = replace(
+                tr, progress=np.ascontiguousarray(seen.progress[:, 1:]),
+                speed=np.ascontiguousarray(seen.speed[:, 1:]), active=tr.active & seen.ever[:, 1:],
+                x=zeros, y=zeros.copy(), cos_yaw=zeros.copy(), sin_yaw=zeros.copy(),
+            )  # fmt: skip
+            place(self.tables, tr)
         _nearest(
             observation[:, 0].astype(np.float64), observation[:, 1].astype(np.float64),
-            x, y, speed, cos_yaw, sin_yaw, active, k, out,
+            tr.x, tr.y, tr.speed, tr.cos_yaw, tr.sin_yaw, tr.active, k, out,
         )  # fmt: skip
         return out
 
