@@ -270,6 +270,7 @@ def _rss_mb(pid):
     return 0.0
 
 
+@pytest.mark.slow
 def test_a_campaign_of_a_trillion_episodes_plans_first_and_keeps_its_memory(tmp_path):
     """Run in one process (``--workers 0``): the plan line comes within 5 s, the shards are
     generated as they are run (memory flat), Ctrl-C stops it and leaves whole shards."""

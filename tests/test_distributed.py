@@ -66,6 +66,7 @@ def test_one_worker_and_two_give_identical_summaries_and_resume_loses_nothing(tm
     assert rows == 600
 
 
+@pytest.mark.slow
 def test_a_crashing_shard_is_reported_and_the_rest_kept(tmp_path, capsys):
     """A shard that fails at run time (here: a grid scenario whose ego would start before its
     route does) is reported with its cell and episode range; every other shard is kept."""

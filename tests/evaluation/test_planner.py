@@ -92,6 +92,7 @@ def test_without_its_pass_first_margin_the_check_is_what_keeps_it_safe(setup):
     assert (reckless.safety_steps > 0).sum() > 0.1 * EPISODES
 
 
+@pytest.mark.slow
 def test_arriving_slowly_at_the_firing_point_clears_sooner(setup):
     """The firing distance grows with v²: a yield that reaches it at 4 m/s waits closer to the
     zone than one arriving at the turn's speed (~6.8 m/s) and clears it sooner."""

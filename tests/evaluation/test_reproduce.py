@@ -94,7 +94,8 @@ def test_the_report_embeds_every_figure_and_animation_it_lists(report):
     assert len(listed) == 3 * (len(ENTRIES) - 1)  # 3 scenarios per controller but the oracle
     pngs = re.findall(r'src="data:image/png;base64,', page)
     gifs = re.findall(r'src="data:image/gif;base64,', page)
-    assert len(pngs) == len(listed) + 3  # the comparison, clearing in traffic, training curves
+    # the comparison, clearing in traffic, training curves, perception errors
+    assert len(pngs) == len(listed) + 4
     assert len(gifs) == len(SCENARIO_NAMES) + 1  # and one in traffic
     assert "Traffic from every leg" in page and "SUMO as a second simulator" in page
     assert (

@@ -464,6 +464,7 @@ def test_no_adversary_collides_behind_the_limiter_with_the_narrower_zones(switch
         assert result.collision.sum() == 0
 
 
+@pytest.mark.slow
 def test_the_narrower_zones_let_the_ego_follow_a_north_car_it_yielded_to_more_closely():
     """Why a training guard narrows them: under `guarded` the planner (which plans around the
     paper logic alone and enters right behind the north car it yielded to) is braked by the
