@@ -54,6 +54,14 @@ into a conflict zone. A vehicle behind the ego is assumed to follow it without r
 (its car-following brakes up to 8 m/s², as hard as the ego's backup); one that merges ahead of
 the ego into its exit lane is assumed to drive on.
 
+**Perception** (:mod:`safeswitch.leftturn.perception`). With the scene's perception bounds
+declared (``certified.perception: declared``), every vehicle is read as the worst case its
+tracker allows — ``other_lead`` ahead of what is seen, at ``other_speed_high``, and gone from its
+zone only once ``other_lag`` behind what is seen is past it. The tracker's bounds at a tick are
+never worse than the previous tick's propagated, so the invariant above holds for any errors
+within the bounds; vehicles not yet seen are phantoms, brought closer by what the sensor may
+miss. Under ``perfect`` the filter takes what it sees as the truth.
+
 If no backup is feasible (only when the assumptions were broken), the filter brakes fully while
 the ego is still before its first zone and accelerates fully once it is inside (best effort),
 and the reason says so.
