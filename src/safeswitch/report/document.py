@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import html
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -270,15 +271,29 @@ def reckless_table(summary: dict[str, Any]) -> Table:
     return Table(header, rows, alert)
 
 
-def traffic_table(summary: dict[str, Any]) -> Table:
+def summary_table(
+    records: list[dict[str, Any]],
+    columns: tuple[tuple[str, str, str], ...],
+    lead: tuple[str, ...],
+    lead_cells: Callable[[dict[str, Any]], list[str]],
+) -> Table:
+    """One row per summary: its ``lead`` text cells, then ``columns``; a row with a failure is
+    red, and so is every cell that breaks a rule."""
     rows, alert, bad = [], [], []
-    for r in summary["traffic"]["rows"]:
-        cells, flags = _columns(r, TRAFFIC, 3)
-        rows.append([r["preset"], r["controller"], r["switching"] or "–", *cells])
+    for r in records:
+        cells, flags = _columns(r, columns, len(lead))
+        rows.append([*lead_cells(r), *cells])
         alert.append(r["failures"] > 0)
         bad.append(flags)
-    header = ["traffic", "controller", "switching", *(h for _, h, _ in TRAFFIC)]
-    return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
+    header = [*lead, *(h for _, h, _ in columns)]
+    return Table(header, rows, alert, text_columns=tuple(range(len(lead))), bad=bad)
+
+
+def traffic_table(summary: dict[str, Any]) -> Table:
+    return summary_table(
+        summary["traffic"]["rows"], TRAFFIC, ("traffic", "controller", "switching"),
+        lambda r: [r["preset"], r["controller"], r["switching"] or "–"],
+    )  # fmt: skip
 
 
 #: Columns of the perception table.
@@ -295,14 +310,11 @@ PERCEPTION = (
 
 def perception_table(summary: dict[str, Any]) -> Table:
     """The perception study's rows: level, errors, controller, then :data:`PERCEPTION`."""
-    rows, alert, bad = [], [], []
-    for r in summary.get("perception", {}).get("rows", []):
-        cells, flags = _columns(r, PERCEPTION, 3)
-        rows.append([f"{r['level']:g}", r["errors"], r["controller"], *cells])
-        alert.append(r["failures"] > 0)
-        bad.append(flags)
-    header = ["level", "errors", "controller", *(h for _, h, _ in PERCEPTION)]
-    return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
+    return summary_table(
+        summary.get("perception", {}).get("rows", []), PERCEPTION,
+        ("level", "errors", "controller"),
+        lambda r: [f"{r['level']:g}", r["errors"], r["controller"]],
+    )  # fmt: skip
 
 
 #: Columns of the cross-simulator table.
@@ -321,14 +333,10 @@ SIMULATORS = (
 
 
 def sumo_table(summary: dict[str, Any]) -> Table:
-    rows, alert, bad = [], [], []
-    for r in summary.get("sumo", {}).get("rows", []):
-        cells, flags = _columns(r, SIMULATORS, 3)
-        rows.append([r.get("scene", "paper's scene"), r["controller"], r["sim"], *cells])
-        alert.append(r["failures"] > 0)
-        bad.append(flags)
-    header = ["scene", "controller", "simulator", *(h for _, h, _ in SIMULATORS)]
-    return Table(header, rows, alert, text_columns=(0, 1, 2), bad=bad)
+    return summary_table(
+        summary.get("sumo", {}).get("rows", []), SIMULATORS, ("scene", "controller", "simulator"),
+        lambda r: [r.get("scene", "paper's scene"), r["controller"], r["sim"]],
+    )  # fmt: skip
 
 
 def figure_list(summary: dict[str, Any]) -> list[tuple[str, str]]:
