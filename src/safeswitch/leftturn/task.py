@@ -453,7 +453,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         perception = None
         if self.perception is not None:
             key = episode_keys([getattr(scenarios, f.name) for f in fields(Scenarios)])
-            perception = self.perception.initial(self.sighted(world, None, None), key)
+            sighted = self.sighted(world, self.others_at_start(scenarios), None)
+            perception = self.perception.initial(sighted, key)
         return TaskState(
             world=world,
             scenarios=Scenarios(*(getattr(scenarios, f.name).copy() for f in fields(Scenarios))),
@@ -701,6 +702,10 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
 
     # -- hooks of a task with more traffic (LeftTurnTrafficTask overrides them) ----------------
 
+    def others_at_start(self, scenarios: Scenarios) -> Any:
+        """The other traffic at an episode's start (what :meth:`sighted` looks at): none."""
+        return None
+
     def advance_others(
         self, state: TaskState, new_world: WorldState, separation: FloatArray
     ) -> tuple[Any, FloatArray]:
@@ -736,15 +741,16 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
         v = world.vehicles
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
-        seen = state.perception
-        north = world.progress[:, 1] if seen is None else seen.progress[:, 0]
-        seen_north = np.ascontiguousarray(north)
+        seen, seen_progress = state.perception, world.progress
+        if seen is not None:  # the north car where the ego sees it
+            seen_progress = world.progress.copy()
+            seen_progress[:, 1] = seen.progress[:, 0]
         out = ControllerOutputs.empty(batch)
         _controllers_entry(
             self._controller_constants,
             tuple(ControllerInputs(
                 learned_throttle, v.x, v.y, v.cos_yaw, v.sin_yaw, v.speed, world.progress,
-                seen_north, state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
+                seen_progress, state.accel_lon, state.scenarios.north_speed, v.throttle, v.brake,
                 (th.integral, th.prev_error, th.derivative, br.integral, br.prev_error,
                  br.derivative, no.integral, no.prev_error, no.derivative),
                 (la.integral, la.prev_error, la.derivative),
@@ -1022,8 +1028,8 @@ class ControllerInputs(NamedTuple):
         sin_yaw: Heading's sine ``[B, 2]``.
         speed: ``[B, 2]`` [m/s].
         progress: Arc length along each route ``[B, 2]`` [m].
-        seen_north: The north car's arc length as the ego sees it ``[B]`` [m] (Algorithm 1's
-            window reads it).
+        seen_progress: ``progress`` as the ego sees it ``[B, 2]`` [m] (Algorithm 1's window
+            reads it; ``progress`` itself with perfect perception).
         accel_lon: The ego's last longitudinal acceleration ``[B]`` [m/s²].
         north_target: The north car's target speed ``[B]`` [m/s].
         throttle: The actual throttle ``[B, 2]`` (held in place of an invalid learned action).
@@ -1040,7 +1046,7 @@ class ControllerInputs(NamedTuple):
     sin_yaw: FloatArray
     speed: FloatArray
     progress: FloatArray
-    seen_north: FloatArray
+    seen_progress: FloatArray
     accel_lon: FloatArray
     north_target: FloatArray
     throttle: FloatArray
@@ -1124,7 +1130,7 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
     pid, lane, g, north = i.pids, i.lane, c.gains, c.north
     learned, x, y, cos_yaw, sin_yaw = i.learned_throttle, i.x, i.y, i.cos_yaw, i.sin_yaw
     speed, progress, accel_lon, target = i.speed, i.progress, i.accel_lon, i.north_target
-    seen_north = i.seen_north
+    seen_progress = i.seen_progress
     held_throttle, held_brake = i.throttle, i.brake
     pid_th, pid_b, pid_n, pid_lka = out.pid_throttle, out.pid_brake, out.pid_north, out.pid_lane
     safety_brake, north_throttle, north_brake = (
@@ -1156,7 +1162,7 @@ def _controllers(c: ControllerConstants, i: ControllerInputs, out: ControllerOut
                 g.lane, c.dt, error, lane[0][b, j], lane[1][b, j], lane[2][b, j]
             )
             pid_lka[0, b, j], pid_lka[1, b, j], pid_lka[2, b, j] = integral, error, derivative
-        at = at_intersection(progress[b, 0], seen_north[b], north)
+        at = at_intersection(progress[b, 0], seen_progress[b, 1], north)
         in_charge = at if c.scope == 0 else c.scope == 1
         both[b], charge[b] = at, in_charge
         proposed[b, 0], proposed[b, 1] = (learned[b] if in_charge else rule), 0.0

@@ -341,24 +341,21 @@ class LeftTurnTrafficTask(LeftTurnTask):
         base = super().initial(scenarios)
         batch = base.batch_size
         fields = {f: getattr(base, f) for f in base.__dataclass_fields__}
-        state = TrafficTaskState(
+        return TrafficTaskState(
             **fields, traffic=scenarios.traffic.copy(schedule=True),
             npc_collisions=np.zeros(batch, dtype=np.int64),
             ghost_ego=np.zeros(batch, dtype=np.bool_),
         )  # fmt: skip
-        if self.perception is not None:
-            assert base.perception is not None
-            sighted = self.sighted(state.world, state.traffic, None)
-            state.perception = self.perception.initial(sighted, base.perception.key)
-        return state
+
+    def others_at_start(self, scenarios: Scenarios) -> TrafficState:
+        assert isinstance(scenarios, TrafficScenarios)
+        return scenarios.traffic
 
     def sighted(self, world: WorldState, others: Any, before: TaskState | None) -> Sighted:
         """The north car (column 0), then every slot: a slot's vehicle is new when the slot was
         empty, or holds another movement or a vehicle farther back than before (the one that
         left, replaced within the tick)."""
         north = super().sighted(world, None, before)
-        if others is None:  # the base scene's start, before the traffic is placed
-            return north
         traffic: TrafficState = others[0] if isinstance(others, tuple) else others
         route, active = traffic.route, traffic.active
         fresh = np.zeros_like(active)
