@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import jit
+from safeswitch.leftturn.scenarios import splitmix64
 
 if TYPE_CHECKING:
     from safeswitch.leftturn.config import LeftTurnConfig
@@ -55,8 +56,6 @@ BoolArray = NDArray[np.bool_]
 #: Stand-in for an unbounded distance behind (a vehicle never seen): finite, so that a logic
 #: that ignores the tracker can multiply it by 0.
 FAR = 1.0e9
-
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
 
 class PerceptionConstants(NamedTuple):
@@ -257,21 +256,14 @@ def episode_keys(columns: list[FloatArray]) -> NDArray[np.uint64]:
         key = np.zeros(len(columns[0]), dtype=np.uint64)
         for column in columns:
             bits = np.ascontiguousarray(column, dtype=np.float64).view(np.uint64)
-            key = _mix(key ^ bits)
+            key = splitmix64(key ^ bits)
     return key
-
-
-def _mix(z: NDArray[np.uint64]) -> NDArray[np.uint64]:
-    """splitmix64's finaliser, vectorised."""
-    z = z + _GOLDEN
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
 
 
 @jit
 def _uniform(key: np.uint64, tick: int, j: int) -> float:
-    """A uniform number in [0, 1), a pure function of ``(key, tick, j)`` (splitmix64)."""
+    """A uniform number in [0, 1), a pure function of ``(key, tick, j)``: the finaliser of
+    :func:`~safeswitch.leftturn.scenarios.splitmix64`, compiled for one number."""
     z = key + np.uint64(tick * 4 + j + 1) * np.uint64(0x9E3779B97F4A7C15)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)

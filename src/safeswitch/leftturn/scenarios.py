@@ -22,7 +22,7 @@ from safeswitch.sim.geometry import FloatArray
 _MASK64 = (1 << 64) - 1
 
 
-def _splitmix64(x: NDArray[Any]) -> NDArray[np.uint64]:
+def splitmix64(x: NDArray[Any]) -> NDArray[np.uint64]:
     """SplitMix64 finaliser (Steele, Lea & Flood 2014): a bijective 64-bit mixer."""
     x = x + np.uint64(0x9E3779B97F4A7C15)
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
@@ -46,10 +46,10 @@ def counter_uniforms(
     """
     with np.errstate(over="ignore"):
         start: NDArray[np.uint64] = np.full(np.shape(env_ids), seed & _MASK64, dtype=np.uint64)
-        key = _splitmix64(start)
-        key = _splitmix64(key ^ np.asarray(env_ids, dtype=np.uint64))
-        key = _splitmix64(key ^ (np.asarray(episodes, dtype=np.uint64) << np.uint64(20)))
-        draws = _splitmix64(key[:, None] + np.arange(1, count + 1, dtype=np.uint64))
+        key = splitmix64(start)
+        key = splitmix64(key ^ np.asarray(env_ids, dtype=np.uint64))
+        key = splitmix64(key ^ (np.asarray(episodes, dtype=np.uint64) << np.uint64(20)))
+        draws = splitmix64(key[:, None] + np.arange(1, count + 1, dtype=np.uint64))
     return (draws >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
 
 
