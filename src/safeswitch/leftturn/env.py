@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import scenario_info, step_info
 from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.statistics import TickCosts
 from safeswitch.leftturn.spaces import action_space, observation_space
 from safeswitch.leftturn.task import (
     LeftTurnTask,
@@ -87,6 +88,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._episode = 0
         self._state: TaskState | None = None
         self._record: StepRecord | None = None
+        self._costs = TickCosts(1)
 
     def make_task(self, render_mode: str | None, config: Any, learned_scope: str,
                   traffic: Any, **overrides: Any) -> LeftTurnTask:  # fmt: skip
@@ -125,16 +127,23 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        self._state, record = self.task.hold(self.state, learned_actions(action, 1))
+        costs, config = self._costs, self.config
+        costs.clear()
+        self._state, record = self.task.hold(
+            self.state, learned_actions(action, 1),
+            lambda tick, live: costs.add_tick(tick, config, live),
+        )  # fmt: skip
         self._record = record
         if self.render_mode == "human":
             self.render()
+        info = step_info(record, 0, self.task.reasons)
+        info["costs"] = costs.published(0)
         return (
             record.observation[0],
             float(record.reward[0]),
             bool(record.terminated[0]),
             bool(record.truncated[0]),
-            step_info(record, 0, self.task.reasons),
+            info,
         )
 
     def render(self) -> NDArray[np.uint8] | None:

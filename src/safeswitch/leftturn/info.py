@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from safeswitch.leftturn.rewards import REWARD_TERMS
 from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.statistics import published_costs
 from safeswitch.leftturn.task import CONTROLLERS, OUTCOMES, StepRecord
 
 
@@ -36,20 +37,24 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
     """The ``info`` of environment ``i`` for one tick.
 
     Keys: ``collision``, ``lost_control`` (the ego left its lane: a failure, like a
-    collision), ``safety_active`` (the safety action was executed), ``reward_terms``
+    collision), ``safety_active`` (the safety action was executed), ``cost`` (1.0 then, else
+    0.0: the switch's intervention, as every switched plant has it), ``reward_terms``
     (the five terms of Eq. 5), ``reason`` (why the switching logic chose as it did),
     ``controller`` (``learned``, ``rule`` or ``safety``: who proposed the executed action),
     ``learned_throttle`` (what the learned action asked for), ``action_clipped`` (it was outside
     [-1, 1] and was clipped to it), ``safety_brake`` (what ``PID_b``
     computed), ``throttle`` and ``brake`` (executed), ``both_at_intersection``, ``outcome``
     (``cut``, ``yield`` or ``undecided``), ``separation`` [m], ``ego_speed``, ``north_speed``
-    [m/s], ``accel_lon``, ``accel_lat`` [m/s²], ``lateral_deviation`` [m].
+    [m/s], ``accel_lon``, ``accel_lat`` [m/s²], ``lateral_deviation`` [m]. The environments
+    add ``costs``, the plant's named costs of the step
+    (:data:`~safeswitch.leftturn.statistics.PUBLISHED_COSTS`).
     """
     r = record
     return {
         "collision": bool(r.collision[i]),
         "lost_control": bool(r.lost_control[i]),
         "safety_active": bool(r.safety_active[i]),
+        "cost": 1.0 if r.safety_active[i] else 0.0,
         "reward_terms": {name: float(r.terms[name][i]) for name in REWARD_TERMS},
         "reason": reasons[int(r.reason[i])],
         "controller": CONTROLLERS[int(r.controller[i])],
@@ -86,7 +91,10 @@ class LazyInfo(MutableMapping[str, Any]):
 
     def _materialise(self) -> dict[str, Any]:
         if self._full is None:
-            full = step_info(self._owner.record, self._index, self._owner.reasons)
+            owner = self._owner
+            full = step_info(owner.record, self._index, owner.reasons)
+            if owner.costs is not None:
+                full["costs"] = published_costs(owner.costs, self._index)
             full.update(self._extra)
             self._full, self._extra = full, full
         return self._full
@@ -136,6 +144,8 @@ class BatchInfos(Sequence[MutableMapping[str, Any]]):
             order of ``np.flatnonzero(done)``).
         episode: Per ended environment, the ``episode`` summary (SB3 Monitor keys ``r``, ``l``,
             ``t`` plus ours), as arrays ``[D]``.
+        costs: The step's named costs (:meth:`~safeswitch.leftturn.statistics.TickCosts.
+            arrays`), each environment's ``info["costs"]``; ``None``: not counted.
     """
 
     def __init__(
@@ -145,8 +155,10 @@ class BatchInfos(Sequence[MutableMapping[str, Any]]):
         done: NDArray[np.bool_],
         terminal_observation: NDArray[np.float32],
         episode: dict[str, NDArray[Any]],
+        costs: dict[str, NDArray[np.int64]] | None = None,
     ) -> None:
         self.record = record
+        self.costs = costs
         self.reasons = reasons
         self.done = done
         self._done_slot = np.full(done.shape[0], -1, dtype=np.intp)

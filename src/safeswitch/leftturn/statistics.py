@@ -64,24 +64,63 @@ class TickCosts:
     """
 
     def __init__(self, batch: int) -> None:
-        self.ticks = np.zeros(batch, dtype=np.int64)
-        self.comfort = np.zeros(batch, dtype=np.int64)
-        self.speeding = np.zeros(batch, dtype=np.int64)
-        self.safety = np.zeros(batch, dtype=np.int64)
-        self.uncleared = np.zeros(batch, dtype=np.int64)
+        self.batch = batch
+        self.clear()
 
     def clear(self) -> None:
-        for counts in (self.ticks, self.comfort, self.speeding, self.safety, self.uncleared):
-            counts[:] = 0
+        """Start a step: fresh arrays (the last step's stay valid where they were handed out,
+        e.g. in a VecEnv's lazy infos)."""
+        self.ticks = np.zeros(self.batch, dtype=np.int64)
+        self.comfort = np.zeros(self.batch, dtype=np.int64)
+        self.speeding = np.zeros(self.batch, dtype=np.int64)
+        self.safety = np.zeros(self.batch, dtype=np.int64)
+        self.uncleared = np.zeros(self.batch, dtype=np.int64)
 
     def add(self, record: StepRecord, stats: EpisodeStatistics, live: NDArray[np.bool_]) -> None:
         """Add one tick of the episodes ``live`` selects (``stats`` just took the same tick:
         its comfort and speeding flags are reused)."""
+        self.add_flags(record, stats.tick_comfort, stats.tick_speeding, live)
+
+    def add_tick(self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_]) -> None:
+        """Add one tick of the episodes ``live`` selects, its comfort and speeding flags
+        computed from ``record`` (where no :class:`EpisodeStatistics` runs: the single Env)."""
+        self.add_flags(record, comfort_exceeded(record, config), speeding(record, config), live)
+
+    def add_flags(
+        self,
+        record: StepRecord,
+        comfort: NDArray[np.bool_],
+        fast: NDArray[np.bool_],
+        live: NDArray[np.bool_],
+    ) -> None:
+        """Add one tick with its comfort and speeding flags given."""
         self.ticks += live
-        self.comfort += live & stats.tick_comfort
-        self.speeding += live & stats.tick_speeding
+        self.comfort += live & comfort
+        self.speeding += live & fast
         self.safety += live & record.safety_active
         self.uncleared += live & ~record.ego_cleared
+
+    def published(self, i: int) -> dict[str, float]:
+        """Environment ``i``'s costs of the step as the plant publishes them in
+        ``info["costs"]`` (:data:`PUBLISHED_COSTS`: counts of ticks, as floats)."""
+        return published_costs(self.arrays(), i)
+
+    def arrays(self) -> dict[str, NDArray[np.int64]]:
+        """The step's counts by published name, ``[B]`` each (valid after the next
+        :meth:`clear`)."""
+        return {name: getattr(self, name) for name in PUBLISHED_COSTS}
+
+
+def published_costs(arrays: dict[str, NDArray[np.int64]], i: int) -> dict[str, float]:
+    """Environment ``i``'s ``info["costs"]`` from a step's :meth:`TickCosts.arrays`."""
+    return {name: float(counts[i]) for name, counts in arrays.items()}
+
+
+#: The left turn's named costs in ``info["costs"]``, per step, each a count of the step's
+#: ticks: ``comfort`` (over a comfort limit), ``speeding`` (faster than the tolerated speed),
+#: ``safety`` (the safety action executed), ``uncleared`` (ended with the ego not yet clear of
+#: its conflict zone: summed over an episode, its time to clear in ticks).
+PUBLISHED_COSTS = ("comfort", "speeding", "safety", "uncleared")
 
 
 class EpisodeStatistics:

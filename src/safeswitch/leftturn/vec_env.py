@@ -114,9 +114,10 @@ class LeftTurnVecEnv(VecEnv):
         #: that reason's safety action ran (training.shaping.ReasonPenalty reads it).
         self.count_reasons = False
         self.reason_ticks_in_step = np.zeros((self.num_envs, len(self.task.reasons)), np.int32)
-        #: Set ``count_costs`` to have :attr:`costs_in_step` filled (a :class:`TickCosts` of
-        #: the last step; training.constraints reads it).
-        self.count_costs = False
+        #: While ``count_costs`` holds (the default), :attr:`costs_in_step` is filled (a
+        #: :class:`TickCosts` of the last step; training.constraints reads it) and every info
+        #: has ``costs``, the plant's named costs of the step; off, neither.
+        self.count_costs = True
         self.costs_in_step = TickCosts(self.num_envs)
 
     @property
@@ -212,7 +213,8 @@ class LeftTurnVecEnv(VecEnv):
             observation = observation.copy()
             observation[ended] = self.task.observe(fresh)
         self.last_record = record
-        infos = BatchInfos(record, self.task.reasons, done, terminal, episode)
+        published = costs.arrays() if costs is not None else None
+        infos = BatchInfos(record, self.task.reasons, done, terminal, episode, published)
         return observation, record.reward.astype(np.float32), done, infos  # type: ignore[return-value]
 
     def _stagger_cuts(self) -> NDArray[np.int64]:
