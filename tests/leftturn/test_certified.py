@@ -464,6 +464,40 @@ def test_no_adversary_collides_behind_the_limiter_with_the_narrower_zones(switch
         assert result.collision.sum() == 0
 
 
+#: A training guard with the assumptions of the left-turn scene itself (the north car holds
+#: its speed, 20-32 km/h): experiments/paper_fric_scene_guard.yaml.
+SCENE = {"certified": {"other_max_accel": 0.05, "other_max_speed_kmh": 32.1}}
+
+
+def test_in_the_left_turn_scene_the_north_car_holds_its_speed_so_a_scene_guard_is_truthful():
+    """What lets a training guard assume the scene's north car (``SCENE``): on every tick of
+    every scenario, whatever the ego does, the north car's speed is its scenario's, at most
+    32 km/h — and a guard that assumes a faster, accelerating one would still be sound."""
+    task = LeftTurnTask(resolve_config({"episode": {"learned_scope": "episode"}}, switching="none"))
+    random, grid = scenarios_for(task, 1000)
+    for scenarios in (random, grid):
+        batch = scenarios.ego_speed.shape[0]
+        state = task.initial(scenarios)
+        start = state.world.vehicles.speed[:, 1].copy()
+        assert start.max() <= 32.0 / 3.6 + 1e-9
+        act = catalogue(task, batch, 0)["bang_bang"]()
+        for tick in range(task.config.episode.horizon_ticks):
+            state, _ = task.step(state, act(task.observe(state), state, tick))
+            np.testing.assert_array_equal(state.world.vehicles.speed[:, 1], start)
+
+
+@pytest.mark.parametrize("adversary", ["uniform", "bang_bang", "full_throttle", "enter_then_stop",
+                                       "creep"])  # fmt: skip
+def test_no_adversary_collides_under_the_scene_guard(adversary):
+    config = {"episode": {"learned_scope": "episode"}, **LIMITED, **NARROW}
+    config["certified"] = {**NARROW["certified"], **SCENE["certified"]}
+    task = LeftTurnTask(resolve_config(config, switching="guarded"))
+    for scenarios in scenarios_for(task, 1000):
+        batch = scenarios.ego_speed.shape[0]
+        result = rollout(task, scenarios, catalogue(task, batch, 0)[adversary]())
+        assert result.collision.sum() == 0 and result.lost_control.sum() == 0
+
+
 @pytest.mark.slow
 def test_the_narrower_zones_let_the_ego_follow_a_north_car_it_yielded_to_more_closely():
     """Why a training guard narrows them: under `guarded` the planner (which plans around the
