@@ -320,7 +320,10 @@ def test_evaluating_a_shipped_policy_that_misses_its_targets_says_so(capsys):
         f"note: the shipped policy 'certified' misses its targets: {MISSING_TARGETS['certified']}"
         in err
     )
-    assert missing_targets("shipped") == MISSING_TARGETS["paper"]  # the paper policy's alias
+    # a name on the command line is its folder's (traffic-certified → traffic_certified)
+    assert missing_targets("traffic-certified") == MISSING_TARGETS["traffic_certified"]
+    # the paper policy, retrained on this plant (issue #39), carries none, nor its alias
+    assert missing_targets("shipped") is None and missing_targets("paper") is None
     assert missing_targets("paper-warm") is None and missing_targets("runs/mine") is None
     assert main([*EVAL, "--model", "paper-warm"]) == 0
     assert "misses its targets" not in capsys.readouterr().err

@@ -25,12 +25,9 @@ SHIPPED = {
 #: Shipped policies (by folder) that miss their targets on today's plant — tyre friction came
 #: after they were trained (issue #37) — with what they measure on 1,000 unseen random
 #: scenarios (seed 1,000,003; ``traffic_certified``: the ``test`` family, seed 424,242). The
-#: one training pipeline of issue #39 retrains them; until then every summary of them says so.
+#: one training pipeline of issue #39 retrains them (``paper`` is); until then every summary
+#: of them says so.
 MISSING_TARGETS = {
-    "paper": (
-        "speeds in 617 of 1,000 scenarios (top 38.6 km/h) and clears 983: trained before "
-        "tyre friction, to be retrained (issue #39)"
-    ),
     "certified": (
         "needs the safety action in 189 of 1,000 scenarios and clears 897 (efficiency 0.80): "
         "trained before tyre friction; its recipe retrained on this plant does worse "
