@@ -66,6 +66,13 @@ def test_the_shipped_paper_policy_learned_from_a_random_start_without_demonstrat
     assert config.warm_start.episodes == 0 and metrics("paper")["warm_start"] is None
     assert config.env.adas_penalty and config.deployed_env.switching == "paper"
     assert metrics("paper")["deployed_switching"] == "paper"
+    # Issue #39: its training guard assumes the scene's own north car (constant speed, at most
+    # 32 km/h: tests/leftturn/test_certified.py shows it truthful); the environment it is
+    # validated and evaluated in keeps the defaults, and its throttle is speed-limited.
+    guard, deployed = config.train_env.certified, config.deployed_env.certified
+    assert guard.other_max_accel < 0.1 and guard.other_max_speed_kmh < 33.0
+    assert deployed.other_max_accel == 2.5 and deployed.other_max_speed_kmh == 50.0
+    assert config.env.controllers.learned_speed_limiter_kmh == 29.9
     assert load_config(SHIPPED_DIR / "paper_warm" / "config.yaml").warm_start.episodes > 0
 
 
