@@ -6,7 +6,7 @@ reports wall time and steps per second (for a configuration with a warm start, s
 ``--config paper``, the warm start's wall time separately), then times the trained
 policy's decision for a single observation (normalisation + forward pass, median of 2,000
 calls, 1 torch thread). Run on an otherwise idle machine:
-``python benchmarks/bench_train.py [--config FILE] [--timesteps N] [--json]``.
+``python benchmarks/bench_train.py [--config FILE] [--timesteps N] [--json] [--out FILE]``.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 import _common
+from safeswitch.io import write_json
 from safeswitch.training import train
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import load_policy
@@ -49,6 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", default="paper_scratch")
     parser.add_argument("--timesteps", type=int, help="override the configuration's timesteps")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--out", type=Path, help="also write the result as JSON to this file")
     args = parser.parse_args(argv)
     config = load_config(args.config)
     if args.timesteps:
@@ -69,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         "steps_per_s": metrics["steps_per_s"],
         "decision_latency_ms": latency,
     }
+    if args.out:
+        write_json(args.out, result)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
