@@ -11,8 +11,8 @@ from numpy.typing import NDArray
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import scenario_info, step_info
 from safeswitch.leftturn.make import build_task
-from safeswitch.leftturn.statistics import TickCosts
 from safeswitch.leftturn.spaces import action_space, observation_space
+from safeswitch.leftturn.statistics import PUBLISHED_COSTS, tick_cost_limits, tick_costs_of
 from safeswitch.leftturn.task import (
     LeftTurnTask,
     StepRecord,
@@ -88,7 +88,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._episode = 0
         self._state: TaskState | None = None
         self._record: StepRecord | None = None
-        self._costs = TickCosts(1)
+        self._cost_limits = tick_cost_limits(self.config)
 
     def make_task(self, render_mode: str | None, config: Any, learned_scope: str,
                   traffic: Any, **overrides: Any) -> LeftTurnTask:  # fmt: skip
@@ -127,17 +127,25 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def step(
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
-        costs, config = self._costs, self.config
-        costs.clear()
-        self._state, record = self.task.hold(
-            self.state, learned_actions(action, 1),
-            lambda tick, live: costs.add_tick(tick, config, live),
-        )  # fmt: skip
+        limits = self._cost_limits
+        if self.config.episode.decision_interval == 1:
+            self._state, record = self.task.hold(self.state, learned_actions(action, 1))
+            costs = tick_costs_of(record, 0, limits)
+        else:  # the step's ticks summed, each while the episode was live
+            sums = [0.0, 0.0, 0.0, 0.0]
+
+            def on_tick(tick: StepRecord, live: NDArray[np.bool_]) -> None:
+                if live[0]:
+                    for k, value in enumerate(tick_costs_of(tick, 0, limits)):
+                        sums[k] += value
+
+            self._state, record = self.task.hold(self.state, learned_actions(action, 1), on_tick)
+            costs = tuple(sums)
         self._record = record
         if self.render_mode == "human":
             self.render()
         info = step_info(record, 0, self.task.reasons)
-        info["costs"] = costs.published(0)
+        info["costs"] = dict(zip(PUBLISHED_COSTS, costs, strict=True))
         return (
             record.observation[0],
             float(record.reward[0]),

@@ -79,36 +79,40 @@ class TickCosts:
     def add(self, record: StepRecord, stats: EpisodeStatistics, live: NDArray[np.bool_]) -> None:
         """Add one tick of the episodes ``live`` selects (``stats`` just took the same tick:
         its comfort and speeding flags are reused)."""
-        self.add_flags(record, stats.tick_comfort, stats.tick_speeding, live)
-
-    def add_tick(self, record: StepRecord, config: LeftTurnConfig, live: NDArray[np.bool_]) -> None:
-        """Add one tick of the episodes ``live`` selects, its comfort and speeding flags
-        computed from ``record`` (where no :class:`EpisodeStatistics` runs: the single Env)."""
-        self.add_flags(record, comfort_exceeded(record, config), speeding(record, config), live)
-
-    def add_flags(
-        self,
-        record: StepRecord,
-        comfort: NDArray[np.bool_],
-        fast: NDArray[np.bool_],
-        live: NDArray[np.bool_],
-    ) -> None:
-        """Add one tick with its comfort and speeding flags given."""
         self.ticks += live
-        self.comfort += live & comfort
-        self.speeding += live & fast
+        self.comfort += live & stats.tick_comfort
+        self.speeding += live & stats.tick_speeding
         self.safety += live & record.safety_active
         self.uncleared += live & ~record.ego_cleared
-
-    def published(self, i: int) -> dict[str, float]:
-        """Environment ``i``'s costs of the step as the plant publishes them in
-        ``info["costs"]`` (:data:`PUBLISHED_COSTS`: counts of ticks, as floats)."""
-        return published_costs(self.arrays(), i)
 
     def arrays(self) -> dict[str, NDArray[np.int64]]:
         """The step's counts by published name, ``[B]`` each (valid after the next
         :meth:`clear`)."""
         return {name: getattr(self, name) for name in PUBLISHED_COSTS}
+
+
+def tick_cost_limits(config: LeftTurnConfig) -> tuple[float, float, float]:
+    """The comfort limits (longitudinal, lateral) and the speed above which a tick speeds, as
+    :func:`comfort_exceeded` and :func:`speeding` read them (for :func:`tick_costs_of`)."""
+    r = config.rewards
+    return r.comfort_accel_lon, r.comfort_accel_lat, r.tolerated_speed + SPEEDING_MARGIN
+
+
+def tick_costs_of(
+    record: StepRecord, i: int, limits: tuple[float, float, float]
+) -> tuple[float, float, float, float]:
+    """Environment ``i``'s costs of one tick in the order of :data:`PUBLISHED_COSTS`, from
+    Python scalars: the single Env's path (a handful of numpy calls per tick would cost it
+    more than a tenth of its step). The same flags as :func:`comfort_exceeded` and
+    :func:`speeding` (``tests/leftturn/test_costs.py`` compares them)."""
+    lon, lat, fast = limits
+    comfort = abs(float(record.accel_lon[i])) > lon or abs(float(record.accel_lat[i])) > lat
+    return (
+        1.0 if comfort else 0.0,
+        1.0 if float(record.ego_speed[i]) > fast else 0.0,
+        1.0 if record.safety_active[i] else 0.0,
+        0.0 if record.ego_cleared[i] else 1.0,
+    )
 
 
 def published_costs(arrays: dict[str, NDArray[np.int64]], i: int) -> dict[str, float]:
