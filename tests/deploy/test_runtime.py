@@ -89,13 +89,15 @@ def test_the_runtime_decides_exactly_as_the_environment(
 
 def test_every_intervention_is_logged_with_its_reason(exported, caplog):
     controller = Controller(exported("paper"))
-    scenarios = controller.task.scenario_set(1_000_003, 30)
+    # The shipped policy rarely meets the paper logic (under 2 % of episodes): find, in one
+    # batched rollout, a scenario where it does, then drive that one through the runtime.
+    scenarios = controller.task.scenario_set(1_000_003, 1000)
+    result = rollout(controller.task, scenarios, load_policy("paper").as_policy())
+    acting = np.flatnonzero(result.safety_steps > 0)
+    assert acting.size, "no safety action in 1,000 episodes: drive an adversary instead"
     caplog.set_level(logging.INFO, logger="safeswitch.runtime")
-    for i in range(30):
-        active = [d for _, _, d in drive(controller, scenarios, i) if d.safety_active]
-        if active:
-            break
-    assert active, "no intervention in 30 episodes: pick scenarios where the paper logic acts"
+    active = [d for _, _, d in drive(controller, scenarios, int(acting[0])) if d.safety_active]
+    assert active  # the runtime meets it too: it decides as the environment does
     logged = controller.interventions
     assert [e["tick"] for e in logged] == [d.tick for d in active]
     assert [e["reason"] for e in logged] == [d.reason for d in active]
