@@ -175,6 +175,15 @@ def training_record(model_dir: str | Path) -> dict[str, Any]:
             f"; trained under {config.env.switching}, deployed under "
             f"{config.deployed_env.switching}"
         )
+    guard, deployed = config.train_env.certified, config.deployed_env.certified
+    if config.env.switching in ("certified", "guarded") and (
+        guard.other_max_accel,
+        guard.other_max_speed_kmh,
+    ) != (deployed.other_max_accel, deployed.other_max_speed_kmh):
+        method += (
+            f"; its training filter assumed other vehicles at most {guard.other_max_accel:g} "
+            f"m/s² and {guard.other_max_speed_kmh:g} km/h (the training scene's own)"
+        )
     collisions = metrics["training"]["collisions"] + (warm["collisions"] if warm else 0)
     return {
         "method": method,
