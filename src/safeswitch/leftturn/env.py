@@ -128,6 +128,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self, action: NDArray[np.float32]
     ) -> tuple[NDArray[np.float32], float, bool, bool, dict[str, Any]]:
         limits = self._cost_limits
+        costs: tuple[float, ...]
         if self.config.episode.decision_interval == 1:
             self._state, record = self.task.hold(self.state, learned_actions(action, 1))
             costs = tick_costs_of(record, 0, limits)
