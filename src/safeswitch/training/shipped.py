@@ -30,8 +30,9 @@ SHIPPED = {
 MISSING_TARGETS = {
     "certified": (
         "needs the safety action in 189 of 1,000 scenarios and clears 897 (efficiency 0.80): "
-        "trained before tyre friction; its recipe retrained on this plant does worse "
-        "(benchmarks/results/train_seeds_certified.json), to be retrained (issue #39)"
+        "trained before tyre friction; retrained on this plant its recipe reaches at best "
+        "0.845 of the oracle and 97-98 % cleared (docs/learning_experiments.md), to be "
+        "retrained (issue #39)"
     ),
     "traffic_certified": (
         "clears 56 of 1,000 test-family scenes, fewer than the rule under the same filter "
