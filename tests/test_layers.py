@@ -2,7 +2,7 @@
 and only ``report`` imports matplotlib.
 
 core → sim → leftturn → sumo, evaluation, runtime → training → report, deploy → app, examples
-→ cli (``io`` and ``progress`` are leaf utilities every layer may use). ``runtime`` (the exported
+→ logics, cli (``io`` and ``progress`` are leaf utilities every layer may use). ``runtime`` (the exported
 controller) sits on the simulation layers alone: it runs without the training stack.
 """
 
@@ -31,6 +31,8 @@ BELOW = {
     "runtime": UTILITIES | {"core", "sim", "leftturn"},
     "deploy": UTILITIES | {"core", "sim", "leftturn", "evaluation", "training", "runtime"},
 }
+# the built-in logics that serve several plants under one name (``certified``)
+BELOW["logics"] = BELOW["examples"] | {"examples"}
 BELOW["app"] = BELOW["training"] | {"training", "report", "examples", "sumo", "deploy", "runtime"}
 BELOW["cli"] = BELOW["app"] | {"app", "bench", "deploy"}
 

@@ -42,7 +42,7 @@ def _register_envs(gym: Any) -> None:
             "kwargs": {"traffic": "medium"},
         },
         SUMO_ENV_ID: {"entry_point": "safeswitch.sumo.task:LeftTurnSumoEnv"},
-        HIGHWAY_ENV_ID: {"entry_point": "safeswitch.examples.highway:make_highway_env"},
+        HIGHWAY_ENV_ID: {"entry_point": "safeswitch.examples.highway_plant:make_highway_env"},
     }
     for env_id, spec in ids.items():
         if env_id not in gym.registry:

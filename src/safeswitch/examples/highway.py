@@ -39,7 +39,6 @@ from safeswitch.core.arrays import clamp
 from safeswitch.core.config import check
 from safeswitch.core.registry import LogicContextError, LogicPlugin, context_name
 from safeswitch.core.switching import BoolArray, Decision, FloatArray
-from safeswitch.core.wrappers import SafeSwitch
 
 #: The Gymnasium id this module registers (in :mod:`safeswitch`).
 ENV_ID = "safeswitch/Highway-v0"
@@ -50,6 +49,7 @@ VEHICLE_LENGTH = 5.0  # [m] highway-env's Vehicle.LENGTH
 VEHICLE_WIDTH = 2.0  # [m] highway-env's Vehicle.WIDTH
 ALONGSIDE = 3.0  # [m] longitudinal margin within which a vehicle in another lane is alongside
 SIDE_MARGIN = 0.5  # [m] lateral clearance the learned action must leave to a vehicle alongside
+OTHER_MAX_BRAKE = 6.0  # [m/s²] highway-env's IDM clips its vehicles' acceleration at ±6 m/s²
 
 #: highway-env configuration of ``safeswitch/Highway-v0`` (on top of ``highway-fast-v0``).
 HIGHWAY_CONFIG: dict[str, Any] = {
@@ -69,9 +69,10 @@ HIGHWAY_CONFIG: dict[str, Any] = {
     "offroad_terminal": True,
 }
 
-#: The state the Safety controller and the logic read, ``[B, 8 + 3·lanes]``: these columns,
-#: then per lane (lowest ``y`` first) its centre [m], the bumper-to-bumper gap to the nearest
-#: vehicle ahead that overlaps the lane [m] (1,000 if none) and that vehicle's speed [m/s].
+#: The state the Safety controller and the logic read, ``[B, 8 + 3·lanes + 7·TRACKED]``: these
+#: columns, then per lane (lowest ``y`` first) its centre [m], the bumper-to-bumper gap to the
+#: nearest vehicle ahead that overlaps the lane [m] (1,000 if none) and that vehicle's speed
+#: [m/s], then the :data:`TRACKED` nearest other vehicles (:data:`VEHICLE_COLUMNS` each).
 STATE_COLUMNS = (
     "speed",  # ego speed [m/s]
     "heading",  # ego heading relative to the road [rad]
@@ -83,6 +84,19 @@ STATE_COLUMNS = (
     "room_right",  # towards -y [m]
 )
 _LANES = len(STATE_COLUMNS)  # first per-lane column
+
+#: Per tracked vehicle (nearest first, by distance along the road; absent slots are all zero).
+VEHICLE_COLUMNS = (
+    "present",  # 1 for a vehicle, 0 for an empty slot
+    "dx",  # its centre's position along the road less the ego's [m]
+    "y",  # its centre's lateral position [m]
+    "speed",  # its speed along the road [m/s]
+    "y_low",  # lowest lateral position its centre may take until its manoeuvre ends [m]
+    "y_high",  # highest [m]
+    "max_brake",  # the hardest braking it may show [m/s²] (a crashed car stops faster)
+)
+#: How many of the other vehicles the state carries (highway-fast-v0 has 15 on its road).
+TRACKED = 16
 
 
 @dataclass(frozen=True)
@@ -105,7 +119,7 @@ class HighwayRules:
 
     decision_period: float = 0.2
     ego_max_brake: float = 5.0
-    lead_max_brake: float = 6.0
+    lead_max_brake: float = OTHER_MAX_BRAKE
     min_gap: float = 3.0
     min_ttc: float = 1.5
     max_heading: float = 0.3
@@ -151,12 +165,40 @@ def highway_state(env: gym.Env[Any, Any]) -> FloatArray:
     row = [float(ego.speed), heading, float(lateral), y, low, high, left, right]
     for (centre, _), gap, speed in zip(lanes, gaps, speeds, strict=True):
         row += [centre, gap, speed]
-    return np.array([row])
+    return np.array([row + _tracked(road, ego)])
+
+
+def _tracked(road: Any, ego: Any) -> list[float]:
+    """The :data:`VEHICLE_COLUMNS` of the :data:`TRACKED` vehicles nearest the ego along the
+    road, flattened. A vehicle's lateral reach spans its position, its lane's centre and the
+    centre of the lane it is changing to (highway-env's ``target_lane_index``: the intent a
+    turn signal shows); a crashed vehicle is brought to rest at ``speed`` m/s² (highway-env),
+    which stops it within ``speed`` · 1 s, as braking at ``speed / 2`` would."""
+    x = float(ego.position[0])
+    network = road.network
+    rows = []
+    for other in road.vehicles:
+        if other is ego:
+            continue
+        oy = float(other.position[1])
+        centres = [oy, float(network.get_lane(other.lane_index).start[1])]
+        target = getattr(other, "target_lane_index", None)
+        if target is not None:
+            centres.append(float(network.get_lane(target).start[1]))
+        speed = float(other.speed)
+        brake = max(OTHER_MAX_BRAKE, speed / 2) if other.crashed else OTHER_MAX_BRAKE
+        dx = float(other.position[0]) - x
+        rows.append((abs(dx), [1.0, dx, oy, speed * math.cos(other.heading), min(centres),
+                               max(centres), brake]))  # fmt: skip
+    rows.sort(key=lambda row: row[0])
+    flat = [value for _, columns in rows[:TRACKED] for value in columns]
+    return flat + [0.0] * (TRACKED * len(VEHICLE_COLUMNS) - len(flat))
 
 
 def _lanes(state: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per lane ``[B, L]``: centre, gap to the vehicle ahead, its speed."""
-    per_lane = state[:, _LANES:].reshape(state.shape[0], -1, 3)
+    end = state.shape[1] - TRACKED * len(VEHICLE_COLUMNS)
+    per_lane = state[:, _LANES:end].reshape(state.shape[0], -1, 3)
     return per_lane[..., 0], per_lane[..., 1], per_lane[..., 2]
 
 
@@ -299,15 +341,19 @@ class TTCParams:
             check(math.isfinite(value) and value > 0, "ttc", name, value, "must be > 0")
 
 
+def is_highway(context: object) -> bool:
+    """Whether ``context`` is a highway-env environment (it has a road)."""
+    return getattr(getattr(context, "unwrapped", None), "road", None) is not None
+
+
 def ttc_logic(context: object, params: TTCParams | None = None) -> TimeToCollisionLogic:
     """Factory of the ``ttc`` logic (registered under that name, with :class:`TTCParams`)
     for highway-env plants."""
-    road = getattr(getattr(context, "unwrapped", None), "road", None)
-    if road is None:
+    if not is_highway(context):
         raise LogicContextError(
             f"the 'ttc' switching logic supervises highway-env plants, not {context_name(context)}"
         )
-    rules = _rules_for(context)
+    rules = highway_rules(context)
     return TimeToCollisionLogic(replace(rules, **asdict(params or TTCParams())))
 
 
@@ -315,44 +361,10 @@ def ttc_logic(context: object, params: TTCParams | None = None) -> TimeToCollisi
 TTC = LogicPlugin(ttc_logic, config=TTCParams)
 
 
-def _rules_for(env: object) -> HighwayRules:
+def highway_rules(env: object) -> HighwayRules:
+    """The ``ttc`` rules for a highway-env environment: its decision period."""
     config = getattr(getattr(env, "unwrapped", None), "config", {})
     return HighwayRules(decision_period=1.0 / float(config.get("policy_frequency", 5)))
-
-
-def make_highway_env(
-    switching: str = "ttc",
-    penalty: float = -1.0,
-    config: dict[str, Any] | None = None,
-    render_mode: str | None = None,
-    logic_params: dict[str, Any] | None = None,
-) -> SafeSwitch:
-    """``safeswitch/Highway-v0``: highway-env's ``highway-fast-v0`` with continuous actions
-    under a switching logic.
-
-    Args:
-        switching: A registered logic (``ttc``, ``none`` or a plugin's).
-        penalty: ``R_ADAS`` on a step the Safety controller acted (ours: highway-env's
-            normalised reward lies in [0, 1] per step, so -1 costs a step's worth of reward; the
-            paper's -25 was set against a per-tick reward of up to 4).
-        config: highway-env configuration entries that replace :data:`HIGHWAY_CONFIG`'s.
-        render_mode: Passed to highway-env (``"rgb_array"`` for pictures).
-        logic_params: Parameters of the logic (``ttc``: :class:`TTCParams`' keys).
-    """
-    import highway_env  # noqa: F401  (registers highway-fast-v0)
-
-    env = gym.make(
-        "highway-fast-v0", config={**HIGHWAY_CONFIG, **(config or {})}, render_mode=render_mode
-    )
-    controller = HighwaySafetyController(_rules_for(env))
-    return SafeSwitch(
-        env,
-        controller,
-        switching,
-        penalty=penalty,
-        state_fn=highway_state,
-        logic_params=logic_params,
-    )
 
 
 def collided(info: dict[str, Any]) -> bool:
@@ -367,7 +379,7 @@ __all__ = [
     "HighwaySafetyController",
     "TimeToCollisionLogic",
     "collided",
+    "highway_rules",
     "highway_state",
-    "make_highway_env",
     "ttc_logic",
 ]
