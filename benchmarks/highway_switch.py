@@ -1,24 +1,31 @@
 """The paper's claim on a second plant: PPO on highway-env with and without the switch.
 
 ``safeswitch/Highway-v0`` (highway-env's ``highway-fast-v0``, continuous acceleration and
-steering) is trained with PPO (the paper's Table II, 4 environments) under the ``ttc`` switching
-logic with ``R_ADAS = -1`` and without any logic, with the same seeds. Reported per run: crashes
-and off-road departures during training, the share of steps on which the Safety controller acted
-(early vs late in training: the penalty should teach the policy not to need it), episode returns,
-and a final deterministic evaluation. Then the wrapper's own cost on a highway-env step.
+steering) is trained with PPO (the paper's Table II, 4 environments) under a switching logic
+(``certified`` by default) with ``R_ADAS = -1`` and without any logic, with the same seeds.
+Reported per run: crashes and off-road departures during training, the share of steps on which
+the Safety controller acted (early vs late in training: the penalty should teach the policy not
+to need it), episode returns, and a final deterministic evaluation (seed 1000003). Then the
+floor: highway-env's own IDM/MOBIL driver in the ego's seat under the same logic (how often a
+competent driver that knows nothing of the logic meets the Safety controller), and the
+wrapper's own cost on a highway-env step.
 
-Run: ``python benchmarks/highway_switch.py [--timesteps N] [--seeds 1 2] [--json]``; writes
-``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread.
+Run: ``python benchmarks/highway_switch.py [--logics certified none] [--timesteps N]
+[--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--json]``; writes
+``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per run.
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import statistics
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -27,6 +34,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 import _common
 import safeswitch
+from safeswitch.examples.highway_drivers import IDMDriver, drive
 from safeswitch.io import write_json
 from safeswitch.training import train
 from safeswitch.training.config import EnvTrainConfig, PPOConfig
@@ -65,7 +73,8 @@ class Episodes(BaseCallback):
         return True
 
 
-def train_one(switching: str, seed: int, timesteps: int) -> dict[str, object]:
+def train_one(switching: str, seed: int, timesteps: int, eval_episodes: int) -> dict[str, object]:
+    torch.set_num_threads(1)
     config = EnvTrainConfig(
         env_id=safeswitch.HIGHWAY_ENV_ID,
         switching=switching,
@@ -75,7 +84,7 @@ def train_one(switching: str, seed: int, timesteps: int) -> dict[str, object]:
         seed=seed,
         torch_threads=1,
         checkpoint_every=10 * timesteps,
-        eval_episodes=20,
+        eval_episodes=eval_episodes,
         ppo=PPOConfig(),
     )
     episodes = Episodes()
@@ -118,6 +127,15 @@ def train_one(switching: str, seed: int, timesteps: int) -> dict[str, object]:
     }
 
 
+def idm_floor(switching: str, episodes: int, seed: int = 1_000_003) -> dict[str, Any]:
+    """highway-env's IDM/MOBIL driver in the ego's seat under ``switching``, on the trained
+    policies' evaluation episodes."""
+    env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching=switching)
+    row = drive(env, IDMDriver(), episodes, seed)
+    env.close()
+    return {"switching": switching, **row}
+
+
 def wrapper_overhead(steps: int = 600, rounds: int = 5) -> dict[str, float]:
     """Time per step of the raw highway-env environment and of the same environment inside
     SafeSwitch with the ``none`` logic (same trajectory: state read-out, Safety controller and
@@ -131,6 +149,7 @@ def wrapper_overhead(steps: int = 600, rounds: int = 5) -> dict[str, float]:
         "raw": lambda: gym.make("highway-fast-v0", config=HIGHWAY_CONFIG),
         "safeswitch_none": lambda: gym.make(safeswitch.HIGHWAY_ENV_ID, switching="none"),
         "safeswitch_ttc": lambda: gym.make(safeswitch.HIGHWAY_ENV_ID, switching="ttc"),
+        "safeswitch_certified": lambda: gym.make(safeswitch.HIGHWAY_ENV_ID, switching="certified"),
     }
     times: dict[str, list[float]] = {name: [] for name in makers}
     for _ in range(rounds):
@@ -157,7 +176,7 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), constrained_layout=True)
-    colours = {"ttc": "tab:blue", "none": "tab:red"}
+    colours = {"certified": "tab:green", "ttc": "tab:blue", "none": "tab:red"}
     for run in runs:
         curve = run["curve"]
         assert isinstance(curve, list)
@@ -176,8 +195,10 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
     for ax in axes:
         ax.set_xlabel("training timesteps")
         ax.legend(fontsize=7)
+    logics = " / ".join(sorted({str(r["switching"]) for r in runs} - {"none"}))
     fig.suptitle(
-        f"PPO on {safeswitch.HIGHWAY_ENV_ID}: with the ttc switch vs without (25-episode means)"
+        f"PPO on {safeswitch.HIGHWAY_ENV_ID}: with the {logics} switch vs without "
+        "(25-episode means)"
     )
     path.parent.mkdir(exist_ok=True)
     fig.savefig(path, dpi=90)
@@ -186,53 +207,80 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--timesteps", type=int, default=30_000)
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--logics", nargs="+", default=["certified", "none"])
+    parser.add_argument("--timesteps", type=int, default=200_000)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--eval-episodes", type=int, default=50)
+    parser.add_argument("--parallel", type=int, default=2, help="training runs at once")
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--figure", type=Path, default=FIGURE)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    runs = []
-    for seed in args.seeds:
-        for switching in ("ttc", "none"):
-            run = train_one(switching, seed, args.timesteps)
+    jobs = [(logic, seed) for seed in args.seeds for logic in args.logics]
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
+        futures = [
+            pool.submit(train_one, logic, seed, args.timesteps, args.eval_episodes)
+            for logic, seed in jobs
+        ]
+        runs = []
+        for future in futures:
+            run = future.result()
             runs.append(run)
             print(
-                f"{switching:5} seed {seed}: {run['episodes']} episodes, crashes {run['crashes']},"
-                f" off road {run['off_road']}, safety rate {run['safety_rate_first_20pct']:.3f} →"
-                f" {run['safety_rate_last_20pct']:.3f}, return {run['return_first_20pct']:.1f} →"
-                f" {run['return_last_20pct']:.1f} ({run['wall_time_s']:.0f} s)",
+                f"{run['switching']:9} seed {run['seed']}: {run['episodes']} episodes, crashes "
+                f"{run['crashes']}, off road {run['off_road']}, safety rate "
+                f"{run['safety_rate_first_20pct']:.3f} → {run['safety_rate_last_20pct']:.3f}, "
+                f"return {run['return_first_20pct']:.1f} → {run['return_last_20pct']:.1f} "
+                f"({run['wall_time_s']:.0f} s)",
                 file=sys.stderr,
                 flush=True,
             )
+    floors = [idm_floor(logic, args.eval_episodes) for logic in args.logics]
     result = {
         "benchmark": "highway_switch",
         **_common.machine(),
         "timesteps": args.timesteps,
+        "eval_episodes": args.eval_episodes,
         "runs": runs,
+        "idm_driver": floors,
         "wrapper_overhead": wrapper_overhead(),
     }
-    write_json(RESULTS, result)
-    figure(runs, FIGURE)
+    write_json(args.out, result)
+    figure(runs, args.figure)
     if args.json:
         _common.emit({k: v for k, v in result.items() if k != "runs"}, True)
         return 0
-    print("| logic | seed | crashes in training | off road | episodes | safety rate first → "
-          "last 20 % | return first → last 20 % | evaluation: crashes / 20 |")  # fmt: skip
-    print("| --- | ---: | ---: | ---: | ---: | --- | --- | ---: |")
+    unswitched = {
+        r["seed"]: r["evaluation"]["mean_return"] for r in runs if r["switching"] == "none"
+    }
+    print("| logic | seed | training: crashes / off road / episodes | safety share, first → "
+          "last 20 % | evaluation: crashes | safety share | mean return | of none's |")  # fmt: skip
+    print("| --- | ---: | --- | --- | ---: | ---: | ---: | ---: |")
     for r in runs:
         e = r["evaluation"]
         assert isinstance(e, dict)
+        base = unswitched.get(r["seed"])
+        ratio = f"{e['mean_return'] / base:.2f}" if base else "—"
         print(
-            f"| {r['switching']} | {r['seed']} | {r['crashes']} | {r['off_road']} | "
+            f"| {r['switching']} | {r['seed']} | {r['crashes']} / {r['off_road']} / "
             f"{r['episodes']} | {r['safety_rate_first_20pct']:.3f} → "
-            f"{r['safety_rate_last_20pct']:.3f} | {r['return_first_20pct']:.1f} → "
-            f"{r['return_last_20pct']:.1f} | {e['failures']} |"
+            f"{r['safety_rate_last_20pct']:.3f} | {e['failures']} | "
+            f"{e['safety_share']:.4f} | {e['mean_return']:.1f} | {ratio} |"
+        )
+    for f in floors:
+        print(
+            f"IDM/MOBIL driver under {f['switching']}: {f['crashes']} crashes, {f['off_road']} "
+            f"off road in {f['episodes']}, safety share {f['safety_share']:.4f}, mean return "
+            f"{f['mean_return']:.1f}"
         )
     o = result["wrapper_overhead"]
     print(
         f"step: raw {o['raw_ms_per_step']:.2f} ms, SafeSwitch(none) "
         f"{o['safeswitch_none_ms_per_step']:.2f} ms ({100 * o['none_over_raw']:+.1f} %), "
-        f"SafeSwitch(ttc) {o['safeswitch_ttc_ms_per_step']:.2f} ms"
+        f"SafeSwitch(ttc) {o['safeswitch_ttc_ms_per_step']:.2f} ms, SafeSwitch(certified) "
+        f"{o['safeswitch_certified_ms_per_step']:.2f} ms"
     )
     return 0
 
