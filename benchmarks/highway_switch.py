@@ -11,13 +11,14 @@ competent driver that knows nothing of the logic meets the Safety controller), a
 wrapper's own cost on a highway-env step.
 
 Run: ``python benchmarks/highway_switch.py [--logics certified none] [--timesteps N]
-[--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--json]``; writes
+[--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--resume] [--json]``; writes
 ``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per run.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing
 import statistics
 import sys
@@ -215,19 +216,36 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--figure", type=Path, default=FIGURE)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--resume", action="store_true",
+        help="keep the runs --out already holds (same budget) and train only the missing ones",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    jobs = [(logic, seed) for seed in args.seeds for logic in args.logics]
+    result: dict[str, Any] = {
+        "benchmark": "highway_switch",
+        **_common.machine(),
+        "timesteps": args.timesteps,
+        "eval_episodes": args.eval_episodes,
+        "runs": [],
+    }
+    if args.resume and args.out.exists():
+        kept = json.loads(args.out.read_text())
+        if (kept["timesteps"], kept["eval_episodes"]) == (args.timesteps, args.eval_episodes):
+            result["runs"] = kept["runs"]
+    runs: list[dict[str, Any]] = result["runs"]
+    done = {(r["switching"], r["seed"]) for r in runs}
+    jobs = [(lg, seed) for seed in args.seeds for lg in args.logics if (lg, seed) not in done]
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
         futures = [
             pool.submit(train_one, logic, seed, args.timesteps, args.eval_episodes)
             for logic, seed in jobs
         ]
-        runs = []
         for future in futures:
             run = future.result()
             runs.append(run)
+            write_json(args.out, result)  # each run is kept the moment it ends (--resume)
             print(
                 f"{run['switching']:9} seed {run['seed']}: {run['episodes']} episodes, crashes "
                 f"{run['crashes']}, off road {run['off_road']}, safety rate "
@@ -237,16 +255,9 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
                 flush=True,
             )
-    floors = [idm_floor(logic, args.eval_episodes) for logic in args.logics]
-    result = {
-        "benchmark": "highway_switch",
-        **_common.machine(),
-        "timesteps": args.timesteps,
-        "eval_episodes": args.eval_episodes,
-        "runs": runs,
-        "idm_driver": floors,
-        "wrapper_overhead": wrapper_overhead(),
-    }
+    result["idm_driver"] = [idm_floor(logic, args.eval_episodes) for logic in args.logics]
+    result["wrapper_overhead"] = wrapper_overhead()
+    floors = result["idm_driver"]
     write_json(args.out, result)
     figure(runs, args.figure)
     if args.json:

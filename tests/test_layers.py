@@ -2,8 +2,9 @@
 and only ``report`` imports matplotlib.
 
 core → sim → leftturn → sumo, evaluation, runtime → training → report, deploy → app, examples
-→ logics, cli (``io`` and ``progress`` are leaf utilities every layer may use). ``runtime`` (the exported
-controller) sits on the simulation layers alone: it runs without the training stack.
+→ logics, cli (``io`` and ``progress`` are leaf utilities every layer may use). ``runtime``
+(the exported controller) sits on the simulation layers alone: it runs without the training
+stack.
 """
 
 import ast

@@ -921,8 +921,9 @@ class CertifiedSwitching:
 
 
 def certified_logic(scene: LogicScene) -> CertifiedSwitching:
-    """Factory of the ``certified`` logic (registered under that name) for a left-turn scene:
-    its assumptions and margins from the scene's configuration, and the scene's phantoms."""
+    """Factory of the ``certified`` logic for a left-turn scene (the name is registered by
+    :func:`safeswitch.logics.certified_logic`, which serves highway-env too): its assumptions
+    and margins from the scene's configuration, and the scene's phantoms."""
     if not isinstance(scene, LogicScene):
         raise LogicContextError(
             "the 'certified' switching logic supervises the left-turn task, not "
