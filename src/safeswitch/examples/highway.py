@@ -209,14 +209,32 @@ def _overlapping(centres: FloatArray, low: FloatArray, high: FloatArray) -> Bool
     return (centres > low[:, None] - half) & (centres < high[:, None] + half)
 
 
-def _stopping_margin(
-    gap: FloatArray, speed: FloatArray, lead_speed: FloatArray, rules: HighwayRules
+def stopping_margin(
+    gap: FloatArray, speed: FloatArray, lead: FloatArray, lead_brake: Any, ego_brake: float
 ) -> FloatArray:
-    """Gap left [m] when the ego brakes at ``ego_max_brake`` and the leader at
-    ``lead_max_brake`` from now on, both until standstill."""
-    ego_stop = speed * speed / (2 * rules.ego_max_brake)
-    lead_stop = lead_speed * lead_speed / (2 * rules.lead_max_brake)
-    return gap + lead_stop - ego_stop
+    """Gap left [m] when the ego (``speed`` ``[B, 1]``) brakes at ``ego_brake`` and the
+    vehicle ahead (``lead``) at ``lead_brake`` from now on, both until standstill."""
+    return gap + lead * lead / (2 * lead_brake) - speed * speed / (2 * ego_brake)
+
+
+def safety_command(
+    speed: FloatArray,
+    heading: FloatArray,
+    lateral: FloatArray,
+    brake_now: BoolArray,
+    rules: Any,
+) -> FloatArray:
+    """A Safety controller's action ``[B, 2]``: brake at ``rules.ego_max_brake`` where
+    ``brake_now`` (never more than stops the car within one decision period, and never in
+    reverse: highway-env's vehicle would roll backwards, and one that does is brought to rest),
+    hold the speed elsewhere; steer back to the nearest lane's centre (a PD law on the offset
+    and heading error, ``rules.lateral_gain`` and ``rules.heading_gain``)."""
+    brake = np.minimum(rules.ego_max_brake, np.abs(speed) / rules.decision_period)
+    steer = -rules.lateral_gain * lateral - rules.heading_gain * heading
+    out = np.empty((speed.shape[0], 2))
+    out[:, 0] = np.where(brake_now | (speed < 0), -np.sign(speed) * brake / ACCEL_RANGE, 0.0)
+    out[:, 1] = clamp(steer / STEER_RANGE, -1.0, 1.0)
+    return out
 
 
 class HighwaySafetyController:
@@ -233,17 +251,10 @@ class HighwaySafetyController:
         r = self.rules
         speed, heading, lateral, y = state[:, 0], state[:, 1], state[:, 2], state[:, 3]
         centres, gaps, leads = _lanes(state)
-        margin = _stopping_margin(gaps, speed[:, None], leads, r)
+        margin = stopping_margin(gaps, speed[:, None], leads, r.lead_max_brake, r.ego_max_brake)
         short = np.where(_overlapping(centres, y, y), margin, np.inf).min(axis=1)
         short = short < 2 * r.min_gap + speed * r.decision_period
-        # never command more braking than stops the car within one decision period, and never
-        # reverse (highway-env's vehicle would): a car rolling backwards is brought to rest
-        brake = np.minimum(r.ego_max_brake, speed / r.decision_period)
-        steer = -r.lateral_gain * lateral - r.heading_gain * heading
-        out = np.empty((state.shape[0], 2))
-        out[:, 0] = np.where(short | (speed < 0), -brake / ACCEL_RANGE, 0.0)
-        out[:, 1] = clamp(steer / STEER_RANGE, -1.0, 1.0)
-        return out
+        return safety_command(speed, heading, lateral, short, r)
 
 
 class TimeToCollisionLogic:
@@ -300,7 +311,7 @@ class TimeToCollisionLogic:
         y = state[:, 3]
         centres, _, _ = _lanes(state)
         relevant = _overlapping(centres, np.minimum(reach_low, y), np.maximum(reach_high, y))
-        margin = _stopping_margin(gaps1, speed1[:, None], leads1, r)
+        margin = stopping_margin(gaps1, speed1[:, None], leads1, r.lead_max_brake, r.ego_max_brake)
         envelope = (relevant & (margin < r.min_gap)).any(axis=1)
         closing = speed1[:, None] - leads1
         ttc = np.where(closing > 0, gaps1 / np.maximum(closing, 1e-9), np.inf)
@@ -381,5 +392,7 @@ __all__ = [
     "collided",
     "highway_rules",
     "highway_state",
+    "safety_command",
+    "stopping_margin",
     "ttc_logic",
 ]

@@ -60,6 +60,8 @@ from safeswitch.examples.highway import (
     _lanes,
     highway_rules,
     is_highway,
+    safety_command,
+    stopping_margin,
 )
 
 _FIELDS = len(VEHICLE_COLUMNS)
@@ -149,14 +151,6 @@ def _meets(
     )
 
 
-def _leader_margin(
-    gap: FloatArray, speed: FloatArray, lead: FloatArray, lead_brake: FloatArray, ego_brake: float
-) -> FloatArray:
-    """``[B, K]``: the gap left [m] when the ego (``speed`` ``[B]``) and the vehicle ahead both
-    brake to a standstill."""
-    return gap + lead * lead / (2 * lead_brake) - (speed * speed / (2 * ego_brake))[:, None]
-
-
 def _follower_margin(
     gap: FloatArray, speed: FloatArray, follower: FloatArray, r: CertifiedRules
 ) -> FloatArray:
@@ -207,20 +201,19 @@ class CertifiedHighwayController:
         low, high = np.minimum(y, centre), np.maximum(y, centre)
         meets = _meets(low, high, _half_width(heading), others, r.side_margin)
         ahead = meets & (others["dx"] > 0)
-        margin = _leader_margin(
-            others["dx"] - VEHICLE_LENGTH, speed, others["speed"], _brakes(others), r.ego_max_brake
+        margin = stopping_margin(
+            others["dx"] - VEHICLE_LENGTH,
+            speed[:, None],
+            others["speed"],
+            _brakes(others),
+            r.ego_max_brake,
         )
         short = (ahead & (margin < (2 * r.min_gap + speed * r.decision_period)[:, None])).any(1)
         beside = _meets(low, high, _half_width(heading), others, r.side_margin + r.lane_width)
         passing = _pass_margin(others["dx"], speed, others["speed"], r)
         closing = (speed[:, None] - others["speed"]) * r.decision_period
         short |= (beside & (others["dx"] > 0) & (passing < r.min_gap + closing)).any(1)
-        brake = np.minimum(r.ego_max_brake, np.abs(speed) / r.decision_period)
-        steer = -r.lateral_gain * lateral - r.heading_gain * heading
-        out = np.empty((state.shape[0], 2))
-        out[:, 0] = np.where(short | (speed < 0), -np.sign(speed) * brake / ACCEL_RANGE, 0.0)
-        out[:, 1] = clamp(steer / STEER_RANGE, -1.0, 1.0)
-        return out
+        return safety_command(speed, heading, lateral, np.asarray(short), r)
 
 
 def _brakes(others: dict[str, FloatArray]) -> FloatArray:
@@ -285,7 +278,10 @@ class CertifiedHighwayLogic:
         behind = meets & (dx <= -VEHICLE_LENGTH)
         leader = ahead & (
             (lead_gap1 < r.min_gap)
-            | (_leader_margin(lead_gap1, speed1, lead1, brakes, r.ego_max_brake) < r.min_gap)
+            | (
+                stopping_margin(lead_gap1, speed1[:, None], lead1, brakes, r.ego_max_brake)
+                < r.min_gap
+            )
         )
         follower = behind & (
             (follow_gap1 < 0.0) | (_follower_margin(follow_gap1, speed1, follower1, r) < r.min_gap)
