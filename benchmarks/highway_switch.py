@@ -11,7 +11,8 @@ competent driver that knows nothing of the logic meets the Safety controller), a
 wrapper's own cost on a highway-env step.
 
 Run: ``python benchmarks/highway_switch.py [--logics certified none] [--timesteps N]
-[--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--resume] [--json]``; writes
+[--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--keep DIR] [--resume]
+[--json]``; writes
 ``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per run.
 """
 
@@ -74,7 +75,9 @@ class Episodes(BaseCallback):
         return True
 
 
-def train_one(switching: str, seed: int, timesteps: int, eval_episodes: int) -> dict[str, object]:
+def train_one(
+    switching: str, seed: int, timesteps: int, eval_episodes: int, keep: Path | None = None
+) -> dict[str, object]:
     torch.set_num_threads(1)
     config = EnvTrainConfig(
         env_id=safeswitch.HIGHWAY_ENV_ID,
@@ -90,7 +93,8 @@ def train_one(switching: str, seed: int, timesteps: int, eval_episodes: int) -> 
     )
     episodes = Episodes()
     with tempfile.TemporaryDirectory() as tmp:
-        metrics = train(config, Path(tmp) / "run", progress_bar=False, callbacks=[episodes])
+        run_dir = keep / f"{switching}_seed{seed}" if keep else Path(tmp) / "run"
+        metrics = train(config, run_dir, progress_bar=False, callbacks=[episodes])
     rows = episodes.rows
     steps = np.array([r["length"] for r in rows], dtype=float)
     safety = np.array([r["safety_steps"] for r in rows])
@@ -217,6 +221,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--figure", type=Path, default=FIGURE)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
+        "--keep", type=Path, default=None,
+        help="keep each run's directory (model, metrics, TensorBoard) as KEEP/LOGIC_seedN",
+    )  # fmt: skip
+    parser.add_argument(
         "--resume", action="store_true",
         help="keep the runs --out already holds (same budget) and train only the missing ones",
     )  # fmt: skip
@@ -239,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
         futures = [
-            pool.submit(train_one, logic, seed, args.timesteps, args.eval_episodes)
+            pool.submit(train_one, logic, seed, args.timesteps, args.eval_episodes, args.keep)
             for logic, seed in jobs
         ]
         for future in futures:
