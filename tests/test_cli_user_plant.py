@@ -205,3 +205,21 @@ def test_an_interrupted_constrained_run_resumes_with_its_multipliers(
     assert metrics["timesteps"] >= 2048
     assert restored == [state["constraints"]]  # it went on from the saved multipliers
     assert metrics["constraints"]["speeding"]["integral"] >= risen
+
+
+@pytest.mark.parametrize("switching", ["none", "braking-envelope"])
+def test_the_car_following_plant_is_trained_by_module_and_id(tmp_path, switching):
+    """The README's car-following plant, registered as a user would register it
+    (``tests/core/follow_plant.py``; the benchmarks train it so): its logic keeps it out of the
+    lead car in training and evaluation; without one, PPO's first policies hit it."""
+    code, run = train(
+        tmp_path, "--env", "tests.core.follow_plant:Follow-v0", "--switching", switching,
+        "--set", "eval_episodes=5",
+    )  # fmt: skip
+    assert code == 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    failures = metrics["training"]["failures"] + metrics["evaluation"]["failures"]
+    if switching == "none":
+        assert failures > 0
+    else:
+        assert failures == 0 and metrics["training"]["safety_activation_steps"] > 0

@@ -1,0 +1,209 @@
+"""Learning on every plant: issue #39's targets against what the benchmarks measured.
+
+Reads the results the training benchmarks wrote (it trains nothing) and prints one row per
+plant and method: the figures per training seed, the target and whether every seed meets it.
+Each row names the script that measured it; re-run that script to re-measure the row.
+
+Run: ``python benchmarks/plants.py [--json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+RESULTS = Path(__file__).parent / "results"
+
+Row = dict[str, Any]
+
+
+def _load(name: str) -> dict[str, Any] | None:
+    path = RESULTS / name
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _col(runs: list[dict[str, Any]], key: str | Callable[[dict[str, Any]], Any], spec: str = "",
+         unit: str = "") -> str:  # fmt: skip
+    """One figure per training seed, ``a / b / c``: ``key`` of each run (or ``key(run)``)."""
+    get = key if callable(key) else (lambda run: run[key])
+    return " / ".join(format(get(run), spec) + unit for run in runs)
+
+
+def left_turn(config: str, scenarios: int = 1000) -> Row | None:
+    """The left turn's recipe ``config`` (``train_seeds.py``), 1,000 unseen scenarios."""
+    data = _load(f"train_seeds_{config}.json")
+    if data is None:
+        return None
+    runs = sorted(data["runs"], key=lambda r: r["seed"])
+    paper = config == "paper"
+    checks = {
+        "0 collisions in training and evaluation": all(
+            r["training_collision_episodes"] == 0 and r["collisions"] == 0 for r in runs
+        ),
+        "never above 30 km/h": all(r["speeding_episodes"] == 0 for r in runs),
+        "efficiency ≥ 0.85": all(r["mean_efficiency"] >= 0.85 for r in runs),
+    }
+    if paper:
+        checks["safety action ≤ 2 % of episodes"] = all(
+            r["safety_activation_episodes"] <= 0.02 * scenarios for r in runs
+        )
+        checks["comfort exceeded ≤ 0.5 % of ticks"] = all(
+            r["comfort_violation_fraction"] <= 0.005 for r in runs
+        )
+        checks["crosses first ≥ 20 %"] = all(r["cut_episodes"] >= 0.2 * scenarios for r in runs)
+    else:
+        checks["clears ≥ 99 %"] = all(r["cleared_episodes"] >= 0.99 * scenarios for r in runs)
+    comfort = _col(runs, lambda r: 100 * r["comfort_violation_fraction"], ".2f", " %")
+    measured = (
+        f"training collisions {_col(runs, 'training_collision_episodes')}; collisions "
+        f"{_col(runs, 'collisions')}; safety action {_col(runs, 'safety_activation_episodes')} "
+        f"episodes; comfort {comfort}; "
+        f"top {_col(runs, 'max_speed_kmh', '.1f')} km/h; cuts {_col(runs, 'cut_episodes')}; "
+        f"cleared {_col(runs, 'cleared_episodes')}; efficiency "
+        f"{_col(runs, 'mean_efficiency', '.3f')}"
+    )
+    return {
+        "plant": f"left turn, `{config}`",
+        "method": f"PPO with R_ADAS from a random start, `configs/{config}.yaml`",
+        "seeds": [r["seed"] for r in runs],
+        "measured": measured,
+        "checks": checks,
+        "source": f"python benchmarks/train_seeds.py --config {config}",
+    }
+
+
+def highway() -> list[Row]:
+    """highway-env under each logic against PPO without one (``highway_switch.py``)."""
+    data = _load("highway.json")
+    if data is None:
+        return []
+    runs = data["runs"]
+    none = {r["seed"]: r for r in runs if r["switching"] == "none"}
+    floors = {f["switching"]: f for f in data.get("idm_driver", [])}
+    rows = []
+    for logic in sorted({r["switching"] for r in runs} - {"none"}):
+        mine = sorted((r for r in runs if r["switching"] == logic), key=lambda r: r["seed"])
+        floor = floors.get(logic, {}).get("safety_share")
+        share_bound = max(0.005, floor) if floor is not None else 0.005
+        ratios = [
+            r["evaluation"]["mean_return"] / none[r["seed"]]["evaluation"]["mean_return"]
+            if r["seed"] in none
+            else float("nan")
+            for r in mine
+        ]
+        checks = {
+            "0 crashes and 0 off road in training": all(
+                r["crashes"] == 0 and r["off_road"] == 0 for r in mine
+            ),
+            "0 crashes in evaluation": all(r["evaluation"]["failures"] == 0 for r in mine),
+            f"Safety controller ≤ {100 * share_bound:.2f} % of steps (0.5 % or the IDM floor)": (
+                all(r["evaluation"]["safety_share"] <= share_bound for r in mine)
+            ),
+            "return ≥ 95 % of PPO without the switch": all(q >= 0.95 for q in ratios),
+        }
+        floor_text = "—" if floor is None else format(100 * floor, ".2f") + " %"
+        measured = (
+            f"training crashes / off road {_col(mine, lambda r: (r['crashes'], r['off_road']))}"
+            f" in {_col(mine, 'episodes')} episodes; evaluation crashes "
+            f"{_col(mine, lambda r: r['evaluation']['failures'])}; Safety controller "
+            f"{_col(mine, lambda r: 100 * r['evaluation']['safety_share'], '.2f', ' %')} of "
+            f"steps (IDM/MOBIL driver: {floor_text}); return "
+            f"{' / '.join(format(q, '.2f') for q in ratios)} of PPO's without the switch"
+        )
+        rows.append(
+            {
+                "plant": "highway-env",
+                "method": f"PPO with R_ADAS = −1 under `{logic}`, {data['timesteps']:,} steps",
+                "seeds": [r["seed"] for r in mine],
+                "measured": measured,
+                "checks": checks,
+                "source": f"python benchmarks/highway_switch.py --logics {logic} none",
+            }
+        )
+    return rows
+
+
+def own_plant(name: str, label: str, command: str) -> list[Row]:
+    """A plant registered as a user registers one (``interventions.py``), penalty alone and
+    with the fit toward the executed safety action."""
+    data = _load(f"interventions_{name}.json")
+    if data is None:
+        return []
+    rows = []
+    for weight in sorted({r["intervention_imitation"] for r in data["runs"]}):
+        mine = sorted(
+            (r for r in data["runs"] if r["intervention_imitation"] == weight),
+            key=lambda r: r["seed"],
+        )
+        how = "penalty alone" if weight == 0 else f"penalty + intervention imitation {weight:g}"
+        rows.append(
+            {
+                "plant": label,
+                "method": f"PPO, {how}, {mine[0]['timesteps']:,} steps",
+                "seeds": [r["seed"] for r in mine],
+                "measured": (
+                    "failures (training, evaluation) "
+                    f"{_col(mine, lambda r: (r['training_failures'], r['failures']))}; "
+                    "Safety controller "
+                    f"{_col(mine, lambda r: 100 * r['safety_share'], '.2f', ' %')} of steps"
+                ),
+                "checks": {
+                    "0 failures": all(
+                        r["training_failures"] == 0 and r["failures"] == 0 for r in mine
+                    ),
+                    "Safety controller ≤ 2 % of evaluation steps": all(
+                        r["safety_share"] <= 0.02 for r in mine
+                    ),
+                },
+                "source": command,
+            }
+        )
+    return rows
+
+
+def rows() -> list[Row]:
+    sources: list[Callable[[], list[Row]]] = [
+        lambda: [r for r in (left_turn("paper"), left_turn("certified")) if r],
+        highway,
+        lambda: own_plant(
+            "Follow-v0_100k",
+            "car following (`tests/core/follow_plant.py`, the README's plant)",
+            "python benchmarks/interventions.py --env tests.core.follow_plant:Follow-v0 "
+            "--switching braking-envelope --timesteps 100000",
+        ),
+        lambda: own_plant(
+            "UserWall-v0",
+            "a user's plant via `--import` (`tests/core/user_plant.py`)",
+            "python benchmarks/interventions.py",
+        ),
+    ]
+    return [row for source in sources for row in source()]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    table = rows()
+    if args.json:
+        print(json.dumps(table, indent=2))
+        return 0
+    print("| plant | method | measured (training seeds in order) | targets missed | reproduce |")
+    print("| --- | --- | --- | --- | --- |")
+    for row in table:
+        missed = [name for name, ok in row["checks"].items() if not ok]
+        verdict = "none" if not missed else "**" + "; ".join(missed) + "**"
+        seeds = ", ".join(str(s) for s in row["seeds"])
+        print(
+            f"| {row['plant']} | {row['method']} (seeds {seeds}) | {row['measured']} | "
+            f"{verdict} | `{row['source']}` |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,28 @@
+"""The car-following plant (``tests/core/plants.py``: the README's own-plant example with
+random starts and a 200-step horizon) registered as a user registers a plant, so that the
+command line and the benchmarks can train it by name:
+``--env tests.core.follow_plant:Follow-v0 --switching braking-envelope``. Its failure is the
+plant's ``info["crashed"]``, declared explicitly.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from safeswitch import register_logic
+from safeswitch.core.registry import register_safety_controller
+from tests.core.plants import BrakingEnvelope, Follow, full_brake
+
+ENV_ID = "Follow-v0"
+LOGIC = "braking-envelope"
+
+
+def register() -> None:
+    """Register the plant, its Safety controller (with its failure) and its logic."""
+    if ENV_ID not in gym.registry:
+        gym.register(ENV_ID, entry_point=Follow)
+    register_safety_controller(ENV_ID, lambda env: full_brake, failure="crashed")
+    register_logic(LOGIC, lambda context: BrakingEnvelope(), replace=True)
+
+
+register()
