@@ -173,12 +173,14 @@ def rows() -> list[Row]:
             "Follow-v0_100k",
             "car following (`tests/core/follow_plant.py`, the README's plant)",
             "python benchmarks/interventions.py --env tests.core.follow_plant:Follow-v0 "
-            "--switching braking-envelope --timesteps 100000",
+            "--switching braking-envelope --timesteps 100000 "
+            "--out benchmarks/results/interventions_Follow-v0_100k.json",
         ),
         lambda: own_plant(
-            "UserWall-v0",
+            "UserWall-v0_100k",
             "a user's plant via `--import` (`tests/core/user_plant.py`)",
-            "python benchmarks/interventions.py",
+            "python benchmarks/interventions.py --timesteps 100000 "
+            "--out benchmarks/results/interventions_UserWall-v0_100k.json",
         ),
     ]
     return [row for source in sources for row in source()]
