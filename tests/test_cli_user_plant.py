@@ -86,6 +86,16 @@ def test_switching_is_checked_after_the_imports(tmp_path, capsys, forgotten):
     assert "no module named" in line
 
 
+def test_module_colon_id_is_imported_before_switching_is_checked(tmp_path, capsys, forgotten):
+    # the module registers the logic too: --env module:EnvId alone makes it a valid choice
+    code, run = train(tmp_path, "--env", f"{MODULE}:{ENV_ID}", "--switching", LOGIC)
+    assert code == 0, error_line(capsys)
+    assert yaml.safe_load((run / "config.yaml").read_text())["switching"] == LOGIC
+    code, _ = train(tmp_path, "--env=tests.core.no_such_module:X-v0", name="missing")
+    assert code == 2
+    assert "--env: cannot import 'tests.core.no_such_module'" in error_line(capsys)
+
+
 def test_module_colon_id_imports_the_module_and_the_run_remembers_it(tmp_path, capsys, forgotten):
     code, run = train(tmp_path, "--env", f"{MODULE}:{ENV_ID}", "--switching", "none")
     assert code == 0

@@ -68,19 +68,21 @@ def penalty_value(text: str) -> float:
     return value
 
 
-def imported_modules(argv: list[str]) -> list[str]:
-    """The modules named by ``--import MODULE`` (or ``--import=MODULE``) anywhere in ``argv``:
-    imported before the parser is built, so that what they register (environments, Safety
-    controllers, switching logics) is known to ``--env`` and ``--switching``."""
-    names, take = [], False
-    for arg in argv:
-        if take:
-            names.append(arg)
-            take = False
-        elif arg == "--import":
-            take = True
-        elif arg.startswith("--import="):
-            names.append(arg.removeprefix("--import="))
+def imported_modules(argv: list[str]) -> list[tuple[str, str]]:
+    """``(option, module)`` for each module named by ``--import MODULE`` (or
+    ``--import=MODULE``) and by ``--env MODULE:EnvId`` anywhere in ``argv``: imported before the
+    parser is built, so that what they register (environments, Safety controllers, switching
+    logics) is known to ``--env`` and ``--switching``."""
+    names: list[tuple[str, str]] = []
+    for i, flag in enumerate(argv):
+        value = argv[i + 1] if i + 1 < len(argv) else ""
+        for option in ("--import", "--env"):
+            if flag.startswith(option + "="):
+                flag, value = option, flag.removeprefix(option + "=")
+        if flag == "--import" and value:
+            names.append((flag, value))
+        elif flag == "--env" and ":" in value:
+            names.append((flag, value.partition(":")[0]))
     return names
 
 
@@ -1015,11 +1017,12 @@ def main(argv: list[str] | None = None) -> int:
     if modules:
         from safeswitch.core.registry import import_modules
 
-        try:
-            import_modules(modules)
-        except ModuleNotFoundError as exc:
-            print(f"safeswitch: error: --import: {exc}", file=sys.stderr)
-            return 2
+        for option, module in modules:
+            try:
+                import_modules([module])
+            except ModuleNotFoundError as exc:
+                print(f"safeswitch: error: {option}: {exc}", file=sys.stderr)
+                return 2
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
