@@ -179,6 +179,7 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), constrained_layout=True)
     colours = {"certified": "tab:green", "ttc": "tab:blue", "none": "tab:red"}
@@ -187,7 +188,12 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
         assert isinstance(curve, list)
         t = np.array([c["timestep"] for c in curve])
         label = f"{run['switching']} (seed {run['seed']})"
-        style = {"color": colours[str(run["switching"])], "alpha": 0.8, "label": label}
+        style = {
+            "color": colours[str(run["switching"])],
+            "linestyle": ("-", "--", ":")[(int(run["seed"]) - 1) % 3],  # type: ignore[call-overload]
+            "alpha": 0.8,
+            "label": label,
+        }
         window = 25
         for ax, key in ((axes[0], "safety_rate"), (axes[1], "return"), (axes[2], "failure")):
             values = np.array([float(c[key]) for c in curve])
@@ -199,6 +205,7 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
     axes[2].set_ylabel("episodes ending in a crash or off the road")
     for ax in axes:
         ax.set_xlabel("training timesteps")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:.0f}k"))
         ax.legend(fontsize=7)
     logics = " / ".join(sorted({str(r["switching"]) for r in runs} - {"none"}))
     fig.suptitle(
