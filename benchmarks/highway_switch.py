@@ -12,8 +12,8 @@ wrapper's own cost on a highway-env step.
 
 Run: ``python benchmarks/highway_switch.py [--logics certified none] [--timesteps N]
 [--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--keep DIR] [--resume]
-[--json]``; writes
-``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per run.
+[--json]``; writes ``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One
+torch thread per run.
 """
 
 from __future__ import annotations
