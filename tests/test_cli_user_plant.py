@@ -96,6 +96,15 @@ def test_module_colon_id_is_imported_before_switching_is_checked(tmp_path, capsy
     assert "--env: cannot import 'tests.core.no_such_module'" in error_line(capsys)
 
 
+def test_a_config_files_module_is_imported_before_switching_is_checked(tmp_path, capsys,
+                                                                      forgotten):  # fmt: skip
+    config = tmp_path / "wall.yaml"
+    config.write_text(f"env_id: {MODULE}:{ENV_ID}\n")
+    code, run = train(tmp_path, "--config", str(config), "--switching", LOGIC)
+    assert code == 0, error_line(capsys)
+    assert yaml.safe_load((run / "config.yaml").read_text())["switching"] == LOGIC
+
+
 def test_module_colon_id_imports_the_module_and_the_run_remembers_it(tmp_path, capsys, forgotten):
     code, run = train(tmp_path, "--env", f"{MODULE}:{ENV_ID}", "--switching", "none")
     assert code == 0

@@ -70,20 +70,40 @@ def penalty_value(text: str) -> float:
 
 def imported_modules(argv: list[str]) -> list[tuple[str, str]]:
     """``(option, module)`` for each module named by ``--import MODULE`` (or
-    ``--import=MODULE``) and by ``--env MODULE:EnvId`` anywhere in ``argv``: imported before the
-    parser is built, so that what they register (environments, Safety controllers, switching
-    logics) is known to ``--env`` and ``--switching``."""
+    ``--import=MODULE``), by ``--env MODULE:EnvId`` and by the ``env_id: MODULE:EnvId`` of a
+    ``--config`` file anywhere in ``argv``: imported before the parser is built, so that what
+    they register (environments, Safety controllers, switching logics) is known to ``--env``
+    and ``--switching``."""
     names: list[tuple[str, str]] = []
     for i, flag in enumerate(argv):
         value = argv[i + 1] if i + 1 < len(argv) else ""
-        for option in ("--import", "--env"):
+        for option in ("--import", "--env", "--config"):
             if flag.startswith(option + "="):
                 flag, value = option, flag.removeprefix(option + "=")
+        if flag == "--config":  # a configuration file's env_id: MODULE:EnvId
+            value = _env_id_of(Path(value))
         if flag == "--import" and value:
             names.append((flag, value))
-        elif flag == "--env" and ":" in value:
+        elif flag in ("--env", "--config") and ":" in value:
             names.append((flag, value.partition(":")[0]))
     return names
+
+
+def _env_id_of(path: Path) -> str:
+    """The ``env_id`` a configuration file names (``""`` if it is not a readable file naming
+    one: whatever is wrong with it is reported where the file is loaded)."""
+    if not path.is_file():
+        return ""
+    import yaml
+
+    from safeswitch.core.config import ConfigError
+    from safeswitch.training.config import read_config
+
+    try:
+        env_id = read_config(path).get("env_id", "")
+    except (ConfigError, OSError, yaml.YAMLError, AttributeError):
+        return ""  # reported, with the file's name, where the configuration is loaded
+    return env_id if isinstance(env_id, str) else ""
 
 
 class _Parser(argparse.ArgumentParser):
