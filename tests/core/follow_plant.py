@@ -7,11 +7,7 @@ plant's ``info["crashed"]``, declared explicitly.
 
 from __future__ import annotations
 
-import gymnasium as gym
-
-from safeswitch import register_logic
-from safeswitch.core.registry import register_safety_controller
-from tests.core.plants import BrakingEnvelope, Follow, full_brake
+from tests.core.plants import BrakingEnvelope, Follow, full_brake, register_plant
 
 ENV_ID = "Follow-v0"
 LOGIC = "braking-envelope"
@@ -19,10 +15,7 @@ LOGIC = "braking-envelope"
 
 def register() -> None:
     """Register the plant, its Safety controller (with its failure) and its logic."""
-    if ENV_ID not in gym.registry:
-        gym.register(ENV_ID, entry_point=Follow)
-    register_safety_controller(ENV_ID, lambda env: full_brake, failure="crashed")
-    register_logic(LOGIC, lambda context: BrakingEnvelope(), replace=True)
+    register_plant(ENV_ID, Follow, full_brake, "crashed", LOGIC, BrakingEnvelope)
 
 
 register()

@@ -12,7 +12,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from safeswitch import Decision
+from safeswitch import Decision, register_logic
+from safeswitch.core.registry import register_safety_controller
 
 DT = 0.1  # [s]
 MAX_BRAKE = 8.0  # [m/s²]
@@ -87,3 +88,13 @@ class BrakingEnvelope:
         lead_travelled = 0.5 * (lead + lead_moved) * DT
         unsafe = margin(gap - travelled + lead_travelled, v1, lead_moved) < MIN_GAP
         return Decision(unsafe, unsafe.astype(np.int8), safe)
+
+
+def register_plant(env_id, entry_point, safety, failure, logic, make_logic):
+    """Register a plant as a user does: its Gymnasium id, its Safety controller ``safety``
+    with what counts as its ``failure``, and its switching logic ``logic`` (``make_logic()``
+    builds it)."""
+    if env_id not in gym.registry:
+        gym.register(env_id, entry_point=entry_point)
+    register_safety_controller(env_id, lambda env: safety, failure=failure)
+    register_logic(logic, lambda context: make_logic(), replace=True)

@@ -12,8 +12,8 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from safeswitch import Decision, register_logic
-from safeswitch.core.registry import register_safety_controller
+from safeswitch import Decision
+from tests.core.plants import register_plant
 
 ENV_ID = "UserWall-v0"
 LOGIC = "stopping-distance"
@@ -78,10 +78,7 @@ class StoppingDistance:
 
 def register() -> None:
     """Register the plant, its Safety controller (with its failure) and its logic."""
-    if ENV_ID not in gym.registry:
-        gym.register(ENV_ID, entry_point=Wall)
-    register_safety_controller(ENV_ID, lambda env: full_brake, failure="hit_wall")
-    register_logic(LOGIC, lambda context: StoppingDistance(), replace=True)
+    register_plant(ENV_ID, Wall, full_brake, "hit_wall", LOGIC, StoppingDistance)
 
 
 register()
