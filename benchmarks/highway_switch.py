@@ -10,10 +10,16 @@ floor: highway-env's own IDM/MOBIL driver in the ego's seat under the same logic
 competent driver that knows nothing of the logic meets the Safety controller), and the
 wrapper's own cost on a highway-env step.
 
+The evaluation also reports why the Safety controller acted (the logic's reasons) and how the
+policy drove: the steps above the lane's speed limit (30 m/s) and beyond the comfort limits
+(|a_lon| ≤ 5, |a_lat| ≤ 3 m/s²), the plant's ``speeding`` and ``comfort`` costs.
+``--imitation W`` adds runs under the first logic that also learn from the Safety controller's
+interventions (``policy.intervention_imitation: W``), to set against the penalty alone.
+
 Run: ``python benchmarks/highway_switch.py [--logics certified none] [--timesteps N]
-[--seeds 1 2 3] [--parallel 2] [--eval-episodes 50] [--out FILE] [--keep DIR] [--resume]
-[--json]``; writes ``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One
-torch thread per run.
+[--seeds 1 2 3] [--imitation W] [--parallel 2] [--eval-episodes 50] [--out FILE] [--keep DIR]
+[--resume] [--reevaluate] [--json]``; writes ``benchmarks/results/highway.json`` and
+``docs/highway_training.png``. One torch thread per run.
 """
 
 from __future__ import annotations
@@ -36,10 +42,11 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 import _common
 import safeswitch
+from safeswitch.cli import main as safeswitch_cli
 from safeswitch.examples.highway_drivers import IDMDriver, drive
 from safeswitch.io import write_json
 from safeswitch.training import train
-from safeswitch.training.config import EnvTrainConfig, PPOConfig
+from safeswitch.training.config import EnvTrainConfig, PolicyConfig, PPOConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "highway.json"
@@ -75,8 +82,22 @@ class Episodes(BaseCallback):
         return True
 
 
+def run_name(switching: str, imitation: float) -> str:
+    """A run's method: the logic, ``+imitation`` when it learns from the interventions."""
+    return f"{switching}+imitation" if imitation else switching
+
+
+def kept_dir(keep: Path, switching: str, imitation: float, seed: int) -> Path:
+    return keep / f"{run_name(switching, imitation).replace('+', '_')}_seed{seed}"
+
+
 def train_one(
-    switching: str, seed: int, timesteps: int, eval_episodes: int, keep: Path | None = None
+    switching: str,
+    seed: int,
+    timesteps: int,
+    eval_episodes: int,
+    keep: Path | None = None,
+    imitation: float = 0.0,
 ) -> dict[str, object]:
     torch.set_num_threads(1)
     config = EnvTrainConfig(
@@ -90,10 +111,11 @@ def train_one(
         checkpoint_every=10 * timesteps,
         eval_episodes=eval_episodes,
         ppo=PPOConfig(),
+        policy=PolicyConfig(intervention_imitation=imitation),
     )
     episodes = Episodes()
     with tempfile.TemporaryDirectory() as tmp:
-        run_dir = keep / f"{switching}_seed{seed}" if keep else Path(tmp) / "run"
+        run_dir = kept_dir(keep, switching, imitation, seed) if keep else Path(tmp) / "run"
         metrics = train(config, run_dir, progress_bar=False, callbacks=[episodes])
     rows = episodes.rows
     steps = np.array([r["length"] for r in rows], dtype=float)
@@ -109,6 +131,7 @@ def train_one(
 
     return {
         "switching": switching,
+        "imitation": imitation,
         "seed": seed,
         "timesteps": metrics["timesteps"],
         "wall_time_s": metrics["wall_time_s"],
@@ -130,6 +153,25 @@ def train_one(
             for r in rows
         ],
     }
+
+
+def reevaluate(run: dict[str, Any], keep: Path, episodes: int) -> dict[str, Any]:
+    """The kept policy of ``run`` evaluated again the way training evaluated it (``safeswitch
+    evaluate``, same seed and episodes): the reasons and driving costs for runs recorded
+    before they were."""
+    model = kept_dir(keep, run["switching"], run.get("imitation", 0.0), run["seed"])
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "evaluation"
+        code = safeswitch_cli(
+            ["evaluate", "--env", safeswitch.HIGHWAY_ENV_ID, "--model", str(model),
+             "--episodes", str(episodes), "--seed", str(run["evaluation"]["seed"]),
+             "--out", str(out)]
+        )  # fmt: skip
+        if code:
+            raise RuntimeError(f"safeswitch evaluate --model {model} exited with {code}")
+        summary = json.loads((out / "summary.json").read_text())
+    return {k: summary[k] for k in (*run["evaluation"], "safety_reasons", "cost_steps")
+            if k in summary}  # fmt: skip
 
 
 def idm_floor(switching: str, episodes: int, seed: int = 1_000_003) -> dict[str, Any]:
@@ -187,9 +229,10 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
         curve = run["curve"]
         assert isinstance(curve, list)
         t = np.array([c["timestep"] for c in curve])
-        label = f"{run['switching']} (seed {run['seed']})"
+        name = run_name(str(run["switching"]), float(run.get("imitation", 0.0)))  # type: ignore[arg-type]
+        label = f"{name} (seed {run['seed']})"
         style = {
-            "color": colours[str(run["switching"])],
+            "color": "tab:purple" if name.endswith("+imitation") else colours[name],
             "linestyle": ("-", "--", ":")[(int(run["seed"]) - 1) % 3],  # type: ignore[call-overload]
             "alpha": 0.8,
             "label": label,
@@ -207,7 +250,10 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
         ax.set_xlabel("training timesteps")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:.0f}k"))
         ax.legend(fontsize=7)
-    logics = " / ".join(sorted({str(r["switching"]) for r in runs} - {"none"}))
+    logics = " / ".join(
+        sorted({run_name(str(r["switching"]), float(r.get("imitation", 0.0))) for r in runs}  # type: ignore[arg-type]
+               - {"none"})
+    )  # fmt: skip
     fig.suptitle(
         f"PPO on {safeswitch.HIGHWAY_ENV_ID}: with the {logics} switch vs without "
         "(25-episode means)"
@@ -217,12 +263,33 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
     plt.close(fig)
 
 
+def reasons(evaluation: dict[str, Any]) -> str:
+    """``leader 162, off_road 26, …``: the Safety controller's steps by the logic's reason."""
+    counts = evaluation.get("safety_reasons")
+    if counts is None:
+        return "not recorded"
+    return ", ".join(f"{k} {v}" for k, v in counts.items()) or "—"
+
+
+def driving(evaluation: dict[str, Any]) -> str:
+    """``0 / 12 of 7,550``: the evaluation steps above the speed limit / beyond comfort."""
+    costs = evaluation.get("cost_steps")
+    if costs is None:
+        return "not recorded"
+    return f"{costs['speeding']} / {costs['comfort']} of {evaluation['steps']:,}"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--logics", nargs="+", default=["certified", "none"])
     parser.add_argument("--timesteps", type=int, default=200_000)
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--eval-episodes", type=int, default=50)
+    parser.add_argument(
+        "--imitation", type=float, default=0.0,
+        help="also train the first logic with policy.intervention_imitation W (runs "
+             "'LOGIC+imitation')",
+    )  # fmt: skip
     parser.add_argument("--parallel", type=int, default=2, help="training runs at once")
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--figure", type=Path, default=FIGURE)
@@ -234,6 +301,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--resume", action="store_true",
         help="keep the runs --out already holds (same budget) and train only the missing ones",
+    )  # fmt: skip
+    parser.add_argument(
+        "--reevaluate", action="store_true",
+        help="evaluate again the kept policies (--keep) of runs recorded without the reasons "
+             "and driving costs",
     )  # fmt: skip
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -249,20 +321,33 @@ def main(argv: list[str] | None = None) -> int:
         if (kept["timesteps"], kept["eval_episodes"]) == (args.timesteps, args.eval_episodes):
             result["runs"] = kept["runs"]
     runs: list[dict[str, Any]] = result["runs"]
-    done = {(r["switching"], r["seed"]) for r in runs}
-    jobs = [(lg, seed) for seed in args.seeds for lg in args.logics if (lg, seed) not in done]
+    if args.reevaluate:
+        if args.keep is None:
+            parser.error("--reevaluate evaluates the kept policies: pass --keep DIR")
+        for run in runs:
+            if "safety_reasons" not in run["evaluation"]:
+                run["evaluation"] = reevaluate(run, args.keep, args.eval_episodes)
+                write_json(args.out, result)
+    done = {(r["switching"], r.get("imitation", 0.0), r["seed"]) for r in runs}
+    wanted = [(lg, 0.0) for lg in args.logics]
+    if args.imitation:
+        wanted.append((args.logics[0], args.imitation))
+    jobs = [(lg, w, seed) for seed in args.seeds for lg, w in wanted if (lg, w, seed) not in done]
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
         futures = [
-            pool.submit(train_one, logic, seed, args.timesteps, args.eval_episodes, args.keep)
-            for logic, seed in jobs
+            pool.submit(
+                train_one, logic, seed, args.timesteps, args.eval_episodes, args.keep, weight
+            )
+            for logic, weight, seed in jobs
         ]
         for future in futures:
             run = future.result()
             runs.append(run)
             write_json(args.out, result)  # each run is kept the moment it ends (--resume)
             print(
-                f"{run['switching']:9} seed {run['seed']}: {run['episodes']} episodes, crashes "
+                f"{run_name(run['switching'], run['imitation']):19} seed {run['seed']}: "
+                f"{run['episodes']} episodes, crashes "
                 f"{run['crashes']}, off road {run['off_road']}, safety rate "
                 f"{run['safety_rate_first_20pct']:.3f} → {run['safety_rate_last_20pct']:.3f}, "
                 f"return {run['return_first_20pct']:.1f} → {run['return_last_20pct']:.1f} "
@@ -281,24 +366,27 @@ def main(argv: list[str] | None = None) -> int:
     unswitched = {
         r["seed"]: r["evaluation"]["mean_return"] for r in runs if r["switching"] == "none"
     }
-    print("| logic | seed | training: crashes / off road / episodes | safety share, first → "
-          "last 20 % | evaluation: crashes | safety share | mean return | of none's |")  # fmt: skip
-    print("| --- | ---: | --- | --- | ---: | ---: | ---: | ---: |")
+    print("| method | seed | training: crashes / off road / episodes | safety share, first → "
+          "last 20 % | evaluation: crashes | safety share | why (steps) | speeding / comfort "
+          "steps | mean return | of none's |")  # fmt: skip
+    print("| --- | ---: | --- | --- | ---: | ---: | --- | --- | ---: | ---: |")
     for r in runs:
         e = r["evaluation"]
         assert isinstance(e, dict)
         base = unswitched.get(r["seed"])
         ratio = f"{e['mean_return'] / base:.2f}" if base else "—"
         print(
-            f"| {r['switching']} | {r['seed']} | {r['crashes']} / {r['off_road']} / "
-            f"{r['episodes']} | {r['safety_rate_first_20pct']:.3f} → "
-            f"{r['safety_rate_last_20pct']:.3f} | {e['failures']} | "
-            f"{e['safety_share']:.4f} | {e['mean_return']:.1f} | {ratio} |"
+            f"| {run_name(r['switching'], r.get('imitation', 0.0))} | {r['seed']} | "
+            f"{r['crashes']} / {r['off_road']} / {r['episodes']} | "
+            f"{r['safety_rate_first_20pct']:.3f} → {r['safety_rate_last_20pct']:.3f} | "
+            f"{e['failures']} | {e['safety_share']:.4f} | {reasons(e)} | {driving(e)} | "
+            f"{e['mean_return']:.1f} | {ratio} |"
         )
     for f in floors:
         print(
             f"IDM/MOBIL driver under {f['switching']}: {f['crashes']} crashes, {f['off_road']} "
-            f"off road in {f['episodes']}, safety share {f['safety_share']:.4f}, mean return "
+            f"off road in {f['episodes']}, safety share {f['safety_share']:.4f} "
+            f"({reasons(f)}), speeding / comfort steps {driving(f)}, mean return "
             f"{f['mean_return']:.1f}"
         )
     o = result["wrapper_overhead"]

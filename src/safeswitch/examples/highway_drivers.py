@@ -9,6 +9,7 @@ Each is a policy: ``driver.reset(env)`` at the start of an episode, then ``drive
 
 from __future__ import annotations
 
+from collections import Counter
 from typing import Any
 
 import numpy as np
@@ -97,9 +98,12 @@ class Adversary:
 def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
     """``episodes`` episodes of ``driver`` on ``env`` (a ``safeswitch/Highway-v0``), reset with
     seeds ``seed``, ``seed + 1``, …: crashes, off-road episodes, steps, the steps on which the
-    Safety controller acted, and the mean return."""
+    Safety controller acted (and why: the logic's reasons), the steps each of the plant's costs
+    (``speeding``, ``comfort``) was positive, and the mean return."""
     crashes = off_road = steps = safety = 0
     returns = []
+    reasons: Counter[str] = Counter()
+    cost_steps: Counter[str] = Counter()
     for k in range(episodes):
         observation, _ = env.reset(seed=seed + k)
         driver.reset(env)
@@ -109,7 +113,11 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
             observation, reward, terminated, truncated, info = env.step(driver(observation))
             total += float(reward)
             steps += 1
-            safety += bool(info["safety_active"])
+            if info["safety_active"]:
+                safety += 1
+                reasons[info["reason"]] += 1
+            for name, cost in info["costs"].items():
+                cost_steps[name] += cost > 0
             done = terminated or truncated
         returns.append(total)
         crashes += bool(info["crashed"])
@@ -121,6 +129,8 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
         "steps": steps,
         "safety_activation_steps": safety,
         "safety_share": safety / steps if steps else None,
+        "safety_reasons": dict(reasons.most_common()),
+        "cost_steps": {name: int(n) for name, n in sorted(cost_steps.items())},
         "mean_return": float(np.mean(returns)) if returns else None,
     }
 

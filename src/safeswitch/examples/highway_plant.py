@@ -5,6 +5,7 @@ for ``certified``). highway-env is imported only when an environment is made."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -12,11 +13,48 @@ import gymnasium as gym
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.examples.highway import (
     HIGHWAY_CONFIG,
+    VEHICLE_LENGTH,
     HighwaySafetyController,
     highway_rules,
     highway_state,
 )
 from safeswitch.examples.highway_certified import CertifiedHighwayController, certified_rules
+
+#: Comfort limits on the ego's accelerations [m/s²] (the left turn's, SPEC: |a_lon| ≤ 5,
+#: |a_lat| ≤ 3) and the margin above the lane's speed limit that counts as speeding [m/s]
+#: (0.1 km/h, as for the left turn).
+COMFORT_ACCEL_LON = 5.0
+COMFORT_ACCEL_LAT = 3.0
+SPEEDING_MARGIN = 0.1 / 3.6
+
+
+class HighwayCosts(gym.Wrapper[Any, Any, Any, Any]):
+    """highway-env's plant with the driving rules it does not score: after every step
+    ``info["costs"]`` holds ``speeding`` (1.0 when the ego is above its lane's speed limit —
+    30 m/s on highway-env's highway — by more than :data:`SPEEDING_MARGIN`) and ``comfort``
+    (1.0 when the step's longitudinal or lateral acceleration exceeds
+    :data:`COMFORT_ACCEL_LON` / :data:`COMFORT_ACCEL_LAT`), and ``info["accel_lat"]`` the lateral
+    acceleration [m/s²]. The accelerations are the ones highway-env's kinematic bicycle applied
+    over the step: the commanded ``acceleration`` and ``v²·sin β / (L/2)`` for the steering
+    angle δ (``β = atan(tan δ / 2)``, ``L`` the vehicle length), at the speed the step began
+    with. Each cost can be a training constraint by name (``constraints: {speeding: …}``)."""
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        ego = self.env.unwrapped.vehicle
+        speed = float(ego.speed)
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        beta = math.atan(0.5 * math.tan(float(ego.action["steering"])))
+        accel_lat = speed * speed * math.sin(beta) / (0.5 * VEHICLE_LENGTH)
+        accel_lon = float(ego.action["acceleration"])
+        info["accel_lat"] = accel_lat
+        info["costs"] = {
+            **info.get("costs", {}),
+            "speeding": float(ego.speed > ego.lane.speed_limit + SPEEDING_MARGIN),
+            "comfort": float(
+                abs(accel_lon) > COMFORT_ACCEL_LON or abs(accel_lat) > COMFORT_ACCEL_LAT
+            ),
+        }
+        return obs, reward, terminated, truncated, info
 
 
 def make_highway_env(
@@ -43,8 +81,12 @@ def make_highway_env(
     """
     import highway_env  # noqa: F401  (registers highway-fast-v0)
 
-    env = gym.make(
-        "highway-fast-v0", config={**HIGHWAY_CONFIG, **(config or {})}, render_mode=render_mode
+    env = HighwayCosts(
+        gym.make(
+            "highway-fast-v0",
+            config={**HIGHWAY_CONFIG, **(config or {})},
+            render_mode=render_mode,
+        )
     )
     controller: Any = HighwaySafetyController(highway_rules(env))
     if switching == "certified":
@@ -59,4 +101,4 @@ def make_highway_env(
     )
 
 
-__all__ = ["make_highway_env"]
+__all__ = ["HighwayCosts", "make_highway_env"]

@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import inspect
 import time
+from collections import Counter
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -242,9 +243,14 @@ def run_episodes(
     """``episodes`` episodes of ``act`` (observation → action), reset with seeds ``seed``,
     ``seed + 1``, …; returns ``evaluate --json``'s fields for a generic environment, failures
     read with ``failed`` (the plant's declared failure, see
-    :func:`~safeswitch.core.registry.failure_of`)."""
+    :func:`~safeswitch.core.registry.failure_of`). ``safety_reasons``: the steps the Safety
+    controller acted, by the logic's reason (``info["reason"]``), most frequent first;
+    ``cost_steps``: per named cost the plant publishes (``info["costs"]``), the steps it was
+    positive."""
     failed = failed or failure_check(None)
     returns, lengths, safety, failures = [], [], [], 0
+    reasons: Counter[str] = Counter()
+    cost_steps: Counter[str] = Counter()
     for k in range(episodes):
         obs, _ = env.reset(seed=seed + k)
         total, steps, active, done = 0.0, 0, 0, False
@@ -253,7 +259,11 @@ def run_episodes(
             obs, reward, terminated, truncated, info = env.step(act(obs))
             total += float(reward)
             steps += 1
-            active += bool(info.get("safety_active", False))
+            if info.get("safety_active", False):
+                active += 1
+                reasons[str(info.get("reason", "unknown"))] += 1
+            for name, cost in info.get("costs", {}).items():
+                cost_steps[name] += float(cost) > 0
             done = terminated or truncated
         returns.append(total)
         lengths.append(steps)
@@ -268,6 +278,8 @@ def run_episodes(
         "safety_share": float(sum(safety) / sum(lengths)) if lengths else None,
         "mean_return": float(np.mean(returns)) if returns else None,
         "mean_episode_steps": float(np.mean(lengths)) if lengths else None,
+        "safety_reasons": dict(reasons.most_common()),
+        "cost_steps": {name: int(n) for name, n in sorted(cost_steps.items())},
     }
 
 
