@@ -16,10 +16,14 @@ policy drove: the steps above the lane's speed limit (30 m/s) and beyond the com
 ``--imitation W`` adds runs under the first logic that also learn from the Safety controller's
 interventions (``policy.intervention_imitation: W``), to set against the penalty alone.
 
-Run: ``python benchmarks/highway_switch.py [--logics certified none] [--timesteps N]
-[--seeds 1 2 3] [--imitation W] [--parallel 2] [--eval-episodes 50] [--out FILE] [--keep DIR]
-[--resume] [--reevaluate] [--json]``; writes ``benchmarks/results/highway.json`` and
-``docs/highway_training.png``. One torch thread per run.
+``--config highway`` trains the shipped recipe instead (the learned steering limited, the
+comfort cost a constraint; ``src/safeswitch/configs/highway.yaml``) for both logics.
+
+Run: ``python benchmarks/highway_switch.py [--config NAME] [--logics certified none]
+[--timesteps N] [--seeds 1 2 3] [--imitation W] [--parallel 2] [--eval-episodes 50]
+[--out FILE] [--keep DIR] [--resume] [--reevaluate] [--json]``; writes
+``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per
+run.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +51,7 @@ from safeswitch.cli import main as safeswitch_cli
 from safeswitch.examples.highway_drivers import IDMDriver, drive
 from safeswitch.io import write_json
 from safeswitch.training import train
-from safeswitch.training.config import EnvTrainConfig, PolicyConfig, PPOConfig
+from safeswitch.training.config import EnvTrainConfig, PPOConfig, load_env_config
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results" / "highway.json"
@@ -98,20 +103,24 @@ def train_one(
     eval_episodes: int,
     keep: Path | None = None,
     imitation: float = 0.0,
+    recipe: str | None = None,
 ) -> dict[str, object]:
     torch.set_num_threads(1)
-    config = EnvTrainConfig(
-        env_id=safeswitch.HIGHWAY_ENV_ID,
+    base = (
+        load_env_config(recipe)
+        if recipe
+        else EnvTrainConfig(env_id=safeswitch.HIGHWAY_ENV_ID, penalty=-1.0, ppo=PPOConfig())
+    )
+    config = replace(
+        base,
         switching=switching,
-        penalty=-1.0,
         timesteps=timesteps,
         n_envs=4,
         seed=seed,
         torch_threads=1,
         checkpoint_every=10 * timesteps,
         eval_episodes=eval_episodes,
-        ppo=PPOConfig(),
-        policy=PolicyConfig(intervention_imitation=imitation),
+        policy=replace(base.policy, intervention_imitation=imitation),
     )
     episodes = Episodes()
     with tempfile.TemporaryDirectory() as tmp:
@@ -286,6 +295,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--eval-episodes", type=int, default=50)
     parser.add_argument(
+        "--config", default=None,
+        help="the recipe: a highway-env training configuration (e.g. the shipped 'highway'); "
+             "its switching, seed, budget and evaluation are this script's (default: PPO's "
+             "defaults on highway-env's full steering range, no constraint)",
+    )  # fmt: skip
+    parser.add_argument(
         "--imitation", type=float, default=0.0,
         help="also train the first logic with policy.intervention_imitation W (runs "
              "'LOGIC+imitation')",
@@ -314,11 +329,13 @@ def main(argv: list[str] | None = None) -> int:
         **_common.machine(),
         "timesteps": args.timesteps,
         "eval_episodes": args.eval_episodes,
+        "recipe": args.config,
         "runs": [],
     }
     if args.resume and args.out.exists():
         kept = json.loads(args.out.read_text())
-        if (kept["timesteps"], kept["eval_episodes"]) == (args.timesteps, args.eval_episodes):
+        same = (args.timesteps, args.eval_episodes, args.config)
+        if (kept["timesteps"], kept["eval_episodes"], kept.get("recipe")) == same:
             result["runs"] = kept["runs"]
     runs: list[dict[str, Any]] = result["runs"]
     if args.reevaluate:
@@ -337,7 +354,14 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
         futures = [
             pool.submit(
-                train_one, logic, seed, args.timesteps, args.eval_episodes, args.keep, weight
+                train_one,
+                logic,
+                seed,
+                args.timesteps,
+                args.eval_episodes,
+                args.keep,
+                weight,
+                args.config,
             )
             for logic, weight, seed in jobs
         ]

@@ -114,3 +114,45 @@ def test_the_ttc_thresholds_are_configured_from_a_training_file():
     with pytest.raises(ConfigError, match="logic_params need switching"):
         from_dict(EnvTrainConfig, {"env_id": safeswitch.HIGHWAY_ENV_ID,
                                    "logic_params": {"min_ttc": 2}})  # fmt: skip
+
+
+def test_the_plant_publishes_speeding_and_comfort_from_the_bicycle_it_drives():
+    """``accel_lat`` is ``v·ψ̇`` of highway-env's kinematic bicycle: checked against the heading
+    the plant actually turned through; ``comfort`` flags a lateral acceleration above 3 m/s²;
+    ``speeding`` a speed above the lane's 30 m/s."""
+    env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching="none")
+    env.reset(seed=3)
+    ego = env.unwrapped.vehicle
+    dt = 1 / env.unwrapped.config["policy_frequency"]
+    for steer, uncomfortable in ((0.01, False), (-0.01, False), (0.05, True)):
+        speed, heading = ego.speed, ego.heading
+        *_, info = env.step(np.array([0.0, steer], dtype=np.float32))
+        assert info["accel_lat"] == pytest.approx(speed * (ego.heading - heading) / dt, rel=1e-6)
+        assert info["costs"]["comfort"] == float(uncomfortable)
+        assert info["costs"]["speeding"] == 0.0
+    ego.speed = 35.0  # above highway-env's 30 m/s limit
+    *_, info = env.step(np.array([0.0, 0.0], dtype=np.float32))
+    assert info["costs"]["speeding"] == 1.0
+    env.close()
+
+
+def test_the_learned_steering_limit_binds_the_policy_not_the_safety_controller():
+    from safeswitch.examples.highway_plant import LearnedSteering
+
+    env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching="certified", steering_limit=0.02)
+    env.reset(seed=0)
+    ego = env.unwrapped.vehicle
+    *_, info = env.step(np.array([0.0, 1.0], dtype=np.float32))
+    assert info["reason"] == "learned" and ego.action["steering"] == pytest.approx(0.02)
+    np.testing.assert_allclose(info["executed_action"], [0.0, 1.0], atol=1e-6)
+    # drive off the road's edge: the Safety controller steers back with more than the limit
+    steering = []
+    for _ in range(40):
+        *_, info = env.step(np.array([0.0, -1.0], dtype=np.float32))
+        if info["safety_active"]:
+            steering.append(abs(ego.action["steering"]))
+    assert steering and max(steering) > 0.02
+    assert info["rewards"]["on_road_reward"] == 1 and not info["crashed"]
+    env.close()
+    with pytest.raises(ValueError, match="steering_limit must lie in .* got 2.0"):
+        LearnedSteering(gym.make(safeswitch.HIGHWAY_ENV_ID, switching="none"), 2.0)

@@ -89,3 +89,28 @@ def test_an_interrupted_validated_run_resumes_with_its_best_policy(
     assert metrics["selected"]["best_key"] >= best_before["best_key"]
     with open(run / "validation.csv", newline="") as handle:
         assert [int(r["timesteps"]) for r in csv.DictReader(handle)][-1] == 2048
+
+
+def test_an_evaluation_counts_why_the_safety_controller_acted_and_each_named_cost(wall):
+    from safeswitch.training.generic import make_supervised_env, run_episodes
+
+    def throttle(obs):  # full throttle: fast enough to speed, then meets the wall's logic
+        return [user_plant.MAX_ACCEL]
+
+    env = make_supervised_env(wall.ENV_ID, wall.LOGIC, -1.0)
+    summary = run_episodes(env, throttle, 3, seed=5)
+    # the same episodes counted here, step by step
+    speeding = too_close = 0
+    for k in range(3):
+        env.reset(seed=5 + k)
+        done = False
+        while not done:
+            *_, terminated, truncated, info = env.step(throttle(None))
+            speeding += info["costs"]["speeding"] > 0
+            too_close += info["reason"] == "too_close"
+            done = terminated or truncated
+    env.close()
+    assert speeding > 0 and too_close > 0
+    assert summary["cost_steps"] == {"speeding": speeding}
+    assert summary["safety_reasons"] == {"too_close": too_close}
+    assert sum(summary["safety_reasons"].values()) == summary["safety_activation_steps"]

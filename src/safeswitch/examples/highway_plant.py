@@ -9,10 +9,12 @@ import math
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.examples.highway import (
     HIGHWAY_CONFIG,
+    STEER_RANGE,
     VEHICLE_LENGTH,
     HighwaySafetyController,
     highway_rules,
@@ -57,13 +59,40 @@ class HighwayCosts(gym.Wrapper[Any, Any, Any, Any]):
         return obs, reward, terminated, truncated, info
 
 
+class LearnedSteering(gym.Wrapper[Any, Any, Any, Any]):
+    """The learned controller's steering range, outside the switch: the policy's steering
+    ``s ∈ [-1, 1]`` reaches the switch as ``s · limit / (π/4)`` (highway-env maps ±1 to ±45°),
+    so the policy can steer at most ``±limit`` rad while the Safety controller keeps the
+    plant's full range and the logic reasons in the plant's units, as before. The actions in
+    ``info`` (``learned_action``, ``executed_action``) are mapped back to the policy's units
+    (clipped to ±1), so learning from the interventions fits what the policy can command."""
+
+    def __init__(self, env: gym.Env[Any, Any], limit: float) -> None:
+        super().__init__(env)
+        if not 0 < limit <= STEER_RANGE:
+            raise ValueError(f"steering_limit must lie in (0, {STEER_RANGE:.4f}] rad, got {limit}")
+        self.scale = limit / STEER_RANGE
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        plant = np.array(action, dtype=np.float32, copy=True)
+        plant[..., 1] = np.clip(plant[..., 1], -1.0, 1.0) * self.scale
+        obs, reward, terminated, truncated, info = self.env.step(plant)
+        for key in ("learned_action", "executed_action"):
+            if key in info:
+                mapped = np.array(info[key], dtype=np.float64, copy=True)
+                mapped[..., 1] = np.clip(mapped[..., 1] / self.scale, -1.0, 1.0)
+                info[key] = mapped
+        return obs, reward, terminated, truncated, info
+
+
 def make_highway_env(
     switching: str = "ttc",
     penalty: float = -1.0,
     config: dict[str, Any] | None = None,
     render_mode: str | None = None,
     logic_params: dict[str, Any] | None = None,
-) -> SafeSwitch:
+    steering_limit: float | None = None,
+) -> gym.Env[Any, Any]:
     """``safeswitch/Highway-v0``: highway-env's ``highway-fast-v0`` with continuous actions
     under a switching logic.
 
@@ -78,6 +107,9 @@ def make_highway_env(
         config: highway-env configuration entries that replace :data:`HIGHWAY_CONFIG`'s.
         render_mode: Passed to highway-env (``"rgb_array"`` for pictures).
         logic_params: Parameters of the logic (``ttc``: :class:`TTCParams`' keys).
+        steering_limit: The learned controller's steering range [rad] (:class:`LearnedSteering`;
+            ``None``: highway-env's ±π/4, which at 25 m/s turns ±0.02 of the action into
+            ±2 m/s² of lateral acceleration).
     """
     import highway_env  # noqa: F401  (registers highway-fast-v0)
 
@@ -91,7 +123,7 @@ def make_highway_env(
     controller: Any = HighwaySafetyController(highway_rules(env))
     if switching == "certified":
         controller = CertifiedHighwayController(certified_rules(env))
-    return SafeSwitch(
+    switched = SafeSwitch(
         env,
         controller,
         switching,
@@ -99,6 +131,7 @@ def make_highway_env(
         state_fn=highway_state,
         logic_params=logic_params,
     )
+    return switched if steering_limit is None else LearnedSteering(switched, steering_limit)
 
 
-__all__ = ["HighwayCosts", "make_highway_env"]
+__all__ = ["HighwayCosts", "LearnedSteering", "make_highway_env"]
