@@ -76,12 +76,44 @@ def left_turn(config: str, scenarios: int = 1000) -> Row | None:
     }
 
 
+def _comfort_share(evaluation: dict[str, Any]) -> float:
+    """The evaluation steps beyond the comfort limits, as a share (NaN: not recorded)."""
+    costs = evaluation.get("cost_steps")
+    return costs["comfort"] / evaluation["steps"] if costs else float("nan")
+
+
+def _speeding(evaluation: dict[str, Any]) -> float:
+    costs = evaluation.get("cost_steps")
+    return costs["speeding"] if costs else float("nan")
+
+
+#: highway_switch.py's results: file → (the recipe, its command's options).
+HIGHWAY_RESULTS = {
+    "highway.json": ("PPO's defaults on highway-env's full steering", ""),
+    "highway_comfort.json": (
+        "the `highway` recipe (learned steering ±0.025 rad, comfort a constraint)",
+        " --config highway --timesteps 100000 --out benchmarks/results/highway_comfort.json "
+        "--figure docs/highway_training_comfort.png",
+    ),
+}
+
+
 def highway() -> list[Row]:
-    """highway-env under each logic against PPO without one (``highway_switch.py``)."""
-    data = _load("highway.json")
+    """highway-env under each logic against PPO without one (``highway_switch.py``), each
+    recipe it measured."""
+    return [row for name in HIGHWAY_RESULTS for row in _highway(name)]
+
+
+def _highway(name: str) -> list[Row]:
+    data = _load(name)
     if data is None:
         return []
-    runs = data["runs"]
+    recipe, options = HIGHWAY_RESULTS[name]
+    runs = [r for r in data["runs"] if not r.get("imitation")]
+
+    def comfort(run: dict[str, Any]) -> float:
+        return 100 * _comfort_share(run["evaluation"])
+
     none = {r["seed"]: r for r in runs if r["switching"] == "none"}
     floors = {f["switching"]: f for f in data.get("idm_driver", [])}
     rows = []
@@ -104,6 +136,10 @@ def highway() -> list[Row]:
                 all(r["evaluation"]["safety_share"] <= share_bound for r in mine)
             ),
             "return ≥ 95 % of PPO without the switch": all(q >= 0.95 for q in ratios),
+            "comfort exceeded ≤ 1 % of evaluation steps, never above 30 m/s": all(
+                _comfort_share(r["evaluation"]) <= 0.01 and _speeding(r["evaluation"]) == 0
+                for r in mine
+            ),
         }
         floor_text = "—" if floor is None else format(100 * floor, ".2f") + " %"
         measured = (
@@ -112,16 +148,19 @@ def highway() -> list[Row]:
             f"{_col(mine, lambda r: r['evaluation']['failures'])}; Safety controller "
             f"{_col(mine, lambda r: 100 * r['evaluation']['safety_share'], '.2f', ' %')} of "
             f"steps (IDM/MOBIL driver: {floor_text}); return "
-            f"{' / '.join(format(q, '.2f') for q in ratios)} of PPO's without the switch"
+            f"{' / '.join(format(q, '.2f') for q in ratios)} of PPO's without the switch; "
+            f"comfort exceeded on {_col(mine, comfort, '.2f', ' %')} of steps (PPO without "
+            f"the switch: {_col([none[s] for s in sorted(none)], comfort, '.2f', ' %')})"
         )
         rows.append(
             {
                 "plant": "highway-env",
-                "method": f"PPO with R_ADAS = −1 under `{logic}`, {data['timesteps']:,} steps",
+                "method": f"PPO with R_ADAS = −1 under `{logic}`, {recipe}, "
+                f"{data['timesteps']:,} steps",
                 "seeds": [r["seed"] for r in mine],
                 "measured": measured,
                 "checks": checks,
-                "source": f"python benchmarks/highway_switch.py --logics {logic} none",
+                "source": f"python benchmarks/highway_switch.py --logics {logic} none{options}",
             }
         )
     return rows
