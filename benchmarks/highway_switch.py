@@ -179,8 +179,8 @@ def reevaluate(run: dict[str, Any], keep: Path, episodes: int) -> dict[str, Any]
         if code:
             raise RuntimeError(f"safeswitch evaluate --model {model} exited with {code}")
         summary = json.loads((out / "summary.json").read_text())
-    return {k: summary[k] for k in (*run["evaluation"], "safety_reasons", "cost_steps")
-            if k in summary}  # fmt: skip
+    fields = (*run["evaluation"], "safety_reasons", "cost_steps", "safety_cost_steps")
+    return {k: summary[k] for k in fields if k in summary}
 
 
 def idm_floor(switching: str, episodes: int, seed: int = 1_000_003) -> dict[str, Any]:
@@ -281,11 +281,14 @@ def reasons(evaluation: dict[str, Any]) -> str:
 
 
 def driving(evaluation: dict[str, Any]) -> str:
-    """``0 / 12 of 7,550``: the evaluation steps above the speed limit / beyond comfort."""
+    """``0 / 86 (60) of 7,550``: the evaluation steps above the speed limit / beyond comfort
+    (in brackets: of those, the steps the Safety controller drove)."""
     costs = evaluation.get("cost_steps")
     if costs is None:
         return "not recorded"
-    return f"{costs['speeding']} / {costs['comfort']} of {evaluation['steps']:,}"
+    by_safety = evaluation.get("safety_cost_steps")
+    comfort = f"{costs['comfort']}" + (f" ({by_safety['comfort']})" if by_safety else "")
+    return f"{costs['speeding']} / {comfort} of {evaluation['steps']:,}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -320,7 +323,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--reevaluate", action="store_true",
         help="evaluate again the kept policies (--keep) of runs recorded without the reasons "
-             "and driving costs",
+             "and driving costs (and who drove them)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -342,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.keep is None:
             parser.error("--reevaluate evaluates the kept policies: pass --keep DIR")
         for run in runs:
-            if "safety_reasons" not in run["evaluation"]:
+            if "safety_cost_steps" not in run["evaluation"]:
                 run["evaluation"] = reevaluate(run, args.keep, args.eval_episodes)
                 write_json(args.out, result)
     done = {(r["switching"], r.get("imitation", 0.0), r["seed"]) for r in runs}
@@ -392,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     print("| method | seed | training: crashes / off road / episodes | safety share, first → "
           "last 20 % | evaluation: crashes | safety share | why (steps) | speeding / comfort "
-          "steps | mean return | of none's |")  # fmt: skip
+          "steps (the Safety controller's) | mean return | of none's |")  # fmt: skip
     print("| --- | ---: | --- | --- | ---: | ---: | --- | --- | ---: | ---: |")
     for r in runs:
         e = r["evaluation"]

@@ -100,17 +100,19 @@ def test_an_evaluation_counts_why_the_safety_controller_acted_and_each_named_cos
     env = make_supervised_env(wall.ENV_ID, wall.LOGIC, -1.0)
     summary = run_episodes(env, throttle, 3, seed=5)
     # the same episodes counted here, step by step
-    speeding = too_close = 0
+    speeding = speeding_braked = too_close = 0
     for k in range(3):
         env.reset(seed=5 + k)
         done = False
         while not done:
             *_, terminated, truncated, info = env.step(throttle(None))
             speeding += info["costs"]["speeding"] > 0
+            speeding_braked += info["costs"]["speeding"] > 0 and info["safety_active"]
             too_close += info["reason"] == "too_close"
             done = terminated or truncated
     env.close()
-    assert speeding > 0 and too_close > 0
+    assert speeding > speeding_braked > 0 and too_close > 0
     assert summary["cost_steps"] == {"speeding": speeding}
+    assert summary["safety_cost_steps"] == {"speeding": speeding_braked}
     assert summary["safety_reasons"] == {"too_close": too_close}
     assert sum(summary["safety_reasons"].values()) == summary["safety_activation_steps"]

@@ -104,6 +104,7 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
     returns = []
     reasons: Counter[str] = Counter()
     cost_steps: Counter[str] = Counter()
+    safety_cost_steps: Counter[str] = Counter()
     for k in range(episodes):
         observation, _ = env.reset(seed=seed + k)
         driver.reset(env)
@@ -118,6 +119,7 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
                 reasons[info["reason"]] += 1
             for name, cost in info["costs"].items():
                 cost_steps[name] += cost > 0
+                safety_cost_steps[name] += cost > 0 and bool(info["safety_active"])
             done = terminated or truncated
         returns.append(total)
         crashes += bool(info["crashed"])
@@ -131,6 +133,7 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
         "safety_share": safety / steps if steps else None,
         "safety_reasons": dict(reasons.most_common()),
         "cost_steps": {name: int(n) for name, n in sorted(cost_steps.items())},
+        "safety_cost_steps": {name: int(safety_cost_steps[name]) for name in sorted(cost_steps)},
         "mean_return": float(np.mean(returns)) if returns else None,
     }
 

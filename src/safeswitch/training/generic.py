@@ -246,11 +246,12 @@ def run_episodes(
     :func:`~safeswitch.core.registry.failure_of`). ``safety_reasons``: the steps the Safety
     controller acted, by the logic's reason (``info["reason"]``), most frequent first;
     ``cost_steps``: per named cost the plant publishes (``info["costs"]``), the steps it was
-    positive."""
+    positive; ``safety_cost_steps``: how many of those the Safety controller drove."""
     failed = failed or failure_check(None)
     returns, lengths, safety, failures = [], [], [], 0
     reasons: Counter[str] = Counter()
     cost_steps: Counter[str] = Counter()
+    safety_cost_steps: Counter[str] = Counter()
     for k in range(episodes):
         obs, _ = env.reset(seed=seed + k)
         total, steps, active, done = 0.0, 0, 0, False
@@ -264,6 +265,7 @@ def run_episodes(
                 reasons[str(info.get("reason", "unknown"))] += 1
             for name, cost in info.get("costs", {}).items():
                 cost_steps[name] += float(cost) > 0
+                safety_cost_steps[name] += float(cost) > 0 and bool(info.get("safety_active"))
             done = terminated or truncated
         returns.append(total)
         lengths.append(steps)
@@ -280,6 +282,7 @@ def run_episodes(
         "mean_episode_steps": float(np.mean(lengths)) if lengths else None,
         "safety_reasons": dict(reasons.most_common()),
         "cost_steps": {name: int(n) for name, n in sorted(cost_steps.items())},
+        "safety_cost_steps": {name: int(safety_cost_steps[name]) for name in sorted(cost_steps)},
     }
 
 

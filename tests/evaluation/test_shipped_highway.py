@@ -1,0 +1,76 @@
+"""The highway-env policies that ship (issue #39): the shipped ``highway`` recipe trained under
+``certified`` and without a logic. Their metrics are what the package says of them; the fast
+tests check the claims against the files and a short drive, the slow one re-measures the
+whole evaluation."""
+
+import json
+
+import pytest
+
+import safeswitch
+from safeswitch.cli import main
+from safeswitch.training.config import load_any_config, load_env_config
+from safeswitch.training.policies import load_policy, resolve_model_dir
+from safeswitch.training.shipped import missing_targets
+
+pytest.importorskip("highway_env")
+
+NAMES = {"highway-certified": "certified", "highway-none": "none"}
+
+
+def metrics(name):
+    return json.loads((resolve_model_dir(name) / "metrics.json").read_text())
+
+
+def evaluate(capsys, name, episodes):
+    capsys.readouterr()
+    assert main(["evaluate", "--env", safeswitch.HIGHWAY_ENV_ID, "--model", name,
+                 "--episodes", str(episodes), "--seed", "1000003", "--json"]) == 0  # fmt: skip
+    return json.loads(capsys.readouterr().out)
+
+
+def test_both_were_trained_by_the_shipped_recipe_within_the_issues_budget():
+    recipe = load_env_config("highway")
+    for name, switching in NAMES.items():
+        config = load_any_config(resolve_model_dir(name) / "config.yaml")
+        assert config.switching == switching and config.seed == recipe.seed
+        assert config.env_kwargs == recipe.env_kwargs and config.constraints == recipe.constraints
+        assert config.ppo == recipe.ppo and config.penalty == recipe.penalty
+        rollout = config.ppo.n_steps * config.n_envs
+        assert recipe.timesteps <= metrics(name)["timesteps"] < recipe.timesteps + rollout
+        assert metrics(name)["timesteps"] <= 200_000
+
+
+def test_under_the_switch_it_never_crashed_and_drives_within_the_rules():
+    certified, none = metrics("highway-certified"), metrics("highway-none")
+    assert certified["training"]["failures"] == 0 and certified["training"]["episodes"] > 500
+    assert none["training"]["failures"] > 0  # without the switch, learning crashed
+    for m in (certified, none):
+        e = m["evaluation"]
+        assert e["episodes"] == 50 and e["cost_steps"]["speeding"] == 0
+    e = certified["evaluation"]
+    assert e["failures"] == 0
+    assert sum(e["safety_reasons"].values()) == e["safety_activation_steps"]
+    assert e["mean_return"] >= 0.95 * none["evaluation"]["mean_return"]
+    # what it misses is said wherever it is evaluated
+    assert "Safety controller" in missing_targets("highway-certified")
+
+
+def test_the_shipped_name_drives_from_the_command_line_without_a_crash(capsys):
+    """The first episodes of the evaluation seed, driven from the command line by the shipped
+    name under the logic the policy was trained with."""
+    policy = load_policy("highway-certified")
+    assert policy.path == resolve_model_dir("highway-certified")
+    summary = evaluate(capsys, "highway-certified", 3)
+    assert summary["episodes"] == 3 and summary["failures"] == 0
+    assert summary["switching"] == "certified" and summary["steps"] == 3 * 151
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(NAMES))
+def test_the_evaluation_in_metrics_is_reproduced(capsys, name):
+    recorded = metrics(name)["evaluation"]
+    summary = evaluate(capsys, name, recorded["episodes"])
+    for key in ("failures", "steps", "safety_activation_steps", "safety_reasons", "cost_steps"):
+        assert summary[key] == recorded[key], key
+    assert summary["mean_return"] == pytest.approx(recorded["mean_return"], rel=1e-9)
