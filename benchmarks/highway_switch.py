@@ -168,6 +168,7 @@ def reevaluate(run: dict[str, Any], keep: Path, episodes: int) -> dict[str, Any]
     """The kept policy of ``run`` evaluated again the way training evaluated it (``safeswitch
     evaluate``, same seed and episodes): the reasons and driving costs for runs recorded
     before they were."""
+    torch.set_num_threads(1)
     model = kept_dir(keep, run["switching"], run.get("imitation", 0.0), run["seed"])
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "evaluation"
@@ -341,13 +342,15 @@ def main(argv: list[str] | None = None) -> int:
         if (kept["timesteps"], kept["eval_episodes"], kept.get("recipe")) == same:
             result["runs"] = kept["runs"]
     runs: list[dict[str, Any]] = result["runs"]
-    if args.reevaluate:
-        if args.keep is None:
-            parser.error("--reevaluate evaluates the kept policies: pass --keep DIR")
-        for run in runs:
-            if "safety_cost_steps" not in run["evaluation"]:
-                run["evaluation"] = reevaluate(run, args.keep, args.eval_episodes)
-                write_json(args.out, result)
+    if args.reevaluate and args.keep is None:
+        parser.error("--reevaluate evaluates the kept policies: pass --keep DIR")
+    again = [r for r in runs if args.reevaluate and "safety_cost_steps" not in r["evaluation"]]
+    for run in [r for r in again if r["evaluation"]["safety_activation_steps"] == 0]:
+        if "cost_steps" in run["evaluation"]:  # the Safety controller never drove: nothing to add
+            run["evaluation"]["safety_cost_steps"] = dict.fromkeys(
+                run["evaluation"]["cost_steps"], 0
+            )
+            again.remove(run)
     done = {(r["switching"], r.get("imitation", 0.0), r["seed"]) for r in runs}
     wanted = [(lg, 0.0) for lg in args.logics]
     if args.imitation:
@@ -355,6 +358,7 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [(lg, w, seed) for seed in args.seeds for lg, w in wanted if (lg, w, seed) not in done]
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
+        evaluations = [pool.submit(reevaluate, run, args.keep, args.eval_episodes) for run in again]
         futures = [
             pool.submit(
                 train_one,
@@ -368,6 +372,9 @@ def main(argv: list[str] | None = None) -> int:
             )
             for logic, weight, seed in jobs
         ]
+        for run, evaluation in zip(again, evaluations, strict=True):
+            run["evaluation"] = evaluation.result()
+            write_json(args.out, result)
         for future in futures:
             run = future.result()
             runs.append(run)
