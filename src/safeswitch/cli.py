@@ -763,7 +763,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="a run directory (or its model.zip), one of its checkpoints "
         "(run/checkpoints/step_…), or a shipped policy: "
         + ", ".join(SHIPPED)
-        + " (shipped is the paper policy; traffic-* were trained in traffic)",
+        + " (shipped is the paper policy; traffic-* were trained in traffic; highway-* on "
+        "safeswitch/Highway-v0: evaluate them with --env)",
     )
     ev.add_argument(
         "--controller",

@@ -20,6 +20,8 @@ SHIPPED = {
     "none": "none",
     "traffic-paper": "traffic_paper",
     "traffic-certified": "traffic_certified",
+    "highway-certified": "highway_certified",
+    "highway-none": "highway_none",
 }
 
 #: Shipped policies (by folder) that miss their targets on today's plant — tyre friction came
