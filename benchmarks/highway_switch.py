@@ -21,7 +21,7 @@ comfort cost a constraint; ``src/safeswitch/configs/highway.yaml``) for both log
 
 Run: ``python benchmarks/highway_switch.py [--config NAME] [--logics certified none]
 [--timesteps N] [--seeds 1 2 3] [--imitation W] [--parallel 2] [--eval-episodes 50]
-[--out FILE] [--keep DIR] [--resume] [--reevaluate] [--json]``; writes
+[--out FILE] [--keep DIR] [--resume] [--reevaluate] [--figure-only] [--json]``; writes
 ``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per
 run.
 """
@@ -226,7 +226,7 @@ def wrapper_overhead(steps: int = 600, rounds: int = 5) -> dict[str, float]:
     return out
 
 
-def figure(runs: list[dict[str, object]], path: Path) -> None:
+def figure(runs: list[dict[str, object]], path: Path, recipe: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -264,8 +264,9 @@ def figure(runs: list[dict[str, object]], path: Path) -> None:
         sorted({run_name(str(r["switching"]), float(r.get("imitation", 0.0))) for r in runs}  # type: ignore[arg-type]
                - {"none"})
     )  # fmt: skip
+    how = f"the '{recipe}' recipe" if recipe else "PPO's defaults, full steering range"
     fig.suptitle(
-        f"PPO on {safeswitch.HIGHWAY_ENV_ID}: with the {logics} switch vs without "
+        f"PPO on {safeswitch.HIGHWAY_ENV_ID} ({how}): with the {logics} switch vs without "
         "(25-episode means)"
     )
     path.parent.mkdir(exist_ok=True)
@@ -326,7 +327,14 @@ def main(argv: list[str] | None = None) -> int:
         help="evaluate again the kept policies (--keep) of runs recorded without the reasons "
              "and driving costs (and who drove them)",
     )  # fmt: skip
+    parser.add_argument(
+        "--figure-only", action="store_true", help="draw the figure from --out and stop"
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.figure_only:
+        kept = json.loads(args.out.read_text())
+        figure(kept["runs"], args.figure, kept.get("recipe"))
+        return 0
     torch.set_num_threads(1)
     result: dict[str, Any] = {
         "benchmark": "highway_switch",
@@ -393,7 +401,7 @@ def main(argv: list[str] | None = None) -> int:
     result["wrapper_overhead"] = wrapper_overhead()
     floors = result["idm_driver"]
     write_json(args.out, result)
-    figure(runs, args.figure)
+    figure(runs, args.figure, args.config)
     if args.json:
         _common.emit({k: v for k, v in result.items() if k != "runs"}, True)
         return 0
@@ -408,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
         e = r["evaluation"]
         assert isinstance(e, dict)
         base = unswitched.get(r["seed"])
-        ratio = f"{e['mean_return'] / base:.2f}" if base else "—"
+        ratio = f"{e['mean_return'] / base:.3f}" if base else "—"
         print(
             f"| {run_name(r['switching'], r.get('imitation', 0.0))} | {r['seed']} | "
             f"{r['crashes']} / {r['off_road']} / {r['episodes']} | "

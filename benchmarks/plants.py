@@ -148,7 +148,7 @@ def _highway(name: str) -> list[Row]:
             f"{_col(mine, lambda r: r['evaluation']['failures'])}; Safety controller "
             f"{_col(mine, lambda r: 100 * r['evaluation']['safety_share'], '.2f', ' %')} of "
             f"steps (IDM/MOBIL driver: {floor_text}); return "
-            f"{' / '.join(format(q, '.2f') for q in ratios)} of PPO's without the switch; "
+            f"{' / '.join(format(q, '.3f') for q in ratios)} of PPO's without the switch; "
             f"comfort exceeded on {_col(mine, comfort, '.2f', ' %')} of steps (PPO without "
             f"the switch: {_col([none[s] for s in sorted(none)], comfort, '.2f', ' %')})"
         )

@@ -158,7 +158,10 @@ def print_summary(summary: dict[str, Any]) -> None:
     """A summary as aligned ``name: value`` lines, numbers rounded (``--json`` has them all)."""
     width = max(len(k) for k in summary)
     for key, value in summary.items():
-        if isinstance(value, dict):
+        if isinstance(value, dict) and all(isinstance(v, int | float) for v in value.values()):
+            counts = ", ".join(f"{name} {_number(v)}" for name, v in value.items())
+            print(f"{key:>{width}}: {counts or '—'}")  # a count per name, on one line
+        elif isinstance(value, dict):
             print(f"{key:>{width}}:")
             inner = max((len(k) for k in value), default=0)
             for name, v in value.items():

@@ -24,11 +24,12 @@ SHIPPED = {
     "highway-none": "highway_none",
 }
 
-#: Shipped policies (by folder) that miss their targets on today's plant — tyre friction came
-#: after they were trained (issue #37) — with what they measure on 1,000 unseen random
-#: scenarios (seed 1,000,003; ``traffic_certified``: the ``test`` family, seed 424,242). The
-#: one training pipeline of issue #39 retrains them (``paper`` is); until then every summary
-#: of them says so.
+#: Shipped policies (by folder) that miss their targets, with what they measure: the left
+#: turn's on today's plant — tyre friction came after they were trained (issue #37) — on 1,000
+#: unseen random scenarios (seed 1,000,003; ``traffic_certified``: the ``test`` family, seed
+#: 424,242), highway-env's on its 50 evaluation episodes (seed 1,000,003). The one training
+#: pipeline of issue #39 retrains the left turn's (``paper`` is); until then every summary of
+#: them says so.
 MISSING_TARGETS = {
     "certified": (
         "needs the safety action in 189 of 1,000 scenarios and clears 897 (efficiency 0.80): "
@@ -39,6 +40,11 @@ MISSING_TARGETS = {
     "traffic_certified": (
         "clears 56 of 1,000 test-family scenes, fewer than the rule under the same filter "
         "(73): trained before tyre friction, to be retrained (issue #39)"
+    ),
+    "highway_certified": (
+        "the Safety controller acts on 2.24 % of its 50 evaluation episodes' steps (issue #39 "
+        "asks at most 0.5 %): 162 of its 169 steps keep it from closing on the car ahead "
+        "(docs/highway.md)"
     ),
 }
 
