@@ -30,7 +30,13 @@ def _col(runs: list[dict[str, Any]], key: str | Callable[[dict[str, Any]], Any],
          unit: str = "") -> str:  # fmt: skip
     """One figure per training seed, ``a / b / c``: ``key`` of each run (or ``key(run)``)."""
     get = key if callable(key) else (lambda run: run[key])
-    return " / ".join(format(get(run), spec) + unit for run in runs)
+
+    def one(value: Any) -> str:
+        if isinstance(value, float) and value != value:  # NaN: the run did not record it
+            return "not recorded"
+        return format(value, spec) + unit
+
+    return " / ".join(one(get(run)) for run in runs)
 
 
 def left_turn(config: str, scenarios: int = 1000) -> Row | None:
@@ -82,6 +88,15 @@ def _comfort_share(evaluation: dict[str, Any]) -> float:
     return costs["comfort"] / evaluation["steps"] if costs else float("nan")
 
 
+def _learned_comfort_share(evaluation: dict[str, Any]) -> float:
+    """The evaluation steps the *learned* controller drove beyond the comfort limits, as a
+    share (the Safety controller may sacrifice comfort; NaN: not recorded)."""
+    costs, by_safety = evaluation.get("cost_steps"), evaluation.get("safety_cost_steps")
+    if not costs or by_safety is None:
+        return float("nan")
+    return (costs["comfort"] - by_safety["comfort"]) / evaluation["steps"]
+
+
 def _speeding(evaluation: dict[str, Any]) -> float:
     costs = evaluation.get("cost_steps")
     return costs["speeding"] if costs else float("nan")
@@ -109,16 +124,23 @@ def _highway(name: str) -> list[Row]:
     if data is None:
         return []
     recipe, options = HIGHWAY_RESULTS[name]
-    runs = [r for r in data["runs"] if not r.get("imitation")]
+    runs = data["runs"]
 
     def comfort(run: dict[str, Any]) -> float:
         return 100 * _comfort_share(run["evaluation"])
 
-    none = {r["seed"]: r for r in runs if r["switching"] == "none"}
+    def learned_comfort(run: dict[str, Any]) -> float:
+        return 100 * _learned_comfort_share(run["evaluation"])
+
+    none = {r["seed"]: r for r in runs if r["switching"] == "none" and not r.get("imitation")}
     floors = {f["switching"]: f for f in data.get("idm_driver", [])}
     rows = []
-    for logic in sorted({r["switching"] for r in runs} - {"none"}):
-        mine = sorted((r for r in runs if r["switching"] == logic), key=lambda r: r["seed"])
+    methods = {(r["switching"], r.get("imitation", 0.0)) for r in runs} - {("none", 0.0)}
+    for logic, imitation in sorted(methods):
+        mine = sorted(
+            (r for r in runs if (r["switching"], r.get("imitation", 0.0)) == (logic, imitation)),
+            key=lambda r: r["seed"],
+        )
         floor = floors.get(logic, {}).get("safety_share")
         share_bound = max(0.005, floor) if floor is not None else 0.005
         ratios = [
@@ -136,8 +158,9 @@ def _highway(name: str) -> list[Row]:
                 all(r["evaluation"]["safety_share"] <= share_bound for r in mine)
             ),
             "return ≥ 95 % of PPO without the switch": all(q >= 0.95 for q in ratios),
-            "comfort exceeded ≤ 1 % of evaluation steps, never above 30 m/s": all(
-                _comfort_share(r["evaluation"]) <= 0.01 and _speeding(r["evaluation"]) == 0
+            "the learned controller beyond comfort ≤ 1 % of evaluation steps, never above "
+            "30 m/s": all(
+                _learned_comfort_share(r["evaluation"]) <= 0.01 and _speeding(r["evaluation"]) == 0
                 for r in mine
             ),
         }
@@ -149,18 +172,21 @@ def _highway(name: str) -> list[Row]:
             f"{_col(mine, lambda r: 100 * r['evaluation']['safety_share'], '.2f', ' %')} of "
             f"steps (IDM/MOBIL driver: {floor_text}); return "
             f"{' / '.join(format(q, '.3f') for q in ratios)} of PPO's without the switch; "
-            f"comfort exceeded on {_col(mine, comfort, '.2f', ' %')} of steps (PPO without "
-            f"the switch: {_col([none[s] for s in sorted(none)], comfort, '.2f', ' %')})"
+            f"comfort exceeded on {_col(mine, comfort, '.2f', ' %')} of steps, by the learned "
+            f"controller on {_col(mine, learned_comfort, '.2f', ' %')} (PPO without the "
+            f"switch: {_col([none[s] for s in sorted(none)], comfort, '.2f', ' %')})"
         )
         rows.append(
             {
                 "plant": "highway-env",
-                "method": f"PPO with R_ADAS = −1 under `{logic}`, {recipe}, "
-                f"{data['timesteps']:,} steps",
+                "method": f"PPO with R_ADAS = −1 under `{logic}`, {recipe}"
+                + (f", + intervention imitation {imitation:g}" if imitation else "")
+                + f", {data['timesteps']:,} steps",
                 "seeds": [r["seed"] for r in mine],
                 "measured": measured,
                 "checks": checks,
-                "source": f"python benchmarks/highway_switch.py --logics {logic} none{options}",
+                "source": f"python benchmarks/highway_switch.py --logics {logic} none{options}"
+                + (f" --imitation {imitation:g}" if imitation else ""),
             }
         )
     return rows

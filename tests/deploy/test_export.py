@@ -15,12 +15,17 @@ from safeswitch.deploy.onnx_policy import OPSET, policy_graph
 from safeswitch.training.policies import load_policy
 from safeswitch.training.shipped import SHIPPED, SHIPPED_DIR
 
-#: Every shipped policy that has a trained network.
+#: Every shipped left-turn policy that has a trained network.
 TRAINED = sorted(
     name
     for name, folder in SHIPPED.items()
-    if (SHIPPED_DIR / folder / "model.zip").is_file() and name != "shipped"
+    if (SHIPPED_DIR / folder / "model.zip").is_file()
+    and name != "shipped"
+    and not name.startswith("highway-")
 )
+#: The shipped highway-env policies (their observations come from highway-env, about 10 ms a
+#: step: 10,000 of them, not 100,000).
+HIGHWAY = sorted(name for name in SHIPPED if name.startswith("highway-"))
 
 
 def session(folder):
@@ -110,3 +115,15 @@ def test_every_shipped_policy_exports_within_1e5_on_100000_observations(tmp_path
     result = export(name, tmp_path / name)
     assert result.observations == 100_000
     assert result.max_abs_diff <= 1e-5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", HIGHWAY)
+def test_the_highway_policies_export_from_their_own_plant_within_1e5(tmp_path, name):
+    pytest.importorskip("highway_env")
+    result = export(name, tmp_path / name, observations=10_000)
+    assert result.max_abs_diff <= 1e-5
+    manifest = json.loads((tmp_path / name / "manifest.json").read_text())
+    assert manifest["source"]["env_id"] == "safeswitch/Highway-v0"
+    assert manifest["switch"]["logic"] == name.removeprefix("highway-")
+    assert manifest["parity"]["observations"] == 10_000

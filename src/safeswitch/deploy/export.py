@@ -148,12 +148,16 @@ def left_turn_observations(
     return np.concatenate(seen)[:count]
 
 
-def env_observations(policy: Any, env_id: str, count: int, seed: int = PARITY_SEED) -> Any:
-    """``count`` observations the policy meets in its own episodes of the Gymnasium ``env_id``
-    (deterministic actions; one seed per episode from ``seed``)."""
-    import gymnasium as gym
+def env_observations(policy: Any, config: Any, count: int, seed: int = PARITY_SEED) -> Any:
+    """``count`` observations the policy meets in its own episodes of the plant it was trained
+    on (``config``, an :class:`~safeswitch.training.config.EnvTrainConfig`: its environment,
+    logic, penalty and keyword arguments; deterministic actions; one seed per episode from
+    ``seed``)."""
+    from safeswitch.training.generic import make_supervised_env
 
-    env = gym.make(env_id)
+    env = make_supervised_env(
+        config.env_id, config.switching, config.penalty, config.logic_params, **config.env_kwargs
+    )
     seen: list[Any] = []
     episode = 0
     try:
@@ -256,13 +260,16 @@ def export(
         logic: str | None = scene.switching
         decision_interval, dt = scene.episode.decision_interval, scene.episode.dt
         env_id = "safeswitch/LeftTurnTraffic-v0" if config.traffic else "safeswitch/LeftTurn-v0"
+        assumptions = ASSUMPTIONS.get(str(logic), ["see the logic's documentation"])
     else:
-        seen = env_observations(policy, config.env_id, observations)
+        seen = env_observations(policy, config, observations)
         scene_dict = to_dict(config)
         observation_layout = None
         logic = switching or config.switching
         decision_interval, dt = 1, None
         env_id = config.env_id
+        # ASSUMPTIONS are the left turn's logics'; a plant's logic documents its own
+        assumptions = [f"see the documentation of the {logic!r} logic for {env_id}"]
     worst, _ = parity(onnx_bytes, policy, seen)
     if not worst <= tolerance:
         raise ExportError(
@@ -282,7 +289,7 @@ def export(
             "sha256": hashlib.sha256(onnx_bytes).hexdigest(),
             "opset": OPSET,
             "ir_version": int(graph.ir_version),
-            "input": {"name": INPUT, "dtype": "float32", "shape": ["N", int(space.shape[0])]},
+            "input": {"name": INPUT, "dtype": "float32", "shape": ["N", *map(int, space.shape)]},
             "output": {
                 "name": "action",
                 "dtype": "float32",
@@ -305,7 +312,7 @@ def export(
         "dt_s": dt,
         "switch": {
             "logic": logic,
-            "assumptions": ASSUMPTIONS.get(str(logic), ["see the logic's documentation"]),
+            "assumptions": assumptions,
             "parameters": "scene.yaml",
         },
         "parity": {

@@ -52,10 +52,13 @@ def _activation(layer: Any) -> tuple[str, dict[str, Any]] | None:
 
 def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
     """The ONNX model of ``policy``'s deterministic action: input ``observation`` float32
-    ``[N, obs_dim]`` (raw, as the environment gives it), output ``action`` float32 ``[N, A]``.
+    ``[N, *obs_shape]`` (raw, as the environment gives it; an observation of more than one
+    axis, such as highway-env's ``[vehicles, features]``, is flattened after its statistics
+    are applied, as SB3's ``FlattenExtractor`` does), output ``action`` float32 ``[N, A]``.
 
     Raises:
-        ExportError: The policy is not a flat MLP policy with a Box observation and action.
+        ExportError: The policy is not an MLP policy with a Box observation and a flat Box
+            action.
     """
     import torch
     from gymnasium import spaces
@@ -65,8 +68,8 @@ def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
     net = model.policy
     where = f"the policy in {policy.path}"
     obs_space, act_space = net.observation_space, net.action_space
-    if not isinstance(obs_space, spaces.Box) or len(obs_space.shape) != 1:
-        raise ExportError(f"{where}: only a flat Box observation exports, got {obs_space}")
+    if not isinstance(obs_space, spaces.Box) or len(obs_space.shape) < 1:
+        raise ExportError(f"{where}: only a Box observation exports, got {obs_space}")
     if not isinstance(act_space, spaces.Box) or len(act_space.shape) != 1:
         raise ExportError(f"{where}: only a flat Box action exports, got {act_space}")
     if not isinstance(net.features_extractor, FlattenExtractor):
@@ -112,6 +115,9 @@ def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
         ]
         x = "normalised"
 
+    if len(obs_space.shape) > 1:
+        nodes.append(helper.make_node("Flatten", [x], ["flat"], axis=1))
+        x = "flat"
     layers = [*net.mlp_extractor.policy_net, net.action_net]
     for index, layer in enumerate(layers):
         out = f"layer{index}"
@@ -138,7 +144,7 @@ def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
     graph = helper.make_graph(
         nodes,
         "safeswitch_policy",
-        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", obs_space.shape[0]])],
+        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", *obs_space.shape])],
         [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", act_space.shape[0]])],
         inits,
     )
