@@ -1,8 +1,10 @@
 """ONNX parity of every shipped policy (``safeswitch export``, issue #42): the largest
 |ONNX − torch| action difference on 100,000 observations of the policy's own evaluation
-episodes (seed 1,000,003), onnxruntime and torch on one thread each.
+episodes (seed 1,000,003; the highway-env policies: 10,000), onnxruntime and torch on one
+thread each.
 
-Run: ``python benchmarks/export_parity.py [--out results/export_parity.json]``.
+Run: ``python benchmarks/export_parity.py [--observations N] [--highway-observations N]
+[--out results/export_parity.json]``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,10 @@ import _common
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--observations", type=int, default=100_000)
+    parser.add_argument(
+        "--highway-observations", type=int, default=10_000,
+        help="for the highway-env policies (a highway-env step takes about 10 ms)",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
@@ -28,7 +34,8 @@ def main() -> None:
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            result = export(name, Path(tmp) / name, observations=args.observations)
+            count = args.highway_observations if name.startswith("highway-") else args.observations
+            result = export(name, Path(tmp) / name, observations=count)
             rows[name] = {"max_abs_diff": result.max_abs_diff,
                           "observations": result.observations}  # fmt: skip
     out = {"machine": _common.machine(), "tolerance": 1e-5, "policies": rows}
