@@ -6,7 +6,7 @@ for ``certified``). highway-env is imported only when an environment is made."""
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -41,8 +41,8 @@ class HighwayCosts(gym.Wrapper[Any, Any, Any, Any]):
     angle δ (``β = atan(tan δ / 2)``, ``L`` the vehicle length), at the speed the step began
     with. Each cost can be a training constraint by name (``constraints: {speeding: …}``)."""
 
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        ego = self.env.unwrapped.vehicle
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        ego = self.env.unwrapped.vehicle  # type: ignore[attr-defined]
         speed = float(ego.speed)
         obs, reward, terminated, truncated, info = self.env.step(action)
         beta = math.atan(0.5 * math.tan(float(ego.action["steering"])))
@@ -73,7 +73,7 @@ class LearnedSteering(gym.Wrapper[Any, Any, Any, Any]):
             raise ValueError(f"steering_limit must lie in (0, {STEER_RANGE:.4f}] rad, got {limit}")
         self.scale = limit / STEER_RANGE
 
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         plant = np.array(action, dtype=np.float32, copy=True)
         plant[..., 1] = np.clip(plant[..., 1], -1.0, 1.0) * self.scale
         obs, reward, terminated, truncated, info = self.env.step(plant)
