@@ -5,6 +5,7 @@ whole evaluation."""
 
 import json
 
+import numpy as np
 import pytest
 
 import safeswitch
@@ -64,6 +65,22 @@ def test_the_shipped_name_drives_from_the_command_line_without_a_crash(capsys):
     summary = evaluate(capsys, "highway-certified", 3)
     assert summary["episodes"] == 3 and summary["failures"] == 0
     assert summary["switching"] == "certified" and summary["steps"] == 3 * 151
+
+
+@pytest.mark.parametrize("name", sorted(NAMES))
+def test_the_fast_deterministic_path_acts_as_sb3_predict(name):
+    """``TrainedPolicy.act`` (the layer-by-layer mean action) on highway-env's ``[B, 5, 7]``
+    observations gives SB3's ``predict``, ``[B, 2]``, near and far from the training data."""
+    policy = load_policy(name)
+    assert policy._actor is not None
+    rng = np.random.default_rng(0)
+    for scale in (1.0, 50.0):
+        obs = rng.normal(0.0, scale, size=(512, 5, 7)).astype(np.float32)
+        fast = policy.act(obs)
+        reference, _ = policy.model.predict(policy.normalise(obs), deterministic=True)
+        assert fast.shape == (512, 2)
+        np.testing.assert_allclose(fast, reference, rtol=0, atol=2e-6)
+        assert np.all(np.abs(fast) <= 1.0)
 
 
 @pytest.mark.slow

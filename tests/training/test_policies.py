@@ -11,7 +11,9 @@ from safeswitch.leftturn.make import build_task
 from safeswitch.training.policies import SHIPPED, load_policy
 
 
-@pytest.mark.parametrize("name", sorted(set(SHIPPED.values())))
+@pytest.mark.parametrize(
+    "name", sorted(f for f in set(SHIPPED.values()) if not f.startswith("highway_"))
+)  # the highway-env policies: tests/evaluation/test_shipped_highway.py
 def test_the_fast_deterministic_path_acts_as_sb3_predict(name):
     policy = load_policy(name.replace("_", "-"))
     assert policy._actor is not None  # the shipped policies take the fast path

@@ -59,14 +59,17 @@ class TrainedPolicy:
         return np.asarray(self.normalizer.normalize_obs(obs), dtype=np.float32)
 
     def act(self, obs: NDArray[np.float32], deterministic: bool = True) -> NDArray[np.float64]:
-        """Actions ``[B]`` in [-1, 1] for observations ``[B, obs_dim]`` (deterministic: the
+        """Actions ``[B]`` in [-1, 1] for observations ``[B, obs_dim]`` (``[B, A]`` for a
+        policy with more than one action, observations ``[B, *obs_shape]``; deterministic: the
         Gaussian's mean, see :meth:`_mean_action`)."""
         normalised = self.normalise(obs)
         if deterministic and self._actor is not None:
             actions = self._mean_action(normalised)
         else:
             actions, _ = self.model.predict(normalised, deterministic=deterministic)
-        return np.asarray(actions, dtype=np.float64).reshape(obs.shape[0])
+        width = int(np.prod(self.model.action_space.shape))
+        shape = (obs.shape[0],) if width == 1 else (obs.shape[0], width)
+        return np.asarray(actions, dtype=np.float64).reshape(shape)
 
     @cached_property
     def _actor(self) -> list[torch.nn.Module] | None:
