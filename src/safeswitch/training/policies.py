@@ -67,7 +67,7 @@ class TrainedPolicy:
             actions = self._mean_action(normalised)
         else:
             actions, _ = self.model.predict(normalised, deterministic=deterministic)
-        width = int(np.prod(self.model.action_space.shape))
+        width = int(np.prod(self.model.action_space.shape or (1,)))
         shape = (obs.shape[0],) if width == 1 else (obs.shape[0], width)
         return np.asarray(actions, dtype=np.float64).reshape(shape)
 
