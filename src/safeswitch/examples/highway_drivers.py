@@ -9,11 +9,11 @@ Each is a policy: ``driver.reset(env)`` at the start of an episode, then ``drive
 
 from __future__ import annotations
 
-from collections import Counter
 from typing import Any
 
 import numpy as np
 
+from safeswitch.core.tally import StepTally
 from safeswitch.examples.highway import ACCEL_RANGE, STEER_RANGE
 
 
@@ -100,11 +100,9 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
     seeds ``seed``, ``seed + 1``, …: crashes, off-road episodes, steps, the steps on which the
     Safety controller acted (and why: the logic's reasons), the steps each of the plant's costs
     (``speeding``, ``comfort``) was positive, and the mean return."""
-    crashes = off_road = steps = safety = 0
+    crashes = off_road = steps = 0
     returns = []
-    reasons: Counter[str] = Counter()
-    cost_steps: Counter[str] = Counter()
-    safety_cost_steps: Counter[str] = Counter()
+    tally = StepTally()
     for k in range(episodes):
         observation, _ = env.reset(seed=seed + k)
         driver.reset(env)
@@ -114,12 +112,7 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
             observation, reward, terminated, truncated, info = env.step(driver(observation))
             total += float(reward)
             steps += 1
-            if info["safety_active"]:
-                safety += 1
-                reasons[info["reason"]] += 1
-            for name, cost in info["costs"].items():
-                cost_steps[name] += cost > 0
-                safety_cost_steps[name] += cost > 0 and bool(info["safety_active"])
+            tally.add(info)
             done = terminated or truncated
         returns.append(total)
         crashes += bool(info["crashed"])
@@ -129,11 +122,9 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
         "crashes": crashes,
         "off_road": off_road,
         "steps": steps,
-        "safety_activation_steps": safety,
-        "safety_share": safety / steps if steps else None,
-        "safety_reasons": dict(reasons.most_common()),
-        "cost_steps": {name: int(n) for name, n in sorted(cost_steps.items())},
-        "safety_cost_steps": {name: int(safety_cost_steps[name]) for name in sorted(cost_steps)},
+        "safety_activation_steps": tally.safety_steps,
+        "safety_share": tally.safety_steps / steps if steps else None,
+        **tally.summary(),
         "mean_return": float(np.mean(returns)) if returns else None,
     }
 

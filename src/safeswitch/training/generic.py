@@ -21,7 +21,6 @@ from __future__ import annotations
 import csv
 import inspect
 import time
-from collections import Counter
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -40,6 +39,7 @@ from safeswitch.core.registry import (
     plain_env_id,
     safety_controller_for,
 )
+from safeswitch.core.tally import StepTally
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.training.config import EnvTrainConfig, dump_env_config
 from safeswitch.training.constraints import SWITCH_COSTS, ConstraintUpdate, NamedCostConstraints
@@ -249,9 +249,7 @@ def run_episodes(
     positive; ``safety_cost_steps``: how many of those the Safety controller drove."""
     failed = failed or failure_check(None)
     returns, lengths, safety, failures = [], [], [], 0
-    reasons: Counter[str] = Counter()
-    cost_steps: Counter[str] = Counter()
-    safety_cost_steps: Counter[str] = Counter()
+    tally = StepTally()
     for k in range(episodes):
         obs, _ = env.reset(seed=seed + k)
         total, steps, active, done = 0.0, 0, 0, False
@@ -260,12 +258,7 @@ def run_episodes(
             obs, reward, terminated, truncated, info = env.step(act(obs))
             total += float(reward)
             steps += 1
-            if info.get("safety_active", False):
-                active += 1
-                reasons[str(info.get("reason", "unknown"))] += 1
-            for name, cost in info.get("costs", {}).items():
-                cost_steps[name] += float(cost) > 0
-                safety_cost_steps[name] += float(cost) > 0 and bool(info.get("safety_active"))
+            active += tally.add(info)
             done = terminated or truncated
         returns.append(total)
         lengths.append(steps)
@@ -280,9 +273,7 @@ def run_episodes(
         "safety_share": float(sum(safety) / sum(lengths)) if lengths else None,
         "mean_return": float(np.mean(returns)) if returns else None,
         "mean_episode_steps": float(np.mean(lengths)) if lengths else None,
-        "safety_reasons": dict(reasons.most_common()),
-        "cost_steps": {name: int(n) for name, n in sorted(cost_steps.items())},
-        "safety_cost_steps": {name: int(safety_cost_steps[name]) for name in sorted(cost_steps)},
+        **tally.summary(),
     }
 
 
