@@ -17,7 +17,11 @@ policy drove: the steps above the lane's speed limit (30 m/s) and beyond the com
 interventions (``policy.intervention_imitation: W``), to set against the penalty alone.
 
 ``--config highway`` trains the shipped recipe instead (the learned steering limited, the
-comfort cost a constraint; ``src/safeswitch/configs/highway.yaml``) for both logics.
+comfort cost a constraint; ``src/safeswitch/configs/highway.yaml``) for both logics. Every run
+sets the imitation weight itself (0 unless ``--imitation``): the runs named after the logic
+alone learn from ``R_ADAS`` alone even where the recipe learns from the interventions too, as
+the shipped ``highway`` recipe does (its runs are ``certified+imitation`` with ``--imitation
+1``).
 
 Run: ``python benchmarks/highway_switch.py [--config NAME] [--logics certified none]
 [--timesteps N] [--seeds 1 2 3] [--imitation W] [--parallel 2] [--eval-episodes 50]
@@ -169,7 +173,7 @@ def reevaluate(run: dict[str, Any], keep: Path, episodes: int) -> dict[str, Any]
     evaluate``, same seed and episodes): the reasons and driving costs for runs recorded
     before they were."""
     torch.set_num_threads(1)
-    model = kept_dir(keep, run["switching"], run.get("imitation", 0.0), run["seed"])
+    model = kept_dir(keep, run["switching"], run["imitation"], run["seed"])
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "evaluation"
         code = safeswitch_cli(
@@ -239,7 +243,7 @@ def figure(runs: list[dict[str, object]], path: Path, recipe: str | None = None)
         curve = run["curve"]
         assert isinstance(curve, list)
         t = np.array([c["timestep"] for c in curve])
-        name = run_name(str(run["switching"]), float(run.get("imitation", 0.0)))  # type: ignore[arg-type]
+        name = run_name(str(run["switching"]), float(run["imitation"]))  # type: ignore[arg-type]
         label = f"{name} (seed {run['seed']})"
         style = {
             "color": "tab:purple" if name.endswith("+imitation") else colours[name],
@@ -261,7 +265,7 @@ def figure(runs: list[dict[str, object]], path: Path, recipe: str | None = None)
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:.0f}k"))
         ax.legend(fontsize=7)
     logics = " / ".join(
-        sorted({run_name(str(r["switching"]), float(r.get("imitation", 0.0))) for r in runs}  # type: ignore[arg-type]
+        sorted({run_name(str(r["switching"]), float(r["imitation"])) for r in runs}  # type: ignore[arg-type]
                - {"none"})
     )  # fmt: skip
     how = f"the '{recipe}' recipe" if recipe else "PPO's defaults, full steering range"
@@ -359,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
                 run["evaluation"]["cost_steps"], 0
             )
             again.remove(run)
-    done = {(r["switching"], r.get("imitation", 0.0), r["seed"]) for r in runs}
+    done = {(r["switching"], r["imitation"], r["seed"]) for r in runs}
     wanted = [(lg, 0.0) for lg in args.logics]
     if args.imitation:
         wanted.append((args.logics[0], args.imitation))
@@ -418,7 +422,7 @@ def main(argv: list[str] | None = None) -> int:
         base = unswitched.get(r["seed"])
         ratio = f"{e['mean_return'] / base:.3f}" if base else "—"
         print(
-            f"| {run_name(r['switching'], r.get('imitation', 0.0))} | {r['seed']} | "
+            f"| {run_name(r['switching'], r['imitation'])} | {r['seed']} | "
             f"{r['crashes']} / {r['off_road']} / {r['episodes']} | "
             f"{r['safety_rate_first_20pct']:.3f} → {r['safety_rate_last_20pct']:.3f} | "
             f"{e['failures']} | {e['safety_share']:.4f} | {reasons(e)} | {driving(e)} | "

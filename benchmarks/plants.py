@@ -102,15 +102,28 @@ def _speeding(evaluation: dict[str, Any]) -> float:
     return costs["speeding"] if costs else float("nan")
 
 
-#: highway_switch.py's results: file → (the recipe, its command's options).
-HIGHWAY_RESULTS = {
-    "highway.json": ("PPO's defaults on highway-env's full steering", ""),
+#: highway_switch.py's results: file → (the recipe, its command's options, the weight of the
+#: recipe's own fit toward the interventions or ``None``).
+HIGHWAY_RESULTS: dict[str, tuple[str, str, float | None]] = {
+    "highway.json": ("PPO's defaults on highway-env's full steering", "", None),
     "highway_comfort.json": (
-        "the `highway` recipe (learned steering ±0.025 rad, comfort a constraint)",
+        "the `highway` recipe (learned steering ±0.025 rad, comfort a constraint",
         " --config highway --timesteps 100000 --out benchmarks/results/highway_comfort.json "
         "--figure docs/highway_training_comfort.png",
+        1.0,
     ),
 }
+
+
+def _highway_method(recipe: str, own: float | None, imitation: float) -> str:
+    """The recipe as a run trained it: with its own fit toward the interventions or without."""
+    if own is None:
+        return recipe + (f", + intervention imitation {imitation:g}" if imitation else "")
+    if imitation == own:
+        return f"{recipe}, the fit toward the interventions with weight {imitation:g})"
+    if not imitation:
+        return f"{recipe}; R_ADAS alone, without its fit toward the interventions)"
+    return f"{recipe}; the fit toward the interventions with weight {imitation:g}, not {own:g})"
 
 
 def highway() -> list[Row]:
@@ -123,7 +136,7 @@ def _highway(name: str) -> list[Row]:
     data = _load(name)
     if data is None:
         return []
-    recipe, options = HIGHWAY_RESULTS[name]
+    recipe, options, own = HIGHWAY_RESULTS[name]
     runs = data["runs"]
 
     def comfort(run: dict[str, Any]) -> float:
@@ -132,13 +145,13 @@ def _highway(name: str) -> list[Row]:
     def learned_comfort(run: dict[str, Any]) -> float:
         return 100 * _learned_comfort_share(run["evaluation"])
 
-    none = {r["seed"]: r for r in runs if r["switching"] == "none" and not r.get("imitation")}
+    none = {r["seed"]: r for r in runs if r["switching"] == "none" and not r["imitation"]}
     floors = {f["switching"]: f for f in data.get("idm_driver", [])}
     rows = []
-    methods = {(r["switching"], r.get("imitation", 0.0)) for r in runs} - {("none", 0.0)}
+    methods = {(r["switching"], r["imitation"]) for r in runs} - {("none", 0.0)}
     for logic, imitation in sorted(methods):
         mine = sorted(
-            (r for r in runs if (r["switching"], r.get("imitation", 0.0)) == (logic, imitation)),
+            (r for r in runs if (r["switching"], r["imitation"]) == (logic, imitation)),
             key=lambda r: r["seed"],
         )
         floor = floors.get(logic, {}).get("safety_share")
@@ -179,9 +192,8 @@ def _highway(name: str) -> list[Row]:
         rows.append(
             {
                 "plant": "highway-env",
-                "method": f"PPO with R_ADAS = −1 under `{logic}`, {recipe}"
-                + (f", + intervention imitation {imitation:g}" if imitation else "")
-                + f", {data['timesteps']:,} steps",
+                "method": f"PPO with R_ADAS = −1 under `{logic}`, "
+                f"{_highway_method(recipe, own, imitation)}, {data['timesteps']:,} steps",
                 "seeds": [r["seed"] for r in mine],
                 "measured": measured,
                 "checks": checks,

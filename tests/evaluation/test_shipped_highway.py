@@ -37,6 +37,10 @@ def test_both_were_trained_by_the_shipped_recipe_within_the_issues_budget():
         assert config.switching == switching and config.seed == recipe.seed
         assert config.env_kwargs == recipe.env_kwargs and config.constraints == recipe.constraints
         assert config.ppo == recipe.ppo and config.penalty == recipe.penalty
+        # the recipe's fit toward the interventions; without a logic there is none to fit
+        fit = recipe.policy.intervention_imitation if switching == "certified" else 0.0
+        assert recipe.policy.intervention_imitation > 0
+        assert config.policy.intervention_imitation == fit
         rollout = config.ppo.n_steps * config.n_envs
         assert recipe.timesteps <= metrics(name)["timesteps"] < recipe.timesteps + rollout
         assert metrics(name)["timesteps"] <= 200_000

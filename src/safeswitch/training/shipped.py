@@ -42,9 +42,10 @@ MISSING_TARGETS = {
         "(73): trained before tyre friction, to be retrained (issue #39)"
     ),
     "highway_certified": (
-        "the Safety controller acts on 2.24 % of its 50 evaluation episodes' steps (issue #39 "
-        "asks at most 0.5 %): 162 of its 169 steps keep it from closing on the car ahead "
-        "(docs/highway.md)"
+        "the Safety controller acts on 1.18 % of its 50 evaluation episodes' steps, above the "
+        "0.5 % issue #39 asks (its fallback, no more often than highway-env's IDM/MOBIL driver "
+        "under the same logic, 36.7 %, holds): all 89 steps keep it from closing on the car "
+        "ahead (docs/highway.md)"
     ),
 }
 
