@@ -37,12 +37,12 @@ WALL = "tests.core.user_plant:UserWall-v0"
 def one_run(env_id: str, switching: str, penalty: float, timesteps: int, seed: int,
             weight: float, episodes: int) -> dict[str, object]:  # fmt: skip
     from safeswitch.training import train
-    from safeswitch.training.config import EnvTrainConfig, PolicyConfig
+    from safeswitch.training.config import EnvPolicyConfig, EnvTrainConfig
 
     config = EnvTrainConfig(
         env_id=env_id, switching=switching, penalty=penalty, timesteps=timesteps, seed=seed,
         n_envs=4, torch_threads=1, eval_episodes=episodes,
-        policy=PolicyConfig(intervention_imitation=weight),
+        policy=EnvPolicyConfig(intervention_imitation=weight),
     )  # fmt: skip
     with tempfile.TemporaryDirectory() as run:
         metrics = train(config, run, progress_bar=False)

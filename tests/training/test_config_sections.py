@@ -7,7 +7,7 @@ import dataclasses
 
 import pytest
 
-from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.core.config import ConfigError, fields_of, from_dict, to_dict
 from safeswitch.leftturn.config import (
     CertifiedConfig,
     LeftTurnConfig,
@@ -16,6 +16,7 @@ from safeswitch.leftturn.config import (
 )
 from safeswitch.sim.params import VehicleParams
 from safeswitch.training.config import (
+    EnvPolicyConfig,
     EnvTrainConfig,
     PolicyConfig,
     PPOConfig,
@@ -96,3 +97,29 @@ def test_the_generic_training_has_no_shaping_section():
         from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"progress_shaping": 1.0}})
     moved = from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"fast_tanh": True}})
     assert moved.policy.fast_tanh is True
+
+
+def test_a_plant_learns_from_the_interventions_by_default_and_the_left_turn_does_not():
+    """The fit toward the executed safety action is the generic recipe's default (it helped on
+    every plant but the left turn); a partial ``policy`` section keeps it, 0 turns it off."""
+    assert TrainConfig().policy.intervention_imitation == 0.0
+    plant = EnvTrainConfig(env_id="CartPole-v1")
+    assert plant.policy.intervention_imitation == 1.0
+    partial = from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "policy": {"fast_tanh": True}})
+    assert partial.policy.intervention_imitation == 1.0 and partial.policy.fast_tanh is True
+    off = from_dict(
+        EnvTrainConfig, {"env_id": "CartPole-v1", "policy": {"intervention_imitation": 0}}
+    )
+    assert off.policy.intervention_imitation == 0.0
+    assert from_dict(EnvTrainConfig, to_dict(plant)) == plant
+    with pytest.raises(ConfigError, match=r"intervention_imitation.*-1"):
+        from_dict(
+            EnvTrainConfig, {"env_id": "CartPole-v1", "policy": {"intervention_imitation": -1}}
+        )
+
+
+def test_the_reference_describes_a_key_a_section_inherits():
+    fields = {f.name: f for f in fields_of(EnvPolicyConfig)}
+    assert fields["intervention_imitation"].default == "1.0"
+    assert "Safety controller's interventions" in fields["intervention_imitation"].description
+    assert all(f.description for f in fields.values())

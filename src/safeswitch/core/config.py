@@ -367,8 +367,12 @@ def _type_name(hint: Any) -> str:
 
 def fields_of(cls: type) -> list[Field]:
     """Every key of the configuration class ``cls`` with its type, default and the
-    description its docstring gives (empty when it gives none)."""
-    described = _attributes(cls)
+    description its docstring gives (or, for a key a subclass inherits, its base class's;
+    empty when none gives one)."""
+    described: dict[str, str] = {}
+    for base in reversed(cls.__mro__):
+        if dataclasses.is_dataclass(base):
+            described |= _attributes(base)
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
