@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
 import platform
@@ -13,12 +14,30 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 
 
 def machine() -> dict[str, object]:
+    """What a timing was measured on: the same computation has taken up to twice as long on one
+    day of this project's machine as on another, so every result says which CPU and when."""
     return {
         "python": platform.python_version(),
         "machine": platform.machine(),
+        "cpu": cpu_model(),
         "cpus": os.cpu_count(),
         "threads": 1,
+        "date": datetime.date.today().isoformat(),
     }
+
+
+def cpu_model() -> str:
+    """The CPU's model name and current clock (Linux's ``/proc/cpuinfo``), else the platform's
+    processor string."""
+    try:
+        info = Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return platform.processor() or "unknown"
+    fields = dict(line.split(":", 1) for line in info if ":" in line)
+    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    name = fields.get("model name", platform.processor() or "unknown")
+    mhz = fields.get("cpu MHz")
+    return f"{name} @ {float(mhz):.0f} MHz" if mhz else name
 
 
 def publish(result: dict[str, object], out: Path | None, as_json: bool) -> bool:

@@ -16,6 +16,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from safeswitch.training.config import EnvPolicyConfig
+
 RESULTS = Path(__file__).parent / "results"
 
 Row = dict[str, Any]
@@ -72,13 +74,27 @@ def left_turn(config: str, scenarios: int = 1000) -> Row | None:
         f"cleared {_col(runs, 'cleared_episodes')}; efficiency "
         f"{_col(runs, 'mean_efficiency', '.3f')}"
     )
+    source = f"python benchmarks/train_seeds.py --config {config}"
+    timing = _load(f"train_time_{config}.json")  # bench_train.py: the recipe alone on the machine
+    if timing is not None:
+        checks["≤ 5 min to train on one torch thread"] = (
+            timing["wall_time_s"] <= 300 and timing["torch_threads"] == 1
+        )
+        when = ", ".join(str(timing[k]) for k in ("cpu", "date") if k in timing)
+        measured += f"; {timing['wall_time_s']:.0f} s to train, alone on one torch thread" + (
+            f" ({when})" if when else ""
+        )
+        source += (
+            f"; python benchmarks/bench_train.py --config {config} "
+            f"--out benchmarks/results/train_time_{config}.json"
+        )
     return {
         "plant": f"left turn, `{config}`",
         "method": f"PPO with R_ADAS from a random start, `configs/{config}.yaml`",
         "seeds": [r["seed"] for r in runs],
         "measured": measured,
         "checks": checks,
-        "source": f"python benchmarks/train_seeds.py --config {config}",
+        "source": source,
     }
 
 
@@ -204,6 +220,10 @@ def _highway(name: str) -> list[Row]:
     return rows
 
 
+#: The generic recipe's weight of the fit toward the interventions (``EnvPolicyConfig``).
+DEFAULT_FIT = EnvPolicyConfig().intervention_imitation
+
+
 def own_plant(name: str, label: str, command: str) -> list[Row]:
     """A plant registered as a user registers one (``interventions.py``), penalty alone and
     with the fit toward the executed safety action."""
@@ -216,7 +236,12 @@ def own_plant(name: str, label: str, command: str) -> list[Row]:
             (r for r in data["runs"] if r["intervention_imitation"] == weight),
             key=lambda r: r["seed"],
         )
-        how = "penalty alone" if weight == 0 else f"penalty + intervention imitation {weight:g}"
+        how = (
+            "penalty alone (the paper's method)"
+            if weight == 0
+            else f"penalty + intervention imitation {weight:g}"
+            + (" (the default)" if weight == DEFAULT_FIT else "")
+        )
         rows.append(
             {
                 "plant": label,
