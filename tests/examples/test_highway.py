@@ -136,6 +136,43 @@ def test_the_plant_publishes_speeding_and_comfort_from_the_bicycle_it_drives():
     env.close()
 
 
+def test_the_plant_publishes_a_following_gap_under_one_second():
+    """``time_gap`` is bumper to bumper at the ego's speed to the vehicle ahead in the ego's
+    lane — a nearer one in another lane does not count —; ``following`` flags a gap under 1 s."""
+    from safeswitch.examples.highway_plant import FOLLOWING_GAP_S, time_gap
+
+    env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching="none")
+    env.reset(seed=0)
+    road, ego = env.unwrapped.road, env.unwrapped.vehicle
+    lanes = len(road.network.lanes_list())
+    own = ego.lane_index
+    other = (own[0], own[1], (own[2] + 1) % lanes)
+    s_ego, _ = road.network.get_lane(own).local_coordinates(ego.position)
+
+    def place(vehicle, index, ahead_by):
+        vehicle.lane_index, vehicle.lane = index, road.network.get_lane(index)
+        vehicle.position = vehicle.lane.position(s_ego + ahead_by, 0.0)
+
+    others = [v for v in road.vehicles if v is not ego]
+    leader, beside = others[0], others[1]
+    for k, v in enumerate(others[2:]):  # every other vehicle far behind
+        place(v, own, -400.0 - 10.0 * k)
+    place(beside, other, ego.LENGTH + 5.0)  # 5 m ahead, one lane over: not followed
+    ego.speed = leader.speed = 25.0
+    for gap in (30.0, 20.0):
+        place(leader, own, gap + ego.LENGTH)
+        assert time_gap(env.unwrapped) == pytest.approx(gap / 25.0)
+    assert FOLLOWING_GAP_S == 1.0
+    *_, info = env.step(np.array([0.0, 0.0], dtype=np.float32))  # 0.8 s: following
+    assert info["time_gap"] < 1.0 and info["costs"]["following"] == 1.0
+    place(leader, own, 40.0 + ego.LENGTH)
+    *_, info = env.step(np.array([0.0, 0.0], dtype=np.float32))  # 1.6 s: not
+    assert info["time_gap"] > 1.0 and info["costs"]["following"] == 0.0
+    place(leader, other, 10.0 + ego.LENGTH)  # nobody ahead in the ego's lane
+    assert time_gap(env.unwrapped) == float("inf")
+    env.close()
+
+
 def test_the_learned_steering_limit_binds_the_policy_not_the_safety_controller():
     from safeswitch.examples.highway_plant import LearnedSteering
 

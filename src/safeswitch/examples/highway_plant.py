@@ -30,6 +30,30 @@ COMFORT_ACCEL_LAT = 3.0
 SPEEDING_MARGIN = 0.1 / 3.6
 
 
+#: The shortest time gap to the vehicle ahead that is not a ``following`` cost [s]: half the
+#: "two-second rule" drivers are taught. The shipped ``highway-certified`` policy met the
+#: ``certified`` logic's ``leader`` interventions at gaps of 0.65-0.85 s (its first 15
+#: evaluation episodes; docs/highway.md).
+FOLLOWING_GAP_S = 1.0
+
+
+def time_gap(env: gym.Env[Any, Any]) -> float:
+    """The time gap [s] from the ego's front bumper to the rear bumper of the vehicle ahead in
+    its lane, at the ego's speed (``inf`` with none ahead or at a standstill, 0 when the two
+    touch)."""
+    road = env.unwrapped.road  # type: ignore[attr-defined]
+    ego = env.unwrapped.vehicle  # type: ignore[attr-defined]
+    front, _ = road.neighbour_vehicles(ego, ego.lane_index)
+    if front is None:
+        return math.inf
+    lane = road.network.get_lane(ego.lane_index)
+    gap = lane.local_coordinates(front.position)[0] - lane.local_coordinates(ego.position)[0]
+    gap -= 0.5 * (ego.LENGTH + front.LENGTH)
+    if gap <= 0:
+        return 0.0
+    return gap / ego.speed if ego.speed > 0 else math.inf
+
+
 class HighwayCosts(gym.Wrapper[Any, Any, Any, Any]):
     """highway-env's plant with the driving rules it does not score: after every step
     ``info["costs"]`` holds ``speeding`` (1.0 when the ego is above its lane's speed limit —
@@ -39,7 +63,9 @@ class HighwayCosts(gym.Wrapper[Any, Any, Any, Any]):
     acceleration [m/s²]. The accelerations are the ones highway-env's kinematic bicycle applied
     over the step: the commanded ``acceleration`` and ``v²·sin β / (L/2)`` for the steering
     angle δ (``β = atan(tan δ / 2)``, ``L`` the vehicle length), at the speed the step began
-    with. Each cost can be a training constraint by name (``constraints: {speeding: …}``)."""
+    with. ``following`` is 1.0 when the time gap to the vehicle ahead in the ego's lane is below
+    :data:`FOLLOWING_GAP_S` (bumper to bumper, at the ego's speed). Each cost can be a training
+    constraint by name (``constraints: {speeding: …}``)."""
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         ego = self.env.unwrapped.vehicle  # type: ignore[attr-defined]
@@ -49,12 +75,14 @@ class HighwayCosts(gym.Wrapper[Any, Any, Any, Any]):
         accel_lat = speed * speed * math.sin(beta) / (0.5 * VEHICLE_LENGTH)
         accel_lon = float(ego.action["acceleration"])
         info["accel_lat"] = accel_lat
+        info["time_gap"] = time_gap(self.env)
         info["costs"] = {
             **info.get("costs", {}),
             "speeding": float(ego.speed > ego.lane.speed_limit + SPEEDING_MARGIN),
             "comfort": float(
                 abs(accel_lon) > COMFORT_ACCEL_LON or abs(accel_lat) > COMFORT_ACCEL_LAT
             ),
+            "following": float(info["time_gap"] < FOLLOWING_GAP_S),
         }
         return obs, reward, terminated, truncated, info
 
@@ -134,4 +162,4 @@ def make_highway_env(
     return switched if steering_limit is None else LearnedSteering(switched, steering_limit)
 
 
-__all__ = ["HighwayCosts", "LearnedSteering", "make_highway_env"]
+__all__ = ["FOLLOWING_GAP_S", "HighwayCosts", "LearnedSteering", "make_highway_env", "time_gap"]
