@@ -17,8 +17,9 @@ scenarios), the efficiency on the shift, and the original distribution's before 
 One torch thread per run; runs go two at a time (two cores). The figure is written beside
 the JSON (``--out``).
 
-Run: ``python benchmarks/adapt.py [--episodes 5000] [--out results/adapt.json]``
-(``--replot results/adapt.json`` redraws the figure of a saved result).
+Run: ``python benchmarks/adapt.py [--episodes 5000] [--shifts ego-fast north-fast] [--noise STD]
+[--out results/adapt.json]`` (``--noise``: ``adapt --noise``, the exploration noise while
+deployed; ``--replot results/adapt.json`` redraws the figure of a saved result).
 """
 
 from __future__ import annotations
@@ -37,15 +38,15 @@ SHIFTS = {
 SEEDS = (1, 2, 3)
 
 
-def one(job: tuple[str, int, int, int, str]) -> dict[str, object]:
+def one(job: tuple[str, int, int, int, str, float | None]) -> dict[str, object]:
     """One adaptation (in a worker process)."""
-    shift, seed, episodes, block, folder = job
+    shift, seed, episodes, block, folder, noise = job
     from safeswitch.app.adapt import adapt
 
     model, settings = SHIFTS[shift]
     summary = adapt(model, Path(folder) / f"{shift}_seed{seed}", settings=settings,
-                    episodes=episodes, block=block, seed=seed)  # fmt: skip
-    return {**summary, "name": shift, "model": model, "seed": seed}
+                    episodes=episodes, block=block, seed=seed, noise=noise)  # fmt: skip
+    return {**summary, "name": shift, "model": model, "seed": seed, "noise": noise}
 
 
 def main() -> None:
@@ -53,6 +54,10 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=5_000)
     parser.add_argument("--block", type=int, default=1_000)
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument(
+        "--noise", type=float, default=None, help="adapt --noise (default: as training ended)"
+    )
+    parser.add_argument("--shifts", nargs="+", choices=sorted(SHIFTS), default=list(SHIFTS))
     parser.add_argument("--json", action="store_true")
     parser.add_argument(
         "--replot", type=Path, help="redraw the figure of a saved result (no adaptation run)"
@@ -68,7 +73,11 @@ def main() -> None:
         adaptation_figure(first, args.replot.with_suffix(".png"))
         return
     with tempfile.TemporaryDirectory() as tmp:
-        jobs = [(s, seed, args.episodes, args.block, tmp) for s in SHIFTS for seed in SEEDS]
+        jobs = [
+            (s, seed, args.episodes, args.block, tmp, args.noise)
+            for s in args.shifts
+            for seed in SEEDS
+        ]
         with ProcessPoolExecutor(2) as pool:
             runs = list(pool.map(one, jobs))
     rows = []
@@ -97,7 +106,7 @@ def main() -> None:
             "wall_time_s": run["wall_time_s"],
         })  # fmt: skip
     result = {"machine": _common.machine(), "episodes": args.episodes, "block": args.block,
-              "rows": rows, "runs": runs}  # fmt: skip
+              "noise": args.noise, "rows": rows, "runs": runs}  # fmt: skip
     if args.out is not None:
         from safeswitch.report.figures import adaptation_figure
 

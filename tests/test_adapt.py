@@ -120,3 +120,22 @@ def test_the_training_terms_follow_the_deployment_logic():
     assert constraints.overrule is None
     same, _ = learning_terms(config, (*reasons, *config.shaping.reason_penalties))
     assert same.reason_penalties == config.shaping.reason_penalties
+
+
+def test_the_deployed_exploration_noise_is_the_size_asked(tmp_path):
+    """``noise`` sets the exploration noise the policy is deployed with (the shipped
+    ``certified`` policy's is fixed, so the adapted one keeps it); a bad value is refused before
+    anything is written, and a resume must ask the same."""
+    for bad in (0.0, float("nan"), 2.0):
+        with pytest.raises(AdaptError, match=rf"--noise must be .*got {bad}"):
+            adapt("certified", tmp_path / "bad", **SMALL, noise=bad)
+    assert not (tmp_path / "bad").exists()
+    trained = load_policy("certified").model.policy.log_std.detach().numpy()
+    out = tmp_path / "a"
+    adapt("certified", out, **{**SMALL, "episodes": 48}, noise=0.05)
+    assert json.loads((out / "adapt.json").read_text())["noise"] == 0.05
+    adapted = load_policy(out).model.policy.log_std.detach().numpy()
+    np.testing.assert_allclose(adapted, np.log(0.05), rtol=1e-6)
+    assert not np.allclose(trained, np.log(0.05))
+    with pytest.raises(AdaptError, match="asked differently"):
+        adapt("certified", out, **{**SMALL, "episodes": 48}, noise=0.1, resume=True)

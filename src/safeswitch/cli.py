@@ -588,7 +588,8 @@ def _adapt(args: argparse.Namespace) -> int:
     summary = adapt(
         args.model, args.out, switching=args.switching, settings=args.set or (),
         episodes=args.episodes, block=args.block, n_envs=args.n_envs, seed=args.seed,
-        eval_episodes=args.eval_episodes, resume=args.resume, progress=not args.no_progress,
+        eval_episodes=args.eval_episodes, noise=args.noise, resume=args.resume,
+        progress=not args.no_progress,
     )  # fmt: skip
     last = summary["blocks"][-1]
     for where in ("shifted", "original"):
@@ -920,6 +921,11 @@ def build_parser() -> argparse.ArgumentParser:
     adp.add_argument(
         "--eval-episodes", type=at_least(1), default=1_000,
         help="held-out scenarios of each evaluation (frozen, each block, adapted)",
+    )  # fmt: skip
+    adp.add_argument(
+        "--noise", type=float, default=None, metavar="STD",
+        help="standard deviation of the exploration noise while deployed (default: the size "
+             "its training ended with)",
     )  # fmt: skip
     adp.add_argument("--resume", action="store_true", help="continue after the last block")
     adp.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import shutil
 import time
@@ -92,11 +93,14 @@ def adapt(
     seed: int = 0,
     eval_episodes: int = 1_000,
     eval_seed: int = 1_000_003,
+    noise: float | None = None,
     resume: bool = False,
     progress: bool = False,
 ) -> dict[str, Any]:
     """Deploy ``model`` on the shift and let it keep learning (see the module docstring);
-    returns ``summary.json``'s contents.
+    returns ``summary.json``'s contents. ``noise``: the standard deviation of the exploration
+    noise on the deployed actions (``None``: the size its training ended with); a smaller one
+    meets the safety action less often in the field and learns from less variety.
 
     Raises:
         AdaptError: Bad arguments, a folder that holds another adaptation, or (``resume``) one
@@ -118,6 +122,10 @@ def adapt(
         "episodes": episodes, "block": block, "n_envs": n_envs, "seed": seed,
         "eval_episodes": eval_episodes, "eval_seed": eval_seed,
     }  # fmt: skip
+    if noise is not None:  # asked only when given: adaptations asked before it resume as asked
+        if not (math.isfinite(noise) and 0 < noise <= 1):
+            raise AdaptError(f"--noise must be a standard deviation in (0, 1], got {noise}")
+        asked["noise"] = noise
     counts = {"episodes": episodes, "block": block, "n_envs": n_envs,
               "eval_episodes": eval_episodes}  # fmt: skip
     for name, count in counts.items():
@@ -183,6 +191,9 @@ def adapt(
     if not resume and ppo.log_std_final is not None:
         with torch.no_grad():
             ppo.policy.log_std.fill_(ppo.log_std_final)
+    if not resume and noise is not None:  # or the size asked (a checkpoint keeps it)
+        with torch.no_grad():
+            ppo.policy.log_std.fill_(math.log(noise))
     ppo.log_std_final = None
     # The trust region: the value function, trained on the original distribution, learns the
     # shift's returns before the actor moves, and the actor then moves slowly.
