@@ -188,12 +188,11 @@ def adapt(
     ppo = SwitchPPO.load(source / "model.zip", env=learner_env(env, config), device="cpu")
     # Exploration as training left it: the annealed noise's final size, held (its schedule
     # runs over one learn call; here progress would restart it at log_std_init).
-    if not resume and ppo.log_std_final is not None:
+    # Or the size asked; a checkpoint keeps the size it had.
+    size = math.log(noise) if noise is not None else ppo.log_std_final
+    if not resume and size is not None:
         with torch.no_grad():
-            ppo.policy.log_std.fill_(ppo.log_std_final)
-    if not resume and noise is not None:  # or the size asked (a checkpoint keeps it)
-        with torch.no_grad():
-            ppo.policy.log_std.fill_(math.log(noise))
+            ppo.policy.log_std.fill_(size)
     ppo.log_std_final = None
     # The trust region: the value function, trained on the original distribution, learns the
     # shift's returns before the actor moves, and the actor then moves slowly.
