@@ -4,25 +4,76 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 
-def write_atomic(path: str | Path, text: str) -> None:
-    """Write a text file so that readers see either nothing or all of it (a temporary file
-    beside it, then an atomic rename)."""
+@contextmanager
+def replacing(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` (``.NAME.tmp``) to write a file into: renamed onto
+    ``path`` when the block ends, deleted if the block raises or is interrupted (Ctrl-C), so
+    that readers see either nothing or all of it and an interrupted run leaves no debris."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_atomic(path: str | Path, text: str) -> None:
+    """Write a text file so that readers see either nothing or all of it (:func:`replacing`)."""
+    with replacing(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:
     """:func:`write_atomic` for binary content."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    with replacing(path) as tmp:
+        tmp.write_bytes(data)
+
+
+def write_policy_files(folder: str | Path, model: Any, normalizer: Any) -> None:
+    """``folder/model.zip`` and ``folder/vecnormalize.pkl`` (a run's policy), each written whole
+    (:func:`replacing`); ``model`` and ``normalizer`` are anything with ``save(path)``."""
+    folder = Path(folder)
+    with replacing(folder / "model.zip") as tmp:
+        model.save(tmp)
+    with replacing(folder / "vecnormalize.pkl") as tmp:
+        normalizer.save(str(tmp))
+
+
+def write_snapshot(folder: str | Path, model: Any, normalizer: Any, state: dict[str, Any]) -> Path:
+    """A policy snapshot ``folder/{model.zip, vecnormalize.pkl, state.json}`` (a checkpoint, the
+    best policy so far), written into ``.NAME.tmp`` beside it and renamed whole; the folder it
+    replaces is kept until the new one is in place. Interrupted, it leaves the old snapshot
+    and no temporary folder. ``model`` and ``normalizer`` are anything with ``save(path)``
+    (Stable-Baselines3's models and ``VecNormalize``)."""
+    folder = Path(folder)
+    tmp = folder.with_name(f".{folder.name}.tmp")
+    old = folder.with_name(f".{folder.name}.old")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        tmp.mkdir(parents=True)
+        model.save(tmp / "model.zip")
+        normalizer.save(str(tmp / "vecnormalize.pkl"))
+        (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
+        shutil.rmtree(old, ignore_errors=True)
+        if folder.exists():
+            os.replace(folder, old)
+        os.replace(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old.exists() and not folder.exists():
+            os.replace(old, folder)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+    return folder
 
 
 def to_json(value: Any) -> str:

@@ -29,8 +29,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
-import shutil
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -40,7 +38,13 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.app.evaluate import scene_settings
-from safeswitch.io import prepare_output_dir, write_atomic, write_json
+from safeswitch.io import (
+    prepare_output_dir,
+    write_atomic,
+    write_json,
+    write_policy_files,
+    write_snapshot,
+)
 from safeswitch.progress import Progress
 
 #: The actor's schedule while it adapts (docs/adapt.md): the value function alone for this
@@ -300,29 +304,14 @@ def learning_terms(config: Any, reasons: Sequence[str]) -> tuple[Any, Any]:
 
 
 def _save(folder: Path, model: Any, env: Any, state: dict[str, Any]) -> None:
-    """The checkpoint: model, statistics and state, written into a temporary folder and
-    renamed whole."""
-    tmp = folder.with_name(f".{folder.name}.tmp")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    model.save(tmp / "model.zip")
-    env.save(str(tmp / "vecnormalize.pkl"))
-    (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
-    old = folder.with_name(f".{folder.name}.old")
-    shutil.rmtree(old, ignore_errors=True)
-    if folder.exists():
-        os.replace(folder, old)
-    os.replace(tmp, folder)
-    shutil.rmtree(old, ignore_errors=True)
+    """The checkpoint: model, statistics and state, renamed whole (:func:`write_snapshot`)."""
+    write_snapshot(folder, model, env, state)
 
 
 def _save_policy(folder: Path, model: Any, env: Any, config_text: str) -> None:
     """The adapted policy as a run directory ``evaluate --model`` accepts."""
     write_atomic(folder / "config.yaml", config_text)
-    model.save(folder / "model.tmp.zip")
-    os.replace(folder / "model.tmp.zip", folder / "model.zip")
-    env.save(str(folder / "vecnormalize.pkl.tmp"))
-    os.replace(folder / "vecnormalize.pkl.tmp", folder / "vecnormalize.pkl")
+    write_policy_files(folder, model, env)
 
 
 class DeploymentMonitor(BaseCallback):

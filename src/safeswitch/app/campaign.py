@@ -25,7 +25,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import os
 import sys
 import time
 from collections.abc import Iterator
@@ -37,7 +36,7 @@ import numpy as np
 
 from safeswitch.app.distributed import DistributedError, check_reachable, cluster
 from safeswitch.app.evaluate import LONG_PLAN_S, NOMINAL_RATE, PARALLEL_EFFICIENCY
-from safeswitch.io import write_json
+from safeswitch.io import replacing, write_atomic, write_json
 from safeswitch.progress import Progress, format_duration
 
 #: Scenario parameters a grid may span, with their unit conversion to the task's SI values.
@@ -231,9 +230,7 @@ def run_shard(shard: Shard, space: Space, folder: str) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     _write_rows(out / f"{shard.index:06d}", CSV_COLUMNS, rows)
     state = accumulator.state()
-    tmp = out / f".{shard.index:06d}.json.tmp"
-    tmp.write_text(json.dumps(state), encoding="utf-8")
-    os.replace(tmp, out / f"{shard.index:06d}.json")
+    write_atomic(out / f"{shard.index:06d}.json", json.dumps(state))
     return state
 
 
@@ -244,17 +241,17 @@ def _write_rows(stem: Path, columns: tuple[str, ...], rows: list[list[Any]]) -> 
     except ImportError:
         import csv
 
-        tmp = stem.with_name(f".{stem.name}.csv.tmp")
-        with open(tmp, "w", newline="", encoding="utf-8") as handle:
+        with (
+            replacing(stem.with_suffix(".csv")) as tmp,
+            open(tmp, "w", newline="", encoding="utf-8") as handle,
+        ):
             writer = csv.writer(handle)
             writer.writerow(columns)
             writer.writerows(rows)
-        os.replace(tmp, stem.with_suffix(".csv"))
         return
     table = pa.table({name: [row[j] for row in rows] for j, name in enumerate(columns)})
-    tmp = stem.with_name(f".{stem.name}.parquet.tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, stem.with_suffix(".parquet"))
+    with replacing(stem.with_suffix(".parquet")) as tmp:
+        pq.write_table(table, tmp)
 
 
 def shard_count(space: Space, shard_size: int) -> int:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from safeswitch.app.distributed import check_reachable, cluster
-from safeswitch.io import prepare_output_dir, write_json
+from safeswitch.io import prepare_output_dir, replacing, write_json
 from safeswitch.progress import Progress
 
 #: The searched parameters, in the order of the normalised vector.
@@ -297,8 +297,7 @@ def _write_scenarios(
 ) -> None:
     task, _ = _setup(target, 2, 0)
     ranges = _ranges(task.config.scenarios)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as handle:
+    with replacing(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
         writer.writerow(["method", "generation", *PARAMETERS, "min_separation_m", "collision",
                          "safety_ticks"])  # fmt: skip
@@ -308,4 +307,3 @@ def _write_scenarios(
                 # every digit of the parameters: a counterexample must replay exactly
                 writer.writerow([method, g, *(repr(float(x)) for x in v), f"{o[0]:.4f}",
                                  int(o[1]), int(o[2])])  # fmt: skip
-    tmp.replace(path)

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from safeswitch.io import replacing
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 
@@ -406,19 +407,17 @@ def write_scenario(
     )
     scenario_file.header.description = description
     path = folder / f"{name}.xosc"
-    tmp = path.with_name(f".{path.name}.tmp")
-    scenario_file.write_xml(str(tmp))
-    validate(tmp)
-    tmp.replace(path)
+    with replacing(path) as tmp:
+        scenario_file.write_xml(str(tmp))
+        validate(tmp)
     return path
 
 
 def write_road(folder: Path, task: LeftTurnTask) -> Path:
     """Write the scene's road as ``folder/intersection.xodr``."""
     path = folder / ROAD_FILE
-    tmp = path.with_name(f".{path.name}.tmp")
-    road_network(task).write_xml(str(tmp))
-    tmp.replace(path)
+    with replacing(path) as tmp:
+        road_network(task).write_xml(str(tmp))
     return path
 
 

@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.ticker import FuncFormatter, MaxNLocator
 
+from safeswitch.io import replacing
+
 #: The paper's six panels (a)–(f), then two of ours: when the policy starts to cut in front,
 #: and how often the Safety controller still acts.
 PANELS = (
@@ -56,10 +58,9 @@ def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = 
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    tmp = Path(out_png).with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
+    with replacing(out_png) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
-    tmp.replace(out_png)
 
 
 def _rows(progress_csv: str | Path) -> list[dict[str, float]]:

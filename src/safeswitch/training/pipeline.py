@@ -33,7 +33,7 @@ import gymnasium as gym
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
-from safeswitch.io import write_json
+from safeswitch.io import write_json, write_policy_files
 from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_any_config
 from safeswitch.training.plant import Plant
 from safeswitch.training.run import (
@@ -44,7 +44,6 @@ from safeswitch.training.run import (
     normalized,
     open_run,
     save_checkpoint,
-    save_final,
     start_run,
 )
 from safeswitch.training.validation import select_best
@@ -131,7 +130,7 @@ def train(
         extra=extra,
     )  # fmt: skip
     wall = monitor.wall_time_s
-    save_final(run, model, env)
+    write_policy_files(run, model, env)
     selected = None
     if validator is not None and validator.state["best_timesteps"] is not None:
         select_best(run)

@@ -21,7 +21,6 @@ Run directory::
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import sys
 from collections.abc import Callable
@@ -35,7 +34,7 @@ from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
-from safeswitch.io import write_atomic
+from safeswitch.io import write_atomic, write_snapshot
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.activations import NumpyTanh
@@ -220,18 +219,12 @@ def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[
     """A resumable checkpoint ``run/checkpoints/step_N`` (model, normaliser and ``state`` as
     ``state.json``), written into a temporary folder and renamed whole; the last two are
     kept."""
-    folder = run / "checkpoints"
-    folder.mkdir(exist_ok=True)
-    final = folder / f"step_{model.num_timesteps:09d}"
-    tmp = folder / f".tmp_{model.num_timesteps:09d}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    model.save(tmp / "model.zip")
-    env.save(str(tmp / "vecnormalize.pkl"))
-    state = {"timesteps": model.num_timesteps, **state}
-    (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
-    shutil.rmtree(final, ignore_errors=True)
-    os.replace(tmp, final)
+    final = write_snapshot(
+        run / "checkpoints" / f"step_{model.num_timesteps:09d}",
+        model,
+        env,
+        {"timesteps": model.num_timesteps, **state},
+    )
     for old in complete_checkpoints(run)[:-2]:  # keep the last two, and every interrupt's
         if not (old / INTERRUPTED).is_file():
             shutil.rmtree(old, ignore_errors=True)
@@ -275,15 +268,6 @@ def start_run(run: Path, config_text: str) -> None:
     :func:`open_run` and every other check passed)."""
     run.mkdir(parents=True, exist_ok=True)
     write_atomic(run / "config.yaml", config_text)
-
-
-def save_final(run: Path, model: SwitchPPO, env: VecNormalize) -> None:
-    """The trained model and its normaliser, each written whole."""
-    tmp_model = run / "model.tmp.zip"
-    model.save(tmp_model)
-    os.replace(tmp_model, run / "model.zip")
-    env.save(str(run / "vecnormalize.pkl.tmp"))
-    os.replace(run / "vecnormalize.pkl.tmp", run / "vecnormalize.pkl")
 
 
 def normalized(venv: Any, config: Any, checkpoint: dict[str, Any] | None) -> VecNormalize:

@@ -40,6 +40,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
+from safeswitch.io import replacing, write_snapshot
 from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import TrainedPolicy
@@ -177,14 +178,7 @@ class BestPolicy(BaseCallback):
         return TrainedPolicy(self.model, normalizer, self.config, self.run)  # type: ignore[arg-type]
 
     def _save_best(self) -> None:
-        tmp, final = self.run / ".best.tmp", self.run / "best"
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir()
-        self.model.save(tmp / "model.zip")
-        self.model.get_env().save(str(tmp / "vecnormalize.pkl"))  # type: ignore[union-attr]
-        (tmp / "state.json").write_text(json.dumps(self.state), encoding="utf-8")
-        shutil.rmtree(final, ignore_errors=True)
-        os.replace(tmp, final)
+        write_snapshot(self.run / "best", self.model, self.model.get_env(), self.state)
 
 
 class Validator(BestPolicy):
@@ -316,5 +310,5 @@ def select_best(run: Path) -> None:
     last.mkdir(exist_ok=True)
     for name in ("model.zip", "vecnormalize.pkl"):
         os.replace(run / name, last / name)
-        shutil.copyfile(run / "best" / name, run / f".{name}.tmp")
-        os.replace(run / f".{name}.tmp", run / name)
+        with replacing(run / name) as tmp:
+            shutil.copyfile(run / "best" / name, tmp)
