@@ -12,7 +12,9 @@ wrapper's own cost on a highway-env step.
 
 The evaluation also reports why the Safety controller acted (the logic's reasons) and how the
 policy drove: the steps above the lane's speed limit (30 m/s) and beyond the comfort limits
-(|a_lon| ≤ 5, |a_lat| ≤ 3 m/s²), the plant's ``speeding`` and ``comfort`` costs.
+(|a_lon| ≤ 5, |a_lat| ≤ 3 m/s²) and closer than 1 s to the vehicle ahead: the plant's
+``speeding``, ``comfort`` and ``following`` costs (``--reevaluate --keep DIR`` evaluates kept
+runs recorded before one of them existed).
 ``--imitation W`` adds runs under the first logic that also learn from the Safety controller's
 interventions (``policy.intervention_imitation: W``), to set against the penalty alone.
 
@@ -286,15 +288,38 @@ def reasons(evaluation: dict[str, Any]) -> str:
     return ", ".join(f"{k} {v}" for k, v in counts.items()) or "—"
 
 
+#: The plant's named costs the table shows, in its order (``following``: closer than 1 s to the
+#: vehicle ahead; runs recorded before it existed show "—" until ``--reevaluate``).
+DRIVING_COSTS = ("speeding", "comfort", "following")
+
+
 def driving(evaluation: dict[str, Any]) -> str:
-    """``0 / 86 (60) of 7,550``: the evaluation steps above the speed limit / beyond comfort
-    (in brackets: of those, the steps the Safety controller drove)."""
+    """``0 / 86 (60) / 243 (83) of 7,550``: the evaluation steps above the speed limit / beyond
+    comfort / closer than 1 s to the vehicle ahead (in brackets: of those, the steps the Safety
+    controller drove)."""
     costs = evaluation.get("cost_steps")
     if costs is None:
         return "not recorded"
-    by_safety = evaluation.get("safety_cost_steps")
-    comfort = f"{costs['comfort']}" + (f" ({by_safety['comfort']})" if by_safety else "")
-    return f"{costs['speeding']} / {comfort} of {evaluation['steps']:,}"
+    by_safety = evaluation.get("safety_cost_steps") or {}
+    shown = []
+    for name in DRIVING_COSTS:
+        if name not in costs:
+            shown.append("—")
+            continue
+        mine = f" ({by_safety[name]})" if name in by_safety else ""
+        shown.append(f"{costs[name]}{mine}")
+    return f"{' / '.join(shown)} of {evaluation['steps']:,}"
+
+
+def stale(evaluation: dict[str, Any]) -> bool:
+    """The evaluation was recorded before the Safety controller's share of each cost, or before
+    one of :data:`DRIVING_COSTS`, was (``--reevaluate`` evaluates it again)."""
+    costs = evaluation.get("cost_steps")
+    return (
+        costs is None
+        or "safety_cost_steps" not in evaluation
+        or any(name not in costs for name in DRIVING_COSTS)
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -356,9 +381,10 @@ def main(argv: list[str] | None = None) -> int:
     runs: list[dict[str, Any]] = result["runs"]
     if args.reevaluate and args.keep is None:
         parser.error("--reevaluate evaluates the kept policies: pass --keep DIR")
-    again = [r for r in runs if args.reevaluate and "safety_cost_steps" not in r["evaluation"]]
+    again = [r for r in runs if args.reevaluate and stale(r["evaluation"])]
     for run in [r for r in again if r["evaluation"]["safety_activation_steps"] == 0]:
-        if "cost_steps" in run["evaluation"]:  # the Safety controller never drove: nothing to add
+        costs = run["evaluation"].get("cost_steps") or {}
+        if all(name in costs for name in DRIVING_COSTS):  # the Safety controller never drove
             run["evaluation"]["safety_cost_steps"] = dict.fromkeys(
                 run["evaluation"]["cost_steps"], 0
             )
@@ -413,8 +439,9 @@ def main(argv: list[str] | None = None) -> int:
         r["seed"]: r["evaluation"]["mean_return"] for r in runs if r["switching"] == "none"
     }
     print("| method | seed | training: crashes / off road / episodes | safety share, first → "
-          "last 20 % | evaluation: crashes | safety share | why (steps) | speeding / comfort "
-          "steps (the Safety controller's) | mean return | of none's |")  # fmt: skip
+          "last 20 % | evaluation: crashes | safety share | why (steps) | speeding / comfort / "
+          "under 1 s behind, steps (the Safety controller's) | mean return | "
+          "of none's |")  # fmt: skip
     print("| --- | ---: | --- | --- | ---: | ---: | --- | --- | ---: | ---: |")
     for r in runs:
         e = r["evaluation"]
@@ -432,8 +459,8 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"IDM/MOBIL driver under {f['switching']}: {f['crashes']} crashes, {f['off_road']} "
             f"off road in {f['episodes']}, safety share {f['safety_share']:.4f} "
-            f"({reasons(f)}), speeding / comfort steps {driving(f)}, mean return "
-            f"{f['mean_return']:.1f}"
+            f"({reasons(f)}), speeding / comfort / under 1 s behind steps {driving(f)}, "
+            f"mean return {f['mean_return']:.1f}"
         )
     o = result["wrapper_overhead"]
     print(

@@ -99,7 +99,7 @@ def drive(env: Any, driver: Any, episodes: int, seed: int) -> dict[str, Any]:
     """``episodes`` episodes of ``driver`` on ``env`` (a ``safeswitch/Highway-v0``), reset with
     seeds ``seed``, ``seed + 1``, …: crashes, off-road episodes, steps, the steps on which the
     Safety controller acted (and why: the logic's reasons), the steps each of the plant's costs
-    (``speeding``, ``comfort``) was positive, and the mean return."""
+    (``speeding``, ``comfort``, ``following``) was positive, and the mean return."""
     crashes = off_road = steps = 0
     returns = []
     tally = StepTally()
