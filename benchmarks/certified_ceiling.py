@@ -1,0 +1,208 @@
+"""How many left turns *any* learned controller could clear under the `certified` filter: an
+oracle under the filter's rules (issue #39, the `certified` row's "clears ≥ 99 %").
+
+The oracle of the efficiency figures plans with hindsight and no filter; under `certified` a
+policy may only do what the filter lets through, and the filter — which must stay safe for any
+north car within its assumptions (it may speed up at 2.5 m/s²) — holds the ego back in some
+scenes where the hindsight oracle cuts in front. This script asks, scene by scene, whether
+*some* open-loop sequence of learned actions clears the conflict zone within the episode under
+the filter, with the scene known in advance (a bound no policy that sees only the present can
+beat):
+
+1. simple drivers: full throttle; the planner; a family "drive at a, brake from t1 to t2, then
+   full throttle" (a ∈ {1, 0.5, 0}, t1 ∈ 0…6 s, t2 − t1 ∈ 0.5…6 s);
+2. for every scene none of them clears, the cross-entropy method over 24 actions (one per
+   0.5 s), started from the best of step 1 (population 128, 16 elites, 12 rounds).
+
+A scene still uncleared is one no searched sequence clears: evidence, not proof, that no
+policy can (the search is finite). Run::
+
+    python benchmarks/certified_ceiling.py [--config certified] [--episodes 1000] \
+        [--out benchmarks/results/certified_ceiling.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import _common  # pins the numeric libraries to one thread first
+
+SEGMENT_S = 0.5  # one open-loop action per half second
+EVAL_SEED = 1_000_003
+
+
+def _outcome(task: Any, scenarios: Any, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Time to clear (NaN: never) and final progress of the ego, one episode per row of
+    ``actions`` [B, segments] (the learned action held over each segment)."""
+    from safeswitch.evaluation.rollout import rollout
+
+    config = task.config
+    per_segment = round(SEGMENT_S / config.episode.dt)
+    last: list[np.ndarray] = []
+
+    def policy(obs: Any, state: Any, tick: int) -> np.ndarray:
+        return actions[:, min(tick // per_segment, actions.shape[1] - 1)]
+
+    def on_tick(state: Any, record: Any, tick: int) -> None:
+        last[:] = [state.world.progress[:, 0].copy()]
+
+    result = rollout(task, scenarios, policy, on_tick)
+    assert not result.collision.any(), "a collision under certified: the filter is broken"
+    return np.asarray(result.time_to_clear, dtype=float), last[0]
+
+
+def _score(clear: np.ndarray, progress: np.ndarray, horizon: float) -> np.ndarray:
+    """Lower is better: the time to clear, else the horizon minus a little for each metre."""
+    return np.where(np.isnan(clear), horizon + 10.0 - 0.01 * progress, clear)
+
+
+def _family(segments: int) -> np.ndarray:
+    rows = []
+    t = np.arange(segments) * SEGMENT_S
+    for a in (1.0, 0.5, 0.0):
+        for t1 in np.arange(0.0, 6.01, SEGMENT_S):
+            for hold in np.arange(SEGMENT_S, 6.01, SEGMENT_S):
+                rows.append(np.where(t < t1, a, np.where(t < t1 + hold, -1.0, 1.0)))
+    return np.array(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--config", default="certified", help="a left-turn recipe (its env)")
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--seed", type=int, default=EVAL_SEED)
+    parser.add_argument("--rounds", type=int, default=12)
+    parser.add_argument("--population", type=int, default=128)
+    parser.add_argument("--out", type=Path)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+
+    from dataclasses import replace
+
+    from safeswitch.evaluation.evaluate import run_controller, scenario_set
+    from safeswitch.evaluation.planner import Planner
+    from safeswitch.leftturn.task import LeftTurnTask
+    from safeswitch.training.config import load_config
+
+    started = time.perf_counter()
+    env = load_config(args.config).env
+    env = replace(env, episode=replace(env.episode, learned_scope="episode"))
+    if env.switching != "certified":
+        raise SystemExit(f"--config {args.config} trains under {env.switching!r}, not certified")
+    task = LeftTurnTask(env)
+    horizon = env.episode.horizon_s
+    segments = round(horizon / SEGMENT_S)
+    scenarios, _ = scenario_set(task, "random", args.episodes, args.seed)
+    n = args.episodes
+    planner, plan = run_controller(task, Planner(task), scenarios, trace=False)
+    oracle_clear = np.asarray(plan.time_to_clear, dtype=float)
+
+    drivers: dict[str, np.ndarray] = {}
+    best_score = np.full(n, np.inf)
+    best_seq = np.ones((n, segments))
+    full = np.ones((n, segments))
+    clear, progress = _outcome(task, scenarios, full)
+    drivers["full throttle"] = clear
+    best_score = _score(clear, progress, horizon)
+    drivers["planner"] = np.asarray(planner.time_to_clear, dtype=float)
+
+    family = _family(segments)
+    left = np.flatnonzero(np.isnan(drivers["full throttle"]) & np.isnan(drivers["planner"]))
+    family_clear = np.full(n, np.nan)
+    if left.size:
+        rows = np.repeat(left, len(family))
+        seqs = np.tile(family, (left.size, 1))
+        clear, progress = _outcome(task, scenarios.take(rows), seqs)
+        score = _score(clear, progress, horizon).reshape(left.size, len(family))
+        pick = score.argmin(axis=1)
+        family_clear[left] = clear.reshape(left.size, len(family))[np.arange(left.size), pick]
+        better = score[np.arange(left.size), pick] < best_score[left]
+        best_score[left[better]] = score[np.arange(left.size), pick][better]
+        best_seq[left[better]] = family[pick[better]]
+    drivers["brake-then-go family"] = family_clear
+
+    left = np.flatnonzero(
+        np.isnan(drivers["full throttle"]) & np.isnan(drivers["planner"]) & np.isnan(family_clear)
+    )
+    search_clear = np.full(n, np.nan)
+    rng = np.random.default_rng(args.seed)
+    if left.size:
+        mean, std = best_seq[left].copy(), np.full((left.size, segments), 0.8)
+        pop = args.population
+        rows = np.repeat(left, pop)
+        batch = scenarios.take(rows)
+        for _ in range(args.rounds):
+            noise = rng.standard_normal((left.size, pop, segments))
+            seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
+            seqs[:, 0] = best_seq[left]  # the best so far stays in the population
+            clear, progress = _outcome(task, batch, seqs.reshape(-1, segments))
+            score = _score(clear, progress, horizon).reshape(left.size, pop)
+            clear = clear.reshape(left.size, pop)
+            order = np.argsort(score, axis=1)[:, :16]
+            elites = np.take_along_axis(seqs, order[:, :, None], axis=1)
+            mean, std = elites.mean(axis=1), np.maximum(elites.std(axis=1), 0.05)
+            top = order[:, 0]
+            found = clear[np.arange(left.size), top]
+            improved = score[np.arange(left.size), top] < best_score[left]
+            best_score[left[improved]] = score[np.arange(left.size), top][improved]
+            best_seq[left[improved]] = seqs[np.arange(left.size), top][improved]
+            search_clear[left] = np.where(np.isnan(search_clear[left]), found, search_clear[left])
+    drivers["cross-entropy search"] = search_clear
+
+    cleared_by_any = np.zeros(n, dtype=bool)
+    for clear in drivers.values():
+        cleared_by_any |= ~np.isnan(clear)
+    never = np.flatnonzero(~cleared_by_any)
+    result: dict[str, Any] = {
+        "config": args.config,
+        "episodes": n,
+        "seed": args.seed,
+        "switching": env.switching,
+        "other_max_accel": env.certified.other_max_accel,
+        "zone_margin_m": env.certified.zone_margin_m,
+        "ego_max_lateral_m": env.certified.ego_max_lateral_m,
+        "cleared": {name: int(np.sum(~np.isnan(c))) for name, c in drivers.items()},
+        "searched": {
+            "family": len(family),
+            "rounds": args.rounds,
+            "population": args.population,
+        },
+        "cleared_by_any": int(cleared_by_any.sum()),
+        "oracle_cleared": int(np.sum(~np.isnan(oracle_clear))),
+        "never_cleared": [
+            {
+                "scenario": int(i),
+                "arrival_offset_s": round(float(scenarios.arrival_offset[i]), 3),
+                "north_speed_kmh": round(3.6 * float(scenarios.north_speed[i]), 2),
+                "ego_speed_kmh": round(3.6 * float(scenarios.ego_speed[i]), 2),
+                "ego_start_distance_m": round(float(scenarios.ego_start_distance[i]), 2),
+                "oracle_time_to_clear_s": round(float(oracle_clear[i]), 2),
+            }
+            for i in never
+        ],
+        "wall_time_s": round(time.perf_counter() - started, 1),
+        "machine": _common.machine(),
+    }
+    if _common.publish(result, args.out, args.json):
+        return
+    print(f"{args.config}: under {env.switching} ({n} scenes, seed {args.seed})")
+    for name, count in result["cleared"].items():
+        print(f"  cleared by {name:24s} {count:5d}")
+    share = result["cleared_by_any"] / n
+    print(f"  cleared by any of them         {result['cleared_by_any']:5d}  ({share:.1%})")
+    print(f"  never cleared                  {len(never):5d}  (the ceiling's complement)")
+    for row in result["never_cleared"]:
+        print(f"    #{row['scenario']:4d}: north {row['arrival_offset_s']:+.2f} s behind at "
+              f"{row['north_speed_kmh']:.1f} km/h; ego {row['ego_speed_kmh']:.1f} km/h, "
+              f"{row['ego_start_distance_m']:.1f} m out; oracle clears at "
+              f"{row['oracle_time_to_clear_s']:.2f} s")  # fmt: skip
+    print(f"  {result['wall_time_s']} s")
+
+
+if __name__ == "__main__":
+    main()
