@@ -13,8 +13,9 @@ wrapper's own cost on a highway-env step.
 The evaluation also reports why the Safety controller acted (the logic's reasons) and how the
 policy drove: the steps above the lane's speed limit (30 m/s) and beyond the comfort limits
 (|a_lon| ≤ 5, |a_lat| ≤ 3 m/s²) and closer than 1 s to the vehicle ahead: the plant's
-``speeding``, ``comfort`` and ``following`` costs (``--reevaluate --keep DIR`` evaluates kept
-runs recorded before one of them existed).
+``speeding``, ``comfort`` and ``following`` costs (``--reevaluate --keep DIR`` evaluates again
+the kept policies of runs recorded before one of them existed, and trains again, with its seed,
+such a run whose policy was not kept, saying whether it reproduces what was recorded).
 ``--imitation W`` adds runs under the first logic that also learn from the Safety controller's
 interventions (``policy.intervention_imitation: W``), to set against the penalty alone.
 
@@ -354,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--reevaluate", action="store_true",
         help="evaluate again the kept policies (--keep) of runs recorded without the reasons "
-             "and driving costs (and who drove them)",
+             "and every driving cost (and who drove them); such a run not kept is trained again",
     )  # fmt: skip
     parser.add_argument(
         "--figure-only", action="store_true", help="draw the figure from --out and stop"
@@ -382,6 +383,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.reevaluate and args.keep is None:
         parser.error("--reevaluate evaluates the kept policies: pass --keep DIR")
     again = [r for r in runs if args.reevaluate and stale(r["evaluation"])]
+    # A stale run whose policy was not kept is trained again (the runs are deterministic on one
+    # machine: seed 1 of the recipe reproduced its model and evaluation bit for bit); what it
+    # recorded before is checked against the new run.
+    previous: dict[tuple[str, float, int], dict[str, Any]] = {}
+    for run in [r for r in again if args.keep is not None]:
+        if not (
+            kept_dir(args.keep, run["switching"], run["imitation"], run["seed"]) / "model.zip"
+        ).is_file():
+            previous[(run["switching"], run["imitation"], run["seed"])] = run
+            again.remove(run)
+            runs.remove(run)
     for run in [r for r in again if r["evaluation"]["safety_activation_steps"] == 0]:
         costs = run["evaluation"].get("cost_steps") or {}
         if all(name in costs for name in DRIVING_COSTS):  # the Safety controller never drove
@@ -416,6 +428,19 @@ def main(argv: list[str] | None = None) -> int:
         for future in futures:
             run = future.result()
             runs.append(run)
+            before = previous.get((run["switching"], run["imitation"], run["seed"]))
+            if before is not None:
+                same = all(
+                    run["evaluation"][k] == v
+                    for k, v in before["evaluation"].items()
+                    if k in ("failures", "safety_activation_steps", "mean_return", "steps")
+                ) and (before["crashes"], before["episodes"]) == (run["crashes"], run["episodes"])
+                print(
+                    f"{run_name(run['switching'], run['imitation'])} seed {run['seed']} trained "
+                    f"again: {'reproduces' if same else 'DIFFERS FROM'} its recorded run",
+                    file=sys.stderr,
+                    flush=True,
+                )
             write_json(args.out, result)  # each run is kept the moment it ends (--resume)
             print(
                 f"{run_name(run['switching'], run['imitation']):19} seed {run['seed']}: "
