@@ -233,7 +233,14 @@ def wrapper_overhead(steps: int = 600, rounds: int = 5) -> dict[str, float]:
     return out
 
 
-def figure(runs: list[dict[str, object]], path: Path, recipe: str | None = None) -> None:
+def ordered(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The runs by method (switched before unswitched, with imitation after without) and
+    seed, whatever order they were trained or back-filled in."""
+    return sorted(runs, key=lambda r: (r["switching"] == "none", r["switching"],
+                                       r["imitation"], r["seed"]))  # fmt: skip
+
+
+def figure(runs: list[dict[str, Any]], path: Path, recipe: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -242,7 +249,7 @@ def figure(runs: list[dict[str, object]], path: Path, recipe: str | None = None)
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4), constrained_layout=True)
     colours = {"certified": "tab:green", "ttc": "tab:blue", "none": "tab:red"}
-    for run in runs:
+    for run in ordered(runs):
         curve = run["curve"]
         assert isinstance(curve, list)
         t = np.array([c["timestep"] for c in curve])
@@ -266,7 +273,7 @@ def figure(runs: list[dict[str, object]], path: Path, recipe: str | None = None)
     for ax in axes:
         ax.set_xlabel("training timesteps")
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:.0f}k"))
-        ax.legend(fontsize=7)
+    axes[2].legend(fontsize=7)  # one legend, where the curves leave room
     logics = " / ".join(
         sorted({run_name(str(r["switching"]), float(r["imitation"])) for r in runs}  # type: ignore[arg-type]
                - {"none"})
@@ -468,7 +475,7 @@ def main(argv: list[str] | None = None) -> int:
           "under 1 s behind, steps (the Safety controller's) | mean return | "
           "of none's |")  # fmt: skip
     print("| --- | ---: | --- | --- | ---: | ---: | --- | --- | ---: | ---: |")
-    for r in runs:
+    for r in ordered(runs):
         e = r["evaluation"]
         assert isinstance(e, dict)
         base = unswitched.get(r["seed"])
