@@ -310,8 +310,8 @@ def test_a_traffic_policy_keeps_its_observation_in_other_traffic(tmp_path, capsy
 
 
 def test_evaluating_a_shipped_policy_that_misses_its_targets_says_so(capsys):
-    """The shipped policies trained before tyre friction carry a note wherever they are
-    evaluated; a policy not listed gets none."""
+    """The shipped policies that miss a target carry a note wherever they are evaluated; a
+    policy not listed gets none."""
     from safeswitch.training.shipped import MISSING_TARGETS, missing_targets
 
     assert main([*EVAL, "--model", "certified"]) == 0

@@ -124,13 +124,23 @@ def test_the_certified_policy_learned_from_a_random_start_and_never_fails_or_spe
     assert certified["speeding_episodes"] == 0 and certified["max_speed_kmh"] <= 30.1
 
 
+def test_the_certified_policy_has_learned_not_to_need_the_filter(certified):
+    """The paper's point, kept under `certified`: trained with the filter's episodes as a
+    constraint, the deterministic policy needs a safety action in at most 2 % of the unseen
+    scenarios, keeps the comfort limits on all but 0.5 % of ticks and still cuts in front in a
+    fifth of them."""
+    assert certified["safety_activation_episodes"] <= 0.02 * EVAL["episodes"]
+    assert certified["comfort_violation_fraction"] <= 0.005
+    assert certified["cut_episodes"] >= 0.20 * EVAL["episodes"]
+
+
 @missing("certified")
 def test_the_certified_policy_clears_the_crossing(certified):
-    """Its targets: it clears the crossing in at least 99 % of the scenarios, keeps at least
-    0.80 of the oracle and cuts in front in at least a fifth."""
+    """Issue #39's `certified` row: it clears the crossing in at least 99 % of the scenarios at
+    0.85 of the oracle or better (an oracle under the filter's rules clears 997 of 1,000 with
+    the recipe's zones: ``benchmarks/certified_ceiling.py``)."""
     assert certified["cleared_episodes"] >= 0.99 * EVAL["episodes"]
-    assert certified["mean_efficiency"] >= 0.80
-    assert certified["cut_episodes"] >= 0.20 * EVAL["episodes"]
+    assert certified["mean_efficiency"] >= 0.85
 
 
 @missing("paper")
