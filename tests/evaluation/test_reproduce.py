@@ -7,6 +7,7 @@ import re
 from html.parser import HTMLParser
 
 import pytest
+from markupsafe import escape
 from PIL import Image
 
 from safeswitch.app.reproduce import ENTRIES, TRAFFIC_PRESETS
@@ -83,7 +84,8 @@ def test_the_report_opens_with_a_verdict_that_matches_the_summary(report):
     verdict_part = page.split("<h2>Verdict</h2>", 1)[1].split("<h2>", 1)[0]
     for folder, name in (("paper", "ppo-paper"), ("certified", "ppo-certified")):
         if folder in MISSING_TARGETS:
-            assert f"<li>{name}: {MISSING_TARGETS[folder]}</li>" in verdict_part
+            # as the template writes it (Jinja escapes the apostrophes)
+            assert f"<li>{escape(f'{name}: {MISSING_TARGETS[folder]}')}</li>" in verdict_part
 
 
 @pytest.mark.slow

@@ -202,8 +202,8 @@ def verdict_table(summary: dict[str, Any]) -> Table:
 
 def verdict_notes(summary: dict[str, Any]) -> list[str]:
     """For each judged policy that is a shipped one known to miss its targets on today's plant
-    (:data:`~safeswitch.training.shipped.MISSING_TARGETS`), why — so the verdict's ✘ is read
-    as "to be retrained", not as the method's ceiling."""
+    (:data:`~safeswitch.training.shipped.MISSING_TARGETS`), why and what was measured
+    against it, beside the verdict's ✘."""
     notes = []
     for name in VERDICT_POLICIES:
         model = (summary["controllers"].get(name) or {}).get("model")
