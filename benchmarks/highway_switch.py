@@ -99,6 +99,11 @@ def run_name(switching: str, imitation: float) -> str:
     return f"{switching}+imitation" if imitation else switching
 
 
+def run_key(run: dict[str, Any]) -> tuple[str, float, int]:
+    """What names a run: its logic, imitation weight and seed."""
+    return run["switching"], run["imitation"], run["seed"]
+
+
 def kept_dir(keep: Path, switching: str, imitation: float, seed: int) -> Path:
     return keep / f"{run_name(switching, imitation).replace('+', '_')}_seed{seed}"
 
@@ -176,7 +181,7 @@ def reevaluate(run: dict[str, Any], keep: Path, episodes: int) -> dict[str, Any]
     evaluate``, same seed and episodes): the reasons and driving costs for runs recorded
     before they were."""
     torch.set_num_threads(1)
-    model = kept_dir(keep, run["switching"], run["imitation"], run["seed"])
+    model = kept_dir(keep, *run_key(run))
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "evaluation"
         code = safeswitch_cli(
@@ -395,10 +400,8 @@ def main(argv: list[str] | None = None) -> int:
     # recorded before is checked against the new run.
     previous: dict[tuple[str, float, int], dict[str, Any]] = {}
     for run in [r for r in again if args.keep is not None]:
-        if not (
-            kept_dir(args.keep, run["switching"], run["imitation"], run["seed"]) / "model.zip"
-        ).is_file():
-            previous[(run["switching"], run["imitation"], run["seed"])] = run
+        if not (kept_dir(args.keep, *run_key(run)) / "model.zip").is_file():
+            previous[run_key(run)] = run
             again.remove(run)
             runs.remove(run)
     for run in [r for r in again if r["evaluation"]["safety_activation_steps"] == 0]:
@@ -408,7 +411,7 @@ def main(argv: list[str] | None = None) -> int:
                 run["evaluation"]["cost_steps"], 0
             )
             again.remove(run)
-    done = {(r["switching"], r["imitation"], r["seed"]) for r in runs}
+    done = {run_key(r) for r in runs}
     wanted = [(lg, 0.0) for lg in args.logics]
     if args.imitation:
         wanted.append((args.logics[0], args.imitation))
@@ -435,7 +438,7 @@ def main(argv: list[str] | None = None) -> int:
         for future in futures:
             run = future.result()
             runs.append(run)
-            before = previous.get((run["switching"], run["imitation"], run["seed"]))
+            before = previous.get(run_key(run))
             if before is not None:
                 same = all(
                     run["evaluation"][k] == v

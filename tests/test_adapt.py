@@ -70,7 +70,7 @@ def test_the_summary_reports_both_distributions_and_the_policy_evaluates(tmp_pat
 def test_resume_continues_after_the_last_complete_block(tmp_path, monkeypatch):
     out = tmp_path / "a"
     blocks_done = []
-    real = adapt_module._save
+    real = adapt_module.write_snapshot
 
     def interrupt_after_first(folder, model, env, state):
         real(folder, model, env, state)
@@ -78,12 +78,12 @@ def test_resume_continues_after_the_last_complete_block(tmp_path, monkeypatch):
         if len(state["blocks"]) == 1:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(adapt_module, "_save", interrupt_after_first)
+    monkeypatch.setattr(adapt_module, "write_snapshot", interrupt_after_first)
     with pytest.raises(KeyboardInterrupt):
         adapt("certified", out, **SMALL)
     first = json.loads((out / "checkpoint" / "state.json").read_text())["blocks"]
     assert len(first) == 1 and not (out / "summary.json").exists()
-    monkeypatch.setattr(adapt_module, "_save", real)
+    monkeypatch.setattr(adapt_module, "write_snapshot", real)
     with pytest.raises(AdaptError, match="asked differently"):
         adapt("certified", out, **{**SMALL, "episodes": 144}, resume=True)
     summary = adapt("certified", out, **SMALL, resume=True)

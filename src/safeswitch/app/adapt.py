@@ -233,7 +233,7 @@ def adapt(
         state["blocks"].append(stats)
         bar.update(stats["episodes"])
         state.update(episode_counters=vec.episode_counters.tolist(), **learning.state())
-        _save(checkpoint, ppo, env, state)
+        write_snapshot(checkpoint, ppo, env, state)  # renamed whole
 
     monitor = DeploymentMonitor(vec, shifted, traffic, block, episodes - deployed, finish_block)
     started = time.perf_counter()
@@ -301,11 +301,6 @@ def learning_terms(config: Any, reasons: Sequence[str]) -> tuple[Any, Any]:
             kept = tuple(r for r in given.reasons if r in known)
             changes[name] = dataclasses.replace(given, reasons=kept)
     return shaping, dataclasses.replace(constraints, **changes)
-
-
-def _save(folder: Path, model: Any, env: Any, state: dict[str, Any]) -> None:
-    """The checkpoint: model, statistics and state, renamed whole (:func:`write_snapshot`)."""
-    write_snapshot(folder, model, env, state)
 
 
 def _save_policy(folder: Path, model: Any, env: Any, config_text: str) -> None:
