@@ -116,10 +116,8 @@ def main() -> None:
     oracle_clear = np.asarray(plan.time_to_clear, dtype=float)
 
     drivers: dict[str, np.ndarray] = {}
-    best_score = np.full(n, np.inf)
     best_seq = np.ones((n, segments))
-    full = np.ones((n, segments))
-    clear, progress = _outcome(task, scenarios, full)
+    clear, progress = _outcome(task, scenarios, np.ones((n, segments)))  # full throttle
     drivers["full throttle"] = clear
     best_score = _score(clear, progress, horizon)
     drivers["planner"] = np.asarray(planner.time_to_clear, dtype=float)
