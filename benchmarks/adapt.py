@@ -1,25 +1,29 @@
 """Learning after deployment (``safeswitch adapt``, issue #40) on two shifts, deployment seeds
 1–3: the frozen shipped policy against the adapting one, under ``certified``.
 
-Shifts (each one where the frozen policy needs the safety action in at least 10 % of
-episodes):
+Shifts of the shipped ``certified`` policy (each one where the frozen policy needs the safety
+action in at least 10 % of episodes; trained on an ego at 18–25 km/h and an oncoming car at
+20–32 km/h):
 
-* ``ego-fast``: the shipped ``certified`` policy, the ego arriving at 28–30 km/h (trained on
-  18–25 km/h);
-* ``north-fast``: the shipped ``paper`` policy deployed under ``certified``, the oncoming car at
-  36–43 km/h (trained on 20–32 km/h; at 45 km/h some arrivals would start the car before its
-  route).
+* ``ego-fast``: the ego arriving at 28–30 km/h;
+* ``north-fast``: the oncoming car at 38–44 km/h (at 45 km/h some arrivals would start the car
+  before its route);
+* ``paper-north-fast`` (not run by default): the shipped ``paper`` policy deployed under
+  ``certified``, the oncoming car at 36–43 km/h.
 
 Each run deploys ``--episodes`` episodes in blocks of ``--block`` (the issue's budget: at most
 20,000 episodes and 10 minutes); the table gives, per shift and seed, the collisions while
-adapting, the safety-action episodes of the last block and of the frozen policy (held-out
-scenarios), the efficiency on the shift, and the original distribution's before and after.
+adapting; the safety-action episodes of the frozen and the adapted policy on 1,000 unseen
+scenarios of the shift, and of the last deployed block; the efficiency, speeding and comfort on
+the shift; the original distribution's efficiency and safety actions before and after; the
+block whose policy was selected and how many blocks were rolled back.
 One torch thread per run; runs go two at a time (two cores). The figure is written beside
 the JSON (``--out``).
 
-Run: ``python benchmarks/adapt.py [--episodes 5000] [--shifts ego-fast north-fast] [--noise STD]
-[--out results/adapt.json]`` (``--noise``: ``adapt --noise``, the exploration noise while
-deployed; ``--replot results/adapt.json`` redraws the figure of a saved result).
+Run: ``python benchmarks/adapt.py [--episodes 10000] [--shifts ego-fast north-fast] [--noise STD]
+[--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback] [--out results/adapt.json]`` (the
+``adapt`` options of the same names, for the ablations of docs/adapt.md; ``--replot
+results/adapt.json`` redraws the figure of a saved result).
 """
 
 from __future__ import annotations
@@ -28,36 +32,42 @@ import argparse
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import _common
 
 SHIFTS = {
     "ego-fast": ("certified", ["env.scenarios.ego_speed_kmh=[28, 30]"]),
-    "north-fast": ("paper", ["env.scenarios.north_speed_kmh=[36, 43]"]),
+    "north-fast": ("certified", ["env.scenarios.north_speed_kmh=[38, 44]"]),
+    "paper-north-fast": ("paper", ["env.scenarios.north_speed_kmh=[36, 43]"]),
 }
+DEFAULT_SHIFTS = ["ego-fast", "north-fast"]
 SEEDS = (1, 2, 3)
 
 
-def one(job: tuple[str, int, int, int, str, float | None]) -> dict[str, object]:
-    """One adaptation (in a worker process)."""
-    shift, seed, episodes, block, folder, noise = job
+def one(job: tuple[str, int, int, int, str, dict[str, Any]]) -> dict[str, object]:
+    """One adaptation (in a worker process); ``options``: ``adapt``'s keyword arguments."""
+    shift, seed, episodes, block, folder, options = job
     from safeswitch.app.adapt import adapt
 
     model, settings = SHIFTS[shift]
     summary = adapt(model, Path(folder) / f"{shift}_seed{seed}", settings=settings,
-                    episodes=episodes, block=block, seed=seed, noise=noise)  # fmt: skip
-    return {**summary, "name": shift, "model": model, "seed": seed, "noise": noise}
+                    episodes=episodes, block=block, seed=seed, **options)  # fmt: skip
+    return {**summary, "name": shift, "model": model, "seed": seed}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--episodes", type=int, default=5_000)
+    parser.add_argument("--episodes", type=int, default=10_000)
     parser.add_argument("--block", type=int, default=1_000)
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument(
         "--noise", type=float, default=None, help="adapt --noise (default: as training ended)"
     )
-    parser.add_argument("--shifts", nargs="+", choices=sorted(SHIFTS), default=list(SHIFTS))
+    parser.add_argument("--noise-decay", type=float, default=None, help="adapt --noise-decay")
+    parser.add_argument("--rehearsal", type=float, default=None, help="adapt --rehearsal")
+    parser.add_argument("--no-rollback", action="store_true", help="adapt --no-rollback")
+    parser.add_argument("--shifts", nargs="+", choices=sorted(SHIFTS), default=DEFAULT_SHIFTS)
     parser.add_argument("--json", action="store_true")
     parser.add_argument(
         "--replot", type=Path, help="redraw the figure of a saved result (no adaptation run)"
@@ -73,8 +83,10 @@ def main() -> None:
         adaptation_figure(first, args.replot.with_suffix(".png"))
         return
     with tempfile.TemporaryDirectory() as tmp:
+        options = {"noise": args.noise, "noise_decay": args.noise_decay,
+                   "rehearsal": args.rehearsal, "rollback": not args.no_rollback}  # fmt: skip
         jobs = [
-            (s, seed, args.episodes, args.block, tmp, args.noise)
+            (s, seed, args.episodes, args.block, tmp, options)
             for s in args.shifts
             for seed in SEEDS
         ]
@@ -103,29 +115,34 @@ def main() -> None:
                               shifted["adapted"]["comfort_violation_fraction"]],
             "shift_failures": [shifted["frozen"]["failures"], shifted["adapted"]["failures"]],
             "last_block_speeding": last["speeding_episodes"],
+            "selected_block": run["selected_block"],
+            "rolled_back": sum(b["rolled_back"] for b in run["blocks"]),
+            "shift_safety": [shifted["frozen"]["safety_activation_episodes"],
+                             shifted["adapted"]["safety_activation_episodes"]],
             "wall_time_s": run["wall_time_s"],
         })  # fmt: skip
     result = {"machine": _common.machine(), "episodes": args.episodes, "block": args.block,
-              "noise": args.noise, "rows": rows, "runs": runs}  # fmt: skip
+              "options": options, "rows": rows, "runs": runs}  # fmt: skip
     if args.out is not None:
         from safeswitch.report.figures import adaptation_figure
 
         first = [r for r in runs if r["seed"] == SEEDS[0]]
         adaptation_figure(first, args.out.with_suffix(".png"))
     if not _common.publish(result, args.out, args.json):
-        print("shift       seed  collisions  safety (frozen → last block, held out; deployed)"
-              "  efficiency on shift  speeding, comfort on shift  original: efficiency, safety"
-              "  wall")  # fmt: skip
+        print("shift             seed  collisions  safety on the shift: frozen → adapted; last "
+              "block deployed  efficiency on the shift  speeding, comfort on the shift  "
+              "original: efficiency, safety  selected block (rollbacks)  wall")  # fmt: skip
         for r in rows:
             e, o, s = r["shift_efficiency"], r["original_efficiency"], r["original_safety"]
+            h = r["shift_safety"]
             print(
-                f"{r['shift']:<11} {r['seed']:>4}  {r['collisions']:>10}  "
-                f"{r['frozen_safety_held_out']:>4} → {r['last_block_held_out_safety']:>4} of 1,000;"
-                f" {r['last_block_safety']:>4} of {r['last_block_episodes']:,}"
-                f"   {e[0]:.3f} → {e[1]:.3f}   {r['shift_speeding'][0]} → "
-                f"{r['shift_speeding'][1]}, {r['shift_comfort'][0]:.2%} → "
-                f"{r['shift_comfort'][1]:.2%}   {o[0]:.3f} → {o[1]:.3f}, {s[0]} → {s[1]}"
-                f"  {r['wall_time_s']:.0f} s"
+                f"{r['shift']:<17} {r['seed']:>4}  {r['collisions']:>10}  "
+                f"{h[0]:>4} → {h[1]:>4} of 1,000; {r['last_block_safety']:>4} of "
+                f"{r['last_block_episodes']:,}   {e[0]:.3f} → {e[1]:.3f}   "
+                f"{r['shift_speeding'][0]} → {r['shift_speeding'][1]}, "
+                f"{r['shift_comfort'][0]:.2%} → {r['shift_comfort'][1]:.2%}   "
+                f"{o[0]:.3f} → {o[1]:.3f}, {s[0]} → {s[1]}   {r['selected_block']} "
+                f"({r['rolled_back']})  {r['wall_time_s']:.0f} s"
             )
 
 

@@ -31,15 +31,62 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, mo
             self.policy.action_net.bias.fill_(5.0)
 
     monkeypatch.setattr(SwitchPPO, "train", adversarial)
-    summary = adapt("certified", tmp_path / "a", **SMALL)
+    summary = adapt("certified", tmp_path / "a", **SMALL, rollback=False)
     blocks = summary["blocks"]
     assert [b["episodes"] for b in blocks] == [48, 48]
     assert all(b["collisions"] == 0 and b["failures"] == 0 for b in blocks)
     assert summary["collisions"] == summary["failures"] == 0
     # the update took hold: the deployed policy is the full-throttle one, overruled often
     assert blocks[-1]["safety_activation_episodes"] == 48
-    adapted = load_policy(tmp_path / "a")
-    assert adapted.act(np.zeros((1, 6), dtype=np.float32))[0] == pytest.approx(1.0)
+    last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")
+    full = last.predict(np.zeros((1, 6), dtype=np.float32), deterministic=True)[0]
+    assert full[0, 0] == pytest.approx(1.0)
+    # ... and it is not what adapting hands back: the selection keeps the frozen policy
+    assert summary["selected_block"] == 0
+    adapted = load_policy(tmp_path / "a").act(np.zeros((1, 6), dtype=np.float32))[0]
+    frozen = load_policy("certified").act(np.zeros((1, 6), dtype=np.float32))[0]
+    assert adapted == pytest.approx(frozen) and adapted != pytest.approx(1.0)
+
+
+def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, monkeypatch):
+    """With the adversarial update above and rollback (the default), every block's policy
+    ranks below the frozen one, so learning goes on from the frozen policy each time: the
+    policy left after the last block is the frozen one, not full throttle."""
+    original = SwitchPPO.train
+
+    def adversarial(self):
+        original(self)
+        with torch.no_grad():
+            self.policy.action_net.bias.fill_(5.0)
+
+    monkeypatch.setattr(SwitchPPO, "train", adversarial)
+    summary = adapt("certified", tmp_path / "a", **SMALL)
+    assert [b["rolled_back"] for b in summary["blocks"]] == [True, True]
+    assert summary["collisions"] == 0 and summary["selected_block"] == 0
+    last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")
+    frozen = load_policy("certified").model
+    for name, value in frozen.policy.state_dict().items():
+        if name != "log_std":  # the noise is scheduled, not restored
+            assert torch.equal(last.policy.state_dict()[name], value), name
+
+
+def test_the_exploration_noise_narrows_with_the_episodes_deployed():
+    from safeswitch.app.adapt import NoiseSchedule
+
+    class Policy(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.log_std = torch.nn.Parameter(torch.zeros(1), requires_grad=False)
+
+    class Model:
+        policy = Policy()
+
+    share = [0.0]
+    schedule = NoiseSchedule(np.array([-2.0]), np.log(0.25), lambda: share[0])
+    schedule.model = Model()
+    for share[0], expected in ((0.0, 0.1353), (0.5, 0.0677), (1.0, 0.0338), (1.2, 0.0338)):
+        schedule._on_rollout_start()
+        assert float(Model.policy.log_std.exp()) == pytest.approx(expected, abs=1e-4)
 
 
 @pytest.mark.slow
@@ -74,6 +121,8 @@ def test_resume_continues_after_the_last_complete_block(tmp_path, monkeypatch):
 
     def interrupt_after_first(folder, model, env, state):
         real(folder, model, env, state)
+        if folder.name != "checkpoint":  # the selected policy's snapshot
+            return
         blocks_done.append(len(state["blocks"]))
         if len(state["blocks"]) == 1:
             raise KeyboardInterrupt
@@ -132,10 +181,83 @@ def test_the_deployed_exploration_noise_is_the_size_asked(tmp_path):
     assert not (tmp_path / "bad").exists()
     trained = load_policy("certified").model.policy.log_std.detach().numpy()
     out = tmp_path / "a"
-    adapt("certified", out, **{**SMALL, "episodes": 48}, noise=0.05)
+    adapt("certified", out, **{**SMALL, "episodes": 48}, noise=0.05, noise_decay=1.0)
     assert json.loads((out / "adapt.json").read_text())["noise"] == 0.05
     adapted = load_policy(out).model.policy.log_std.detach().numpy()
     np.testing.assert_allclose(adapted, np.log(0.05), rtol=1e-6)
     assert not np.allclose(trained, np.log(0.05))
     with pytest.raises(AdaptError, match="asked differently"):
-        adapt("certified", out, **{**SMALL, "episodes": 48}, noise=0.1, resume=True)
+        adapt(
+            "certified", out, **{**SMALL, "episodes": 48}, noise=0.1, noise_decay=1.0, resume=True
+        )
+
+
+def test_the_rehearsing_environments_replay_the_original_scenarios_and_are_not_counted(
+    tmp_path, monkeypatch
+):
+    """With ``rehearsal``, a quarter of the environments draw the policy's original
+    distribution (the north car at 20–32 km/h) and the blocks count only the deployed, shifted
+    episodes (at 38–44 km/h)."""
+    seen = []
+    real = adapt_module.DeploymentMonitor.summary
+
+    def spy(self, rows):
+        seen.extend(3.6 * row["scenario"]["north_speed"] for row in rows)
+        return real(self, rows)
+
+    monkeypatch.setattr(adapt_module.DeploymentMonitor, "summary", spy)
+    shift = ["env.scenarios.north_speed_kmh=[38, 44]"]
+    summary = adapt("certified", tmp_path / "a", **{**SMALL, "settings": shift})
+    assert summary["rehearsal"] == 0.25
+    assert len(seen) == 96 and min(seen) >= 38 - 1e-9 and max(seen) <= 44 + 1e-9
+    assert [b["episodes"] for b in summary["blocks"]] == [48, 48]
+
+
+def test_rehearsal_and_the_noise_decay_are_validated_before_anything_is_written(tmp_path):
+    for bad in (-0.1, 1.0, float("nan")):
+        message = rf"--rehearsal must be a share in \[0, 1\), got {bad}"
+        with pytest.raises(AdaptError, match=message):
+            adapt("certified", tmp_path / "a", **SMALL, rehearsal=bad)
+    for bad in (0.0, 1.5):
+        message = rf"--noise-decay must be a share in \(0, 1\], got {bad}"
+        with pytest.raises(AdaptError, match=message):
+            adapt("certified", tmp_path / "a", **SMALL, noise_decay=bad)
+    with pytest.raises(AdaptError, match="leaves none deployed"):
+        adapt("certified", tmp_path / "a", **{**SMALL, "n_envs": 2}, rehearsal=0.75)
+    # the original scenarios replayed on another plant would not be a rehearsal
+    other_plant = [*SHIFT, "env.vehicle.mass=1950"]
+    with pytest.raises(AdaptError, match=r"scenario distribution alone.*--rehearsal 0"):
+        adapt("certified", tmp_path / "a", **{**SMALL, "settings": other_plant})
+    assert not (tmp_path / "a").exists()
+
+
+def _evaluated(safety, efficiency, collisions=0, episodes=1000):
+    return {"episodes": episodes, "collisions": collisions,
+            "safety_activation_episodes": safety, "mean_efficiency": efficiency}  # fmt: skip
+
+
+def test_the_selection_ranks_the_targets_before_the_efficiency():
+    from safeswitch.app.adapt import selection_key
+
+    frozen = {"held_out": _evaluated(120, 0.84), "held_out_original": _evaluated(15, 0.83)}
+    key = lambda shift, original: selection_key(  # noqa: E731
+        {"shifted": shift, "original": original}, frozen
+    )
+    within = key(_evaluated(20, 0.85), _evaluated(20, 0.825))
+    assert within == (0.0, -0.85)
+    # within every target, the more efficient on the shift wins
+    assert key(_evaluated(5, 0.86), _evaluated(10, 0.83)) < within
+    # a faster policy that needs the filter more often than 2 % of the shift's episodes loses
+    assert key(_evaluated(21, 0.95), _evaluated(10, 0.83)) > within
+    # ... as does a safe one slower than the frozen policy on the shift
+    assert key(_evaluated(0, 0.83), _evaluated(10, 0.83)) > within
+    # ... and one that forgets: the original distribution's efficiency falls by > 0.01
+    assert key(_evaluated(5, 0.90), _evaluated(10, 0.815)) > within
+    # smaller excesses rank first; any collision ranks last
+    assert key(_evaluated(30, 0.85), _evaluated(10, 0.83)) < key(
+        _evaluated(40, 0.9), _evaluated(10, 0.83)
+    )
+    assert key(_evaluated(0, 0.9, collisions=1), _evaluated(0, 0.9))[0] >= 1e9
+    # on the original distribution the frozen policy's own share, if above 2 %, is the limit
+    frozen["held_out_original"] = _evaluated(100, 0.83)
+    assert key(_evaluated(20, 0.85), _evaluated(100, 0.83)) == (0.0, -0.85)

@@ -588,7 +588,8 @@ def _adapt(args: argparse.Namespace) -> int:
     summary = adapt(
         args.model, args.out, switching=args.switching, settings=args.set or (),
         episodes=args.episodes, block=args.block, n_envs=args.n_envs, seed=args.seed,
-        eval_episodes=args.eval_episodes, noise=args.noise, resume=args.resume,
+        eval_episodes=args.eval_episodes, noise=args.noise, noise_decay=args.noise_decay,
+        rehearsal=args.rehearsal, rollback=not args.no_rollback, resume=args.resume,
         progress=not args.no_progress,
     )  # fmt: skip
     last = summary["blocks"][-1]
@@ -604,7 +605,9 @@ def _adapt(args: argparse.Namespace) -> int:
         f"{summary['collisions']:,} collisions, {summary['failures']:,} failures; last block: "
         f"safety action in {last['safety_activation_episodes']:,} of {last['episodes']:,}"
     )
-    print(f"adapted policy: {args.out} (safeswitch evaluate --model {args.out})")
+    chosen = summary["selected_block"]
+    which = f"after block {chosen}" if chosen else "the frozen one: no block ranked above it"
+    print(f"adapted policy ({which}): {args.out} (safeswitch evaluate --model {args.out})")
     return 0
 
 
@@ -926,6 +929,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--noise", type=float, default=None, metavar="STD",
         help="standard deviation of the exploration noise while deployed (default: the size "
              "its training ended with)",
+    )  # fmt: skip
+    adp.add_argument(
+        "--noise-decay", type=float, default=None, metavar="SHARE",
+        help="the noise at the last deployed episode as a share of the first's (default: a "
+             "quarter; 1: constant)",
+    )  # fmt: skip
+    adp.add_argument(
+        "--no-rollback", action="store_true",
+        help="keep learning from a block's policy even when the held-out evaluation ranks it "
+             "below the selected one",
+    )  # fmt: skip
+    adp.add_argument(
+        "--rehearsal", type=float, default=None, metavar="SHARE",
+        help="share of the learner's environments replaying the original scenarios, the guard "
+             "against forgetting (default: a quarter; 0: none)",
     )  # fmt: skip
     adp.add_argument("--resume", action="store_true", help="continue after the last block")
     adp.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -101,3 +101,40 @@ def test_train_only_changes_the_training_environment_alone_and_names_a_bad_key()
         from_dict(TrainConfig, {"train_only": {"paper": {"ttr_threshold_s": -1.0}}})
     with pytest.raises(ConfigError, match=r"train_only\.scenarios: expected a mapping"):
         from_dict(TrainConfig, {"train_only": {"scenarios": 3}})
+
+
+def test_rehearsing_environments_draw_the_other_distribution_and_the_rest_are_unchanged():
+    """``LeftTurnVecEnv.rehearse`` (``safeswitch adapt``'s rehearsal): the last environments
+    draw their episodes from another distribution, exactly the scenarios a batch of that
+    distribution would draw for them; the others draw what they drew without it, episode after
+    episode."""
+    from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+
+    original = LeftTurnConfig(switching="certified")
+    shift = dataclasses.replace(original, scenarios=ScenarioConfig(north_speed_kmh=(38.0, 44.0)))
+
+    def north_speeds(vec, episodes):
+        speeds = [[info["scenario"]["north_speed"] for info in vec.reset_infos]]
+        for _ in range(episodes - 1):  # every episode lasts the horizon: all end together
+            done = np.zeros(vec.num_envs, dtype=bool)
+            while not done.all():
+                _, _, dones, _ = vec.step(np.zeros((vec.num_envs, 1), dtype=np.float32))
+                done |= dones
+            speeds.append([info["scenario"]["north_speed"] for info in vec.reset_infos])
+        return 3.6 * np.array(speeds)
+
+    def batch(config, rehearse=0):
+        vec = LeftTurnVecEnv(6, config=config, seed=5)
+        if rehearse:
+            vec.rehearse(original, rehearse)
+        vec.reset()
+        return vec
+
+    mixed = batch(shift, rehearse=2)
+    assert mixed.rehearsing.tolist() == [False] * 4 + [True] * 2
+    got = north_speeds(mixed, 3)
+    np.testing.assert_array_equal(got[:, :4], north_speeds(batch(shift), 3)[:, :4])
+    np.testing.assert_array_equal(got[:, 4:], north_speeds(batch(original), 3)[:, 4:])
+    assert (got[:, :4] >= 38).all() and (got[:, 4:] <= 32).all()
+    with pytest.raises(ValueError, match=r"count must be in 0…6, got 7"):
+        mixed.rehearse(original, 7)

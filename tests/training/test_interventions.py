@@ -101,3 +101,43 @@ def test_imitation_changes_the_update_only_on_intervention_states():
     assert gap() < before
     after = list(model.policy.mlp_extractor.value_net.parameters())
     assert all(torch.equal(a, b) for a, b in zip(value_before, after, strict=True))
+
+
+def _mean_action(policy, states):
+    with torch.no_grad():
+        return policy.get_distribution(torch.as_tensor(states)).distribution.mean.numpy()
+
+
+def test_an_anchored_actor_stays_near_its_reference_only_where_anchored():
+    """``anchor_to`` (``safeswitch adapt``'s guard against forgetting) fits the actor toward a
+    reference policy on the anchored environments' states after each update: there it moves
+    toward the reference; with nothing anchored the update is PPO's to the last bit."""
+    import copy
+
+    def run(anchored):
+        model = SwitchPPO("MlpPolicy", wall_env("none", n=4), n_steps=32, batch_size=32,
+                          n_epochs=2, seed=0, device="cpu", learning_rate=0.01,
+                          policy_kwargs={"net_arch": [16, 16]})  # fmt: skip
+        reference = copy.deepcopy(model.policy)
+        with torch.no_grad():
+            reference.action_net.bias.add_(0.5)  # the reference asks for 0.5 more everywhere
+        model.anchor_to(reference, np.array(anchored), weight=1.0)
+        states = np.random.default_rng(0).normal(size=(64, 2)).astype(np.float32)
+        start = np.abs(_mean_action(model.policy, states) - _mean_action(reference, states))
+        model.learn(1024)
+        end = np.abs(_mean_action(model.policy, states) - _mean_action(reference, states))
+        return model, start.mean(), end.mean()
+
+    plain, start, end_plain = run([False] * 4)
+    anchored, _, end_anchored = run([False, False, True, True])
+    assert start == pytest.approx(0.5, abs=1e-5)
+    assert end_anchored < 0.5 * start and end_anchored < 0.5 * end_plain
+    unanchored = SwitchPPO("MlpPolicy", wall_env("none", n=4), n_steps=32, batch_size=32,
+                           n_epochs=2, seed=0, device="cpu", learning_rate=0.01,
+                           policy_kwargs={"net_arch": [16, 16]})  # fmt: skip
+    unanchored.learn(1024)
+    for a, b in zip(_parameters(plain), _parameters(unanchored), strict=True):
+        assert torch.equal(a, b)
+    with pytest.raises(ValueError, match=r"one flag per environment \(4\)"):
+        anchored.anchor_to(anchored.policy, np.array([True]))
+    assert "_anchor" in anchored._excluded_save_params()

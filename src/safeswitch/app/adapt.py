@@ -8,20 +8,30 @@ switching logic (``certified`` by default: nothing the policy learns can make it
 the logic's assumptions hold). Every episode it drives is experience: PPO continues from the
 policy's own weights and observation statistics, with the reward it was trained
 with (``R_ADAS`` for each tick the safety action runs, and its constraints' costs at the
-multipliers its training ended with) and the exploration noise its training ended with. The
-guard against forgetting is a trust region: the value function learns the shift first, the
-actor then moves at a sixteenth of the training rate in PPO's clipped steps, and the observation
-statistics stay frozen (the network keeps seeing the original distribution's coordinates);
-the original distribution is evaluated after adapting (``summary.json``: ``original``).
+multipliers its training ended with), exploring with the noise its training ended with,
+narrowing to a quarter of it by the last episode. What keeps it from forgetting, and from
+deploying a worse policy:
+
+* a trust region: the value function learns the shift first, the actor then moves at a
+  sixteenth of the training rate in PPO's clipped steps, and the observation statistics stay
+  frozen;
+* rehearsal with an anchor: a quarter of the learner's environments replay scenarios of the
+  original distribution (simulated, beside the deployed ones; not counted as deployed), and on
+  their states the actor is fitted toward the original policy's actions after each update;
+* selection and rollback: after each block the deterministic policy is evaluated on held-out
+  scenarios of the shift and of the original distribution and ranked (:func:`selection_key`);
+  the best so far — the frozen policy to begin with — is the one adapting hands back, and a
+  block whose policy ranks below it is rolled back (learning goes on from the selected one).
 
 Deployment runs in blocks of ``block`` episodes; after each, the block's deployed episodes
 are summarised (``blocks``: ``episodes``, ``collisions``, ``failures``,
 ``safety_activation_episodes``, ``speeding_episodes``, ``mean_efficiency`` against the oracle on
-the same scenarios) together with the deterministic policy's evaluation on held-out scenarios of
-the shift (``held_out``), and a checkpoint is written whole: ``--resume`` continues after the
-last complete block (Ctrl-C leaves the last one). The adapted policy is a run directory
-(``model.zip``, ``vecnormalize.pkl``, ``config.yaml``) that ``safeswitch evaluate --model``
-accepts.
+the same scenarios, ``rolled_back``) together with the held-out evaluations (``held_out``,
+``held_out_original``), and a checkpoint is written whole: ``--resume`` continues after the
+last complete block (Ctrl-C leaves the last one). The adapted (selected) policy is a run
+directory (``model.zip``, ``vecnormalize.pkl``, ``config.yaml``) that ``safeswitch evaluate
+--model`` accepts; it and the frozen one are evaluated on other unseen scenarios of both
+distributions (``summary.json``: ``shifted``, ``original``).
 """
 
 from __future__ import annotations
@@ -57,9 +67,26 @@ ACTOR_FROZEN_STEPS = 60_000
 ACTOR_RAMP_STEPS = 60_000
 ACTOR_LEARNING_RATE = 3e-5
 
+#: The selection's targets (issue #40's): the share of episodes with a safety action, and how
+#: far the original distribution's efficiency may fall (:func:`selection_key`).
+SAFETY_BUDGET = 0.02
+EFFICIENCY_TOLERANCE = 0.01
+
 #: ``adapt.json``'s fields: what a ``--resume`` must ask again.
 ARGUMENTS = ("model", "switching", "settings", "episodes", "block", "n_envs", "seed",
-             "eval_episodes", "eval_seed")  # fmt: skip
+             "eval_episodes", "eval_seed", "rehearsal")  # fmt: skip
+
+#: The share of the learner's environments that replay the policy's original scenarios by
+#: default (see :func:`adapt`'s ``rehearsal``).
+REHEARSAL = 0.25
+
+#: The weight of the fit toward the original policy's actions on the rehearsing environments'
+#: states (:meth:`~safeswitch.training.ppo.SwitchPPO.anchor_to`).
+ANCHOR_WEIGHT = 1.0
+
+#: The exploration noise at the last deployed episode, as a share of the first's (``adapt``'s
+#: ``noise_decay``): the field's exploration narrows as the policy settles.
+NOISE_DECAY = 0.25
 
 
 class AdaptError(ValueError):
@@ -98,6 +125,9 @@ def adapt(
     eval_episodes: int = 1_000,
     eval_seed: int = 1_000_003,
     noise: float | None = None,
+    noise_decay: float | None = None,
+    rehearsal: float | None = None,
+    rollback: bool = True,
     resume: bool = False,
     progress: bool = False,
 ) -> dict[str, Any]:
@@ -105,6 +135,18 @@ def adapt(
     returns ``summary.json``'s contents. ``noise``: the standard deviation of the exploration
     noise on the deployed actions (``None``: the size its training ended with); a smaller one
     meets the safety action less often in the field and learns from less variety.
+    ``noise_decay``: the noise at the last deployed episode as a share of the first's
+    (``None``: :data:`NOISE_DECAY`; the
+    log standard deviation falls linearly with the episodes deployed; 1: constant).
+    ``rollback``: after a block whose policy ranks below the selected one
+    (:func:`selection_key`), learning goes on from the selected policy instead — a policy the
+    held-out evaluation found worse is not deployed further.
+    ``rehearsal``: the share of the learner's environments (``None``: :data:`REHEARSAL`;
+    rounded, at least one if not 0)
+    that replay scenarios of the policy's original distribution while it adapts — simulated
+    episodes beside the deployed ones, the guard against forgetting the shift alone does not
+    give; not counted in ``blocks`` or ``episodes``. Needs a shift of the scenario
+    distribution alone (``env.scenarios.*``).
 
     Raises:
         AdaptError: Bad arguments, a folder that holds another adaptation, or (``resume``) one
@@ -121,20 +163,26 @@ def adapt(
     from safeswitch.training.ppo import SwitchPPO
     from safeswitch.training.run import LearningEnv, learner_env
 
+    rehearsal = REHEARSAL if rehearsal is None else rehearsal
+    noise_decay = NOISE_DECAY if noise_decay is None else noise_decay
     asked: dict[str, Any] = {
         "model": str(model), "switching": switching, "settings": list(settings),
         "episodes": episodes, "block": block, "n_envs": n_envs, "seed": seed,
-        "eval_episodes": eval_episodes, "eval_seed": eval_seed,
+        "eval_episodes": eval_episodes, "eval_seed": eval_seed, "rehearsal": rehearsal,
+        "noise_decay": noise_decay, "rollback": rollback,
     }  # fmt: skip
     if noise is not None:  # asked only when given: adaptations asked before it resume as asked
         if not (math.isfinite(noise) and 0 < noise <= 1):
             raise AdaptError(f"--noise must be a standard deviation in (0, 1], got {noise}")
         asked["noise"] = noise
+    if not (math.isfinite(noise_decay) and 0 < noise_decay <= 1):
+        raise AdaptError(f"--noise-decay must be a share in (0, 1], got {noise_decay}")
     counts = {"episodes": episodes, "block": block, "n_envs": n_envs,
               "eval_episodes": eval_episodes}  # fmt: skip
     for name, count in counts.items():
         if count < 1:
             raise AdaptError(f"--{name.replace('_', '-')} must be at least 1, got {count}")
+    rehearsed = rehearsal_count(rehearsal, n_envs)
     if switching not in logic_names():
         raise AdaptError(
             f"--switching {switching!r} is not a registered logic "
@@ -149,7 +197,7 @@ def adapt(
         if json.loads(record.read_text(encoding="utf-8")) != json.loads(json.dumps(asked)):
             raise AdaptError(
                 f"--resume: {folder} holds an adaptation asked differently; ask the same "
-                "(--model, --switching, --set, --episodes, --block, --seed)"
+                "(--model, --switching, --set, --episodes, --block, --seed, --rehearsal)"
             )
         if (folder / "summary.json").is_file():
             raise AdaptError(f"--resume: the adaptation in {folder} is already complete")
@@ -166,6 +214,12 @@ def adapt(
         )
     original = dataclasses.replace(config.deployed_env, switching=switching)
     shifted = scene_settings(original, settings)  # a bad --set fails before anything is written
+    if rehearsed and dataclasses.replace(shifted, scenarios=original.scenarios) != original:
+        raise AdaptError(
+            "--rehearsal replays the original scenarios on the shifted plant: it needs a shift "
+            "of the scenario distribution alone (--set env.scenarios.KEY=VALUE); this one "
+            "changes more, so ask --rehearsal 0"
+        )
     traffic = config.traffic_settings
     if not resume:
         prepare_output_dir(folder)
@@ -175,6 +229,7 @@ def adapt(
     from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 
     vec = LeftTurnVecEnv(n_envs, config=shifted, seed=seed, traffic=traffic)
+    vec.rehearse(original, rehearsed)
     shaping, constraints = learning_terms(config, vec.task.reasons)
     learning = LearningEnv(vec, shaping, config.ppo.gamma, constraints, switching)
     source = checkpoint if resume else policy.path
@@ -203,6 +258,8 @@ def adapt(
     # (A checkpoint keeps the schedule and the optimiser's moments: a resumed run goes on.)
     if not resume:
         ppo.schedule_actor(ACTOR_LEARNING_RATE, ACTOR_FROZEN_STEPS, ACTOR_RAMP_STEPS)
+    if rehearsed:  # on the rehearsed distribution, the actor is held near the original policy
+        ppo.anchor_to(policy.model.policy, vec.rehearsing, ANCHOR_WEIGHT)
     # The deployment's seed, not the training's: SB3 reseeds torch and the environments with
     # the model's seed when it loads (three deployment seeds were otherwise one). Seeding the
     # environments restarts their episode counts: a resumed run takes its own back, so its
@@ -216,36 +273,71 @@ def adapt(
                              folder)  # fmt: skip
 
     held_out_seed = eval_seed + 1
+
+    def held_out(candidate: Any) -> dict[str, Any]:
+        """A candidate on the held-out scenarios of the shift and of the original distribution
+        (what the selection reads; the summary's evaluations use other scenarios)."""
+        return {
+            "shifted": _brief(_evaluation(candidate, shifted, traffic, eval_episodes,
+                                          held_out_seed)),
+            "original": _brief(_evaluation(candidate, original, traffic, eval_episodes,
+                                           held_out_seed)),
+        }  # fmt: skip
+
+    chosen = folder / "selected"
     if state["frozen"] is None:  # the frozen policy, measured once before it learns
-        state["frozen"] = {
+        frozen_held_out = held_out(policy)
+        frozen = {
             "shifted": _brief(_evaluation(policy, shifted, traffic, eval_episodes, eval_seed)),
             "original": _brief(_evaluation(policy, original, traffic, eval_episodes, eval_seed)),
-            "held_out": _brief(_evaluation(policy, shifted, traffic, eval_episodes, held_out_seed)),
+            "held_out": frozen_held_out["shifted"],
+            "held_out_original": frozen_held_out["original"],
         }
+        state["frozen"] = frozen
+        # The frozen policy is the first candidate: adapting never hands back a worse one.
+        state["selected"] = {"block": 0, "key": selection_key(frozen_held_out, frozen)}
+        write_snapshot(chosen, ppo, env, state["selected"])
     bar = Progress(episodes, "adapt", enabled=progress)
     deployed = sum(b["episodes"] for b in state["blocks"])
     bar.update(deployed)
 
     def finish_block(stats: dict[str, Any]) -> None:
-        stats["held_out"] = _brief(
-            _evaluation(current(), shifted, traffic, eval_episodes, held_out_seed)
-        )
+        measured = held_out(current())
+        stats["held_out"], stats["held_out_original"] = measured["shifted"], measured["original"]
         state["blocks"].append(stats)
         bar.update(stats["episodes"])
+        key = selection_key(measured, state["frozen"])
+        stats["rolled_back"] = False
+        if key < tuple(state["selected"]["key"]):
+            state["selected"] = {"block": len(state["blocks"]), "key": key}
+            # Written before the checkpoint: interrupted between the two, a resumed run
+            # replays this block exactly and writes it again.
+            write_snapshot(chosen, ppo, env, state["selected"])
+        elif rollback:  # not deployed further: on from the selected policy (and its optimiser)
+            ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
+            stats["rolled_back"] = True
         state.update(episode_counters=vec.episode_counters.tolist(), **learning.state())
         write_snapshot(checkpoint, ppo, env, state)  # renamed whole
 
     monitor = DeploymentMonitor(vec, shifted, traffic, block, episodes - deployed, finish_block)
+    if "noise_start" not in state:  # the log standard deviation at the first deployed episode
+        state["noise_start"] = ppo.policy.log_std.detach().numpy().tolist()
+    noise_schedule = NoiseSchedule(
+        np.asarray(state["noise_start"]), math.log(noise_decay),
+        lambda: (episodes - monitor.remaining + len(monitor.rows)) / episodes,
+    )  # fmt: skip
     started = time.perf_counter()
     try:
         if deployed < episodes:
             ppo.learn(
-                total_timesteps=10**12, callback=CallbackList([monitor, *learning.schedules()]),
+                total_timesteps=10**12,
+                callback=CallbackList([monitor, noise_schedule, *learning.schedules()]),
                 reset_num_timesteps=False, progress_bar=False,
             )  # fmt: skip
     finally:
         bar.close()
     wall = time.perf_counter() - started
+    ppo.set_parameters(str(chosen / "model.zip"), device="cpu")  # the selected policy
     _save_policy(
         folder, ppo, env, dump_config(dataclasses.replace(config, deploy_switching=switching))
     )
@@ -263,6 +355,8 @@ def adapt(
             "adapted": _brief(_evaluation(adapted, original, traffic, eval_episodes, eval_seed)),
         },
         "frozen_held_out": state["frozen"]["held_out"],
+        "frozen_held_out_original": state["frozen"]["held_out_original"],
+        "selected_block": state["selected"]["block"],
         "collisions": sum(b["collisions"] for b in state["blocks"]),
         "failures": sum(b["failures"] for b in state["blocks"]),
         "wall_time_s": round(wall, 1),
@@ -276,6 +370,50 @@ def adapt(
     except Exception as exc:  # a figure must never cost a finished adaptation
         print(f"warning: adaptation.png not written: {exc}")
     return summary
+
+
+def selection_key(measured: dict[str, Any], frozen: dict[str, Any]) -> tuple[float, float]:
+    """How a candidate policy ranks (lower is better), from its held-out evaluations
+    ``measured`` (``shifted``, ``original``) against the frozen policy's on the same scenarios
+    (``frozen``: ``held_out``, ``held_out_original``): its excess over the targets first — a
+    collision outranks any excess; the safety action in at most :data:`SAFETY_BUDGET` of the
+    episodes of the shift, with an efficiency there no lower than the frozen policy's; on the
+    original distribution, the safety action in at most :data:`SAFETY_BUDGET` of the episodes
+    (or the frozen policy's share, if larger) and the efficiency within
+    :data:`EFFICIENCY_TOLERANCE` of the frozen policy's — then the shift's efficiency."""
+    shift, original = measured["shifted"], measured["original"]
+    if shift["collisions"] or original["collisions"]:
+        return (1e9, 0.0)  # finite: the key is kept in JSON
+
+    def share(summary: dict[str, Any]) -> float:
+        return summary["safety_activation_episodes"] / summary["episodes"]
+
+    before, before_shift = frozen["held_out_original"], frozen["held_out"]
+    excess = (
+        max(0.0, share(shift) - SAFETY_BUDGET)
+        + max(0.0, before_shift["mean_efficiency"] - shift["mean_efficiency"])
+        + max(0.0, share(original) - max(SAFETY_BUDGET, share(before)))
+        + max(0.0, before["mean_efficiency"] - EFFICIENCY_TOLERANCE - original["mean_efficiency"])
+    )
+    return (round(excess, 12), -round(float(shift["mean_efficiency"]), 12))
+
+
+def rehearsal_count(share: float, n_envs: int) -> int:
+    """The environments that rehearse: ``share`` of ``n_envs``, rounded, at least one if
+    ``share`` > 0, and at least one left deployed.
+
+    Raises:
+        AdaptError: ``share`` outside [0, 1), or too large for ``n_envs``.
+    """
+    if not (math.isfinite(share) and 0 <= share < 1):
+        raise AdaptError(f"--rehearsal must be a share in [0, 1), got {share}")
+    count = max(1, round(share * n_envs)) if share > 0 else 0
+    if count >= n_envs:
+        raise AdaptError(
+            f"--rehearsal {share} of {n_envs} environments leaves none deployed; ask a smaller "
+            "share or more --n-envs"
+        )
+    return count
 
 
 def learning_terms(config: Any, reasons: Sequence[str]) -> tuple[Any, Any]:
@@ -309,10 +447,33 @@ def _save_policy(folder: Path, model: Any, env: Any, config_text: str) -> None:
     write_policy_files(folder, model, env)
 
 
+class NoiseSchedule(BaseCallback):
+    """Before each rollout, the exploration noise's log standard deviation: ``start`` plus
+    ``change`` times the share of the episodes deployed so far (``progress()``). Set before the
+    rollout, so the update that follows computes its ratios under the noise the actions were
+    drawn with; a rolled-back policy takes the scheduled noise at the next rollout."""
+
+    def __init__(self, start: np.ndarray, change: float, progress: Callable[[], float]) -> None:
+        super().__init__()
+        self.start, self.change, self.progress = start, change, progress
+
+    def _on_rollout_start(self) -> None:
+        import torch
+
+        value = self.start + self.change * min(1.0, self.progress())
+        log_std: Any = self.model.policy.log_std
+        with torch.no_grad():
+            log_std.copy_(torch.as_tensor(value, dtype=torch.float32))
+
+    def _on_step(self) -> bool:
+        return True
+
+
 class DeploymentMonitor(BaseCallback):
-    """Counts the deployed episodes block by block; at the end of the rollout in which a block
-    fills, hands its summary to ``finish`` (see :meth:`summary`); once ``episodes`` have been
-    deployed, stops PPO (after it has learned from the last rollout).
+    """Counts the deployed episodes (not the rehearsing environments') block by block; at the
+    end of the rollout in which a block fills, hands its summary to ``finish`` (see
+    :meth:`summary`); once ``episodes`` have been deployed, stops PPO (after it has learned
+    from the last rollout).
 
     Args:
         vec: The batched environment (its ``reset_infos`` name each episode's scenario).
@@ -335,6 +496,7 @@ class DeploymentMonitor(BaseCallback):
         self._stop = False
 
     def _on_training_start(self) -> None:
+        self.rehearsing = self.vec.rehearsing  # replays, not deployment: not counted
         # after SB3's reset: every environment's current episode
         self._scenario = [dict(info["scenario"]) for info in self.vec.reset_infos]
 
@@ -343,7 +505,7 @@ class DeploymentMonitor(BaseCallback):
             return False
         infos, dones = self.locals["infos"], self.locals["dones"]
         for i in np.flatnonzero(dones):
-            if self.remaining - len(self.rows) > 0:
+            if self.remaining - len(self.rows) > 0 and not self.rehearsing[i]:
                 episode = infos[i]["episode"]
                 kept = ("collision", "lost_control", "safety_steps", "speeding_steps",
                         "time_to_clear")  # fmt: skip

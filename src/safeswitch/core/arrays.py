@@ -121,9 +121,12 @@ def concat_rows(batches: list[Any]) -> Any:
     """Batch dataclasses of one type stacked along their first axis (recursing into dataclass
     fields): the inverse of :func:`take_rows`."""
     first = batches[0]
-    values = {}
+    values: dict[str, Any] = {}
     for f in fields(first):
         parts = [getattr(b, f.name) for b in batches]
+        if parts[0] is None:  # an optional part the batches do not have
+            values[f.name] = None
+            continue
         values[f.name] = (
             np.concatenate(parts) if isinstance(parts[0], np.ndarray) else concat_rows(parts)
         )

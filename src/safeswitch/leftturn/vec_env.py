@@ -32,6 +32,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+from safeswitch.core.arrays import concat_rows, take_rows
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import BatchInfos, scenario_info
 from safeswitch.leftturn.make import build_task
@@ -93,6 +94,7 @@ class LeftTurnVecEnv(VecEnv):
             perception=perception,
         )  # fmt: skip
         self.config = self.task.config
+        self._traffic = traffic
         self.render_mode = render_mode
         super().__init__(int(num_envs), observation_space(self.task), action_space())
         self._seed = _fresh_seed() if seed is None else int(seed)
@@ -119,6 +121,46 @@ class LeftTurnVecEnv(VecEnv):
         #: has ``costs``, the plant's named costs of the step; off, neither.
         self.count_costs = True
         self.costs_in_step = TickCosts(self.num_envs)
+        #: ``(task, count)``: the last ``count`` environments draw their scenarios from
+        #: ``task`` (see :meth:`rehearse`).
+        self._rehearsal: tuple[Any, int] | None = None
+
+    def rehearse(self, config: LeftTurnConfig | dict[str, Any], count: int) -> None:
+        """From the next episode on, the last ``count`` environments draw their scenarios from
+        ``config``'s distribution instead of this batch's (a *rehearsal* of another
+        distribution of the same plant, as ``safeswitch adapt`` replays the one a policy was
+        trained on; 0: none). Only the scenarios come from ``config``: every environment drives
+        this batch's plant, logic and rewards.
+
+        Raises:
+            ValueError: ``count`` outside ``0 … num_envs``.
+        """
+        if not 0 <= count <= self.num_envs:
+            raise ValueError(f"count must be in 0…{self.num_envs}, got {count}")
+        task = build_task(None, config, traffic=self._traffic) if count else None
+        self._rehearsal = (task, int(count)) if count else None
+
+    @property
+    def rehearsing(self) -> NDArray[np.bool_]:
+        """Per environment, whether it draws from the rehearsed distribution ``[N]``."""
+        count = 0 if self._rehearsal is None else self._rehearsal[1]
+        return self._env_ids >= self.num_envs - count
+
+    def _draw(self, env_ids: NDArray[np.int64], episodes: NDArray[np.int64]) -> Any:
+        """The scenarios of episodes ``episodes`` of environments ``env_ids``."""
+        drawn = self.task.draw_scenarios(self._seed, env_ids, episodes)
+        if self._rehearsal is None:
+            return drawn
+        task, count = self._rehearsal
+        other = env_ids >= self.num_envs - count
+        if not other.any():
+            return drawn
+        merged = concat_rows([
+            take_rows(drawn, ~other),
+            task.draw_scenarios(self._seed, env_ids[other], episodes[other]),
+        ])  # fmt: skip
+        order = np.concatenate([np.flatnonzero(~other), np.flatnonzero(other)])
+        return take_rows(merged, np.argsort(order))
 
     @property
     def state(self) -> TaskState:
@@ -147,7 +189,7 @@ class LeftTurnVecEnv(VecEnv):
         return [self._seed] * self.num_envs
 
     def reset(self) -> VecEnvObs:
-        scenarios = self.task.draw_scenarios(self._seed, self._env_ids, self._episodes)
+        scenarios = self._draw(self._env_ids, self._episodes)
         self._episodes += 1
         self._state = self.task.initial(scenarios)
         self._stats = EpisodeStatistics(self.num_envs)
@@ -203,9 +245,7 @@ class LeftTurnVecEnv(VecEnv):
             record = _detached(record)
             episode = self._stats.summary(ended, record, time.perf_counter() - self._start)
             self._stats.reset_at(ended)
-            fresh = self.task.initial(
-                self.task.draw_scenarios(self._seed, self._env_ids[ended], self._episodes[ended])
-            )
+            fresh = self.task.initial(self._draw(self._env_ids[ended], self._episodes[ended]))
             self._episodes[ended] += 1
             self._state.replace_at(ended, fresh)
             for j, i in enumerate(ended):

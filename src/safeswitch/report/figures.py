@@ -346,8 +346,8 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
     """Learning after deployment (``safeswitch adapt``): per shift, the share of episodes with
     a safety action and the efficiency against deployment episodes — the deployed episodes of
     each block and the deterministic policy on held-out scenarios after it, beside the frozen
-    policy's on the same held-out scenarios (dashed); a block with a failure is marked with a
-    red cross. Saved as PNG."""
+    policy's on the same held-out scenarios (dashed); a star marks the selected policy (the one
+    adapting hands back), a red cross a block with a failure. Saved as PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -372,6 +372,14 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
         right.plot(x, [b["held_out"]["mean_efficiency"] for b in blocks], marker="s", ls=":",
                    color=color)  # fmt: skip
         right.axhline(frozen["mean_efficiency"], color=color, ls="--", lw=1)
+        chosen = run.get("selected_block")
+        if chosen is not None:  # the policy adapting hands back (0: the frozen one)
+            at = 0 if chosen == 0 else x[chosen - 1]
+            point = frozen if chosen == 0 else blocks[chosen - 1]["held_out"]
+            star = dict(marker="*", s=170, color=color, edgecolors="black", zorder=6)
+            left.scatter([at], [point["safety_activation_episodes"] / point["episodes"]],
+                         label=f"{label}: selected", **star)  # fmt: skip
+            right.scatter([at], [point["mean_efficiency"]], **star)
         failed = np.array([b["failures"] for b in blocks]) > 0
         if failed.any():
             left.scatter(x[failed], np.asarray(safety)[failed], marker="x", s=80, color="red",

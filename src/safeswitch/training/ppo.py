@@ -15,7 +15,8 @@ The schedule is saved with the model (SB3 saves the attributes), so ``load`` and
 rebuild the same parameter groups.
 
 With ``intervention_imitation`` > 0 the actor also learns from the Safety controller's
-interventions after each update (:mod:`safeswitch.training.interventions`).
+interventions after each update (:mod:`safeswitch.training.interventions`); anchored
+(:meth:`SwitchPPO.anchor_to`), it also stays near a reference policy on chosen environments.
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ class SwitchPPO(PPO):
         self.learn_log_std = learn_log_std
         self.log_std_final = log_std_final
         self.intervention_imitation = intervention_imitation
+        #: ``(reference policy, environment mask, weight)`` (see :meth:`anchor_to`).
+        self._anchor: tuple[Any, np.ndarray, float] | None = None
         super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
@@ -134,6 +137,43 @@ class SwitchPPO(PPO):
         super().train()
         if self.intervention_imitation > 0:
             self.imitate_interventions()
+        if self._anchor is not None:
+            self.keep_anchor()
+
+    def anchor_to(self, reference: Any, columns: np.ndarray, weight: float = 1.0) -> None:
+        """After each update, also fit the actor toward ``reference``'s mean action (a frozen
+        policy of the same architecture) on the rollout's states of environments ``columns``
+        (a mask over the environments): a trust region toward that policy where it must not
+        change — ``safeswitch adapt`` anchors the original policy on the environments that
+        rehearse its distribution (the idea of learning without forgetting, Li & Hoiem, ECCV
+        2016, on the actor's output). Not saved with the model: call it again after loading."""
+        columns = np.asarray(columns, dtype=bool)
+        if columns.shape != (self.n_envs,):
+            raise ValueError(f"columns needs one flag per environment ({self.n_envs}), got "
+                             f"shape {columns.shape}")  # fmt: skip
+        reference.set_training_mode(False)
+        self._anchor = (reference, columns, float(weight))
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "_anchor"]
+
+    def keep_anchor(self) -> None:
+        """The fit of :meth:`anchor_to` on this rollout's anchored states."""
+        assert self._anchor is not None
+        reference, columns, weight = self._anchor
+        buffer = self.rollout_buffer
+        observations = buffer.observations
+        # SB3 flattens the buffer environment by environment once an update has read it
+        if buffer.generator_ready:
+            observations = observations.reshape(self.n_envs, -1, *observations.shape[1:])
+            states = observations[columns].reshape(-1, *observations.shape[2:])
+        else:
+            states = observations[:, columns].reshape(-1, *observations.shape[2:])
+        if not len(states):
+            return
+        with torch.no_grad():
+            target = self._executed_mean(reference, obs_as_tensor(states, self.device))
+        self._fit_actor(states, target, weight, "anchor")
 
     def imitate_interventions(self) -> None:
         """Fit the actor toward the executed safety action on the rollout's intervention
@@ -145,10 +185,24 @@ class SwitchPPO(PPO):
         if batch is None:
             return
         states, targets = batch
+        target = torch.as_tensor(targets, dtype=torch.float32)
+        self._fit_actor(states, target, self.intervention_imitation, "imitation")
+
+    def _executed_mean(self, policy: Any, observation: Any) -> torch.Tensor:
+        """``policy``'s mean action on ``observation``, clipped to the action bounds as the
+        environment clips it."""
         space = self.action_space
         low = torch.as_tensor(np.asarray(getattr(space, "low", -np.inf)), dtype=torch.float32)
         high = torch.as_tensor(np.asarray(getattr(space, "high", np.inf)), dtype=torch.float32)
-        target = torch.as_tensor(targets, dtype=torch.float32)
+        normal = policy.get_distribution(observation).distribution
+        assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
+        return torch.maximum(torch.minimum(normal.mean, high), low)
+
+    def _fit_actor(
+        self, states: np.ndarray, target: torch.Tensor, weight: float, name: str
+    ) -> None:
+        """``n_epochs`` passes in minibatches of ``batch_size`` minimising
+        ``weight · mean ‖clip(μ(s)) − target‖²`` (logged as ``train/{name}_loss``)."""
         self.policy.set_training_mode(True)
         losses = []
         count = len(states)
@@ -158,19 +212,14 @@ class SwitchPPO(PPO):
             for start in range(0, count, size):
                 rows = order[start : start + size]
                 observation = obs_as_tensor(states[rows], self.device)
-                normal = self.policy.get_distribution(observation).distribution
-                assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
-                mean = normal.mean
-                executed = torch.maximum(torch.minimum(mean, high), low)
-                loss = self.intervention_imitation * (
-                    (executed - target[rows]).pow(2).sum(dim=-1).mean()
-                )
+                executed = self._executed_mean(self.policy, observation)
+                loss = weight * (executed - target[rows]).pow(2).sum(dim=-1).mean()
                 self.policy.optimizer.zero_grad()
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
                 self.policy.optimizer.step()
                 losses.append(float(loss.detach()))
-        self.logger.record("train/imitation_loss", float(np.mean(losses)))
+        self.logger.record(f"train/{name}_loss", float(np.mean(losses)))
 
     def actor_rate(self, timesteps: int) -> float:
         """The actor's learning rate after ``timesteps`` (see the module docstring); without an
