@@ -21,7 +21,7 @@ One torch thread per run; runs go two at a time (two cores). The figure is writt
 the JSON (``--out``).
 
 Run: ``python benchmarks/adapt.py [--episodes 10000] [--shifts ego-fast north-fast] [--noise STD]
-[--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback] [--out results/adapt.json]`` (the
+[--noise-decay SHARE] [--rehearsal SHARE] [--rollback] [--out results/adapt.json]`` (the
 ``adapt`` options of the same names, for the ablations of docs/adapt.md; ``--replot
 results/adapt.json`` redraws the figure of a saved result).
 """
@@ -66,7 +66,7 @@ def main() -> None:
     )
     parser.add_argument("--noise-decay", type=float, default=None, help="adapt --noise-decay")
     parser.add_argument("--rehearsal", type=float, default=None, help="adapt --rehearsal")
-    parser.add_argument("--no-rollback", action="store_true", help="adapt --no-rollback")
+    parser.add_argument("--rollback", action="store_true", help="adapt --rollback")
     parser.add_argument("--shifts", nargs="+", choices=sorted(SHIFTS), default=DEFAULT_SHIFTS)
     parser.add_argument("--json", action="store_true")
     parser.add_argument(
@@ -84,7 +84,7 @@ def main() -> None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         options = {"noise": args.noise, "noise_decay": args.noise_decay,
-                   "rehearsal": args.rehearsal, "rollback": not args.no_rollback}  # fmt: skip
+                   "rehearsal": args.rehearsal, "rollback": args.rollback}  # fmt: skip
         jobs = [
             (s, seed, args.episodes, args.block, tmp, options)
             for s in args.shifts

@@ -31,7 +31,7 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, mo
             self.policy.action_net.bias.fill_(5.0)
 
     monkeypatch.setattr(SwitchPPO, "train", adversarial)
-    summary = adapt("certified", tmp_path / "a", **SMALL, rollback=False)
+    summary = adapt("certified", tmp_path / "a", **SMALL)  # the adversarial policy deployed
     blocks = summary["blocks"]
     assert [b["episodes"] for b in blocks] == [48, 48]
     assert all(b["collisions"] == 0 and b["failures"] == 0 for b in blocks)
@@ -49,7 +49,7 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, mo
 
 
 def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, monkeypatch):
-    """With the adversarial update above and rollback (the default), every block's policy
+    """With the adversarial update above and rollback, every block's policy
     ranks below the frozen one, so learning goes on from the frozen policy each time: the
     policy left after the last block is the frozen one, not full throttle."""
     original = SwitchPPO.train
@@ -60,7 +60,7 @@ def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, m
             self.policy.action_net.bias.fill_(5.0)
 
     monkeypatch.setattr(SwitchPPO, "train", adversarial)
-    summary = adapt("certified", tmp_path / "a", **SMALL)
+    summary = adapt("certified", tmp_path / "a", **SMALL, rollback=True)
     assert [b["rolled_back"] for b in summary["blocks"]] == [True, True]
     assert summary["collisions"] == 0 and summary["selected_block"] == 0
     last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")

@@ -589,7 +589,7 @@ def _adapt(args: argparse.Namespace) -> int:
         args.model, args.out, switching=args.switching, settings=args.set or (),
         episodes=args.episodes, block=args.block, n_envs=args.n_envs, seed=args.seed,
         eval_episodes=args.eval_episodes, noise=args.noise, noise_decay=args.noise_decay,
-        rehearsal=args.rehearsal, rollback=not args.no_rollback, resume=args.resume,
+        rehearsal=args.rehearsal, rollback=args.rollback, resume=args.resume,
         progress=not args.no_progress,
     )  # fmt: skip
     last = summary["blocks"][-1]
@@ -936,9 +936,9 @@ def build_parser() -> argparse.ArgumentParser:
              "quarter; 1: constant)",
     )  # fmt: skip
     adp.add_argument(
-        "--no-rollback", action="store_true",
-        help="keep learning from a block's policy even when the held-out evaluation ranks it "
-             "below the selected one",
+        "--rollback", action="store_true",
+        help="after a block whose policy the held-out evaluation ranks below the selected "
+             "one, go on learning from the selected policy",
     )  # fmt: skip
     adp.add_argument(
         "--rehearsal", type=float, default=None, metavar="SHARE",

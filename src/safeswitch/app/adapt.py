@@ -18,10 +18,11 @@ deploying a worse policy:
 * rehearsal with an anchor: a quarter of the learner's environments replay scenarios of the
   original distribution (simulated, beside the deployed ones; not counted as deployed), and on
   their states the actor is fitted toward the original policy's actions after each update;
-* selection and rollback: after each block the deterministic policy is evaluated on held-out
-  scenarios of the shift and of the original distribution and ranked (:func:`selection_key`);
-  the best so far — the frozen policy to begin with — is the one adapting hands back, and a
-  block whose policy ranks below it is rolled back (learning goes on from the selected one).
+* selection: after each block the deterministic policy is evaluated on held-out scenarios of
+  the shift and of the original distribution and ranked (:func:`selection_key`); the best so
+  far — the frozen policy to begin with — is the one adapting hands back (and, with
+  ``rollback``, a block whose policy ranks below it is rolled back: learning goes on from the
+  selected one).
 
 Deployment runs in blocks of ``block`` episodes; after each, the block's deployed episodes
 are summarised (``blocks``: ``episodes``, ``collisions``, ``failures``,
@@ -127,7 +128,7 @@ def adapt(
     noise: float | None = None,
     noise_decay: float | None = None,
     rehearsal: float | None = None,
-    rollback: bool = True,
+    rollback: bool = False,
     resume: bool = False,
     progress: bool = False,
 ) -> dict[str, Any]:
@@ -140,7 +141,8 @@ def adapt(
     log standard deviation falls linearly with the episodes deployed; 1: constant).
     ``rollback``: after a block whose policy ranks below the selected one
     (:func:`selection_key`), learning goes on from the selected policy instead — a policy the
-    held-out evaluation found worse is not deployed further.
+    held-out evaluation found worse is not deployed further. Off by default: on ``north-fast``
+    (docs/adapt.md) it cost efficiency on the shift and deployed no fewer safety actions.
     ``rehearsal``: the share of the learner's environments (``None``: :data:`REHEARSAL`;
     rounded, at least one if not 0)
     that replay scenarios of the policy's original distribution while it adapts — simulated
