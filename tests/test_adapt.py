@@ -20,9 +20,10 @@ SHIFT = ["env.scenarios.ego_speed_kmh=[28, 30]"]
 SMALL = dict(settings=SHIFT, episodes=96, block=48, n_envs=8, eval_episodes=40)
 
 
-def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, monkeypatch):
-    """Every update drives the actor to full throttle (the action head's bias to +5): the
-    policy the switch supervises changes each rollout, for the worse, and no block collides."""
+@pytest.fixture
+def adversarial_updates(monkeypatch):
+    """Every PPO update ends by driving the actor to full throttle (the action head's bias to
+    +5)."""
     original = SwitchPPO.train
 
     def adversarial(self):
@@ -31,6 +32,11 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, mo
             self.policy.action_net.bias.fill_(5.0)
 
     monkeypatch.setattr(SwitchPPO, "train", adversarial)
+
+
+def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, adversarial_updates):
+    """With adversarial updates the policy the switch supervises changes each rollout, for the
+    worse, and no block collides."""
     summary = adapt("certified", tmp_path / "a", **SMALL)  # the adversarial policy deployed
     blocks = summary["blocks"]
     assert [b["episodes"] for b in blocks] == [48, 48]
@@ -48,18 +54,10 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, mo
     assert adapted == pytest.approx(frozen) and adapted != pytest.approx(1.0)
 
 
-def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, monkeypatch):
-    """With the adversarial update above and rollback, every block's policy
-    ranks below the frozen one, so learning goes on from the frozen policy each time: the
-    policy left after the last block is the frozen one, not full throttle."""
-    original = SwitchPPO.train
-
-    def adversarial(self):
-        original(self)
-        with torch.no_grad():
-            self.policy.action_net.bias.fill_(5.0)
-
-    monkeypatch.setattr(SwitchPPO, "train", adversarial)
+def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, adversarial_updates):
+    """With adversarial updates and rollback, every block's policy ranks below the frozen one,
+    so learning goes on from the frozen policy each time: the policy left after the last block
+    is the frozen one, not full throttle."""
     summary = adapt("certified", tmp_path / "a", **SMALL, rollback=True)
     assert [b["rolled_back"] for b in summary["blocks"]] == [True, True]
     assert summary["collisions"] == 0 and summary["selected_block"] == 0

@@ -29,9 +29,9 @@ def wall_env(logic, n=2, seed=0):
     return InterventionRecorder(VecNormalize(vec, norm_reward=False))
 
 
-def model_on(env, coef, seed=0):
+def model_on(env, coef, seed=0, learning_rate=3e-4):  # SB3's default rate
     return SwitchPPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=2, seed=seed,
-                     device="cpu", intervention_imitation=coef,
+                     device="cpu", intervention_imitation=coef, learning_rate=learning_rate,
                      policy_kwargs={"net_arch": [16, 16]})  # fmt: skip
 
 
@@ -115,9 +115,7 @@ def test_an_anchored_actor_stays_near_its_reference_only_where_anchored():
     import copy
 
     def run(anchored):
-        model = SwitchPPO("MlpPolicy", wall_env("none", n=4), n_steps=32, batch_size=32,
-                          n_epochs=2, seed=0, device="cpu", learning_rate=0.01,
-                          policy_kwargs={"net_arch": [16, 16]})  # fmt: skip
+        model = model_on(wall_env("none", n=4), 0.0, learning_rate=0.01)
         reference = copy.deepcopy(model.policy)
         with torch.no_grad():
             reference.action_net.bias.add_(0.5)  # the reference asks for 0.5 more everywhere
@@ -132,9 +130,7 @@ def test_an_anchored_actor_stays_near_its_reference_only_where_anchored():
     anchored, _, end_anchored = run([False, False, True, True])
     assert start == pytest.approx(0.5, abs=1e-5)
     assert end_anchored < 0.5 * start and end_anchored < 0.5 * end_plain
-    unanchored = SwitchPPO("MlpPolicy", wall_env("none", n=4), n_steps=32, batch_size=32,
-                           n_epochs=2, seed=0, device="cpu", learning_rate=0.01,
-                           policy_kwargs={"net_arch": [16, 16]})  # fmt: skip
+    unanchored = model_on(wall_env("none", n=4), 0.0, learning_rate=0.01)
     unanchored.learn(1024)
     for a, b in zip(_parameters(plain), _parameters(unanchored), strict=True):
         assert torch.equal(a, b)
