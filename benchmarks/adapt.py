@@ -1,4 +1,4 @@
-"""Learning after deployment (``safeswitch adapt``, issue #40) on two shifts, deployment seeds
+"""Learning after deployment (``safeswitch adapt``, issue #40) on three shifts, deployment seeds
 1–3: the frozen shipped policy against the adapting one, under ``certified``.
 
 Shifts of the shipped ``certified`` policy (each one where the frozen policy needs the safety
@@ -8,6 +8,8 @@ action in at least 10 % of episodes; trained on an ego at 18–25 km/h and an on
 * ``ego-fast``: the ego arriving at 28–30 km/h;
 * ``north-fast``: the oncoming car at 38–44 km/h (at 45 km/h some arrivals would start the car
   before its route);
+* ``north-slow``: the oncoming car at 6–12 km/h (a slow vehicle: it holds the conflict zone
+  longer);
 * ``paper-north-fast`` (not run by default): the shipped ``paper`` policy deployed under
   ``certified``, the oncoming car at 36–43 km/h.
 
@@ -20,10 +22,10 @@ block whose policy was selected and how many blocks were rolled back.
 One torch thread per run; runs go two at a time (two cores). The figure is written beside
 the JSON (``--out``).
 
-Run: ``python benchmarks/adapt.py [--episodes 10000] [--shifts ego-fast north-fast] [--noise STD]
-[--noise-decay SHARE] [--rehearsal SHARE] [--rollback] [--out results/adapt.json]`` (the
-``adapt`` options of the same names, for the ablations of docs/adapt.md; ``--replot
-results/adapt.json`` redraws the figure of a saved result).
+Run: ``python benchmarks/adapt.py [--episodes 10000] [--shifts north-fast north-slow ego-fast]
+[--noise STD] [--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback]
+[--out results/adapt.json]`` (the ``adapt`` options of the same names, for the ablations of
+docs/adapt.md; ``--replot results/adapt.json`` redraws the figure of a saved result).
 """
 
 from __future__ import annotations
@@ -39,9 +41,10 @@ import _common
 SHIFTS = {
     "ego-fast": ("certified", ["env.scenarios.ego_speed_kmh=[28, 30]"]),
     "north-fast": ("certified", ["env.scenarios.north_speed_kmh=[38, 44]"]),
+    "north-slow": ("certified", ["env.scenarios.north_speed_kmh=[6, 12]"]),
     "paper-north-fast": ("paper", ["env.scenarios.north_speed_kmh=[36, 43]"]),
 }
-DEFAULT_SHIFTS = ["ego-fast", "north-fast"]
+DEFAULT_SHIFTS = ["north-fast", "north-slow", "ego-fast"]
 SEEDS = (1, 2, 3)
 
 
@@ -66,7 +69,12 @@ def main() -> None:
     )
     parser.add_argument("--noise-decay", type=float, default=None, help="adapt --noise-decay")
     parser.add_argument("--rehearsal", type=float, default=None, help="adapt --rehearsal")
-    parser.add_argument("--rollback", action="store_true", help="adapt --rollback")
+    parser.add_argument(
+        "--rollback",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="adapt --rollback / --no-rollback",
+    )
     parser.add_argument("--shifts", nargs="+", choices=sorted(SHIFTS), default=DEFAULT_SHIFTS)
     parser.add_argument("--json", action="store_true")
     parser.add_argument(

@@ -36,8 +36,8 @@ def adversarial_updates(monkeypatch):
 
 def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, adversarial_updates):
     """With adversarial updates the policy the switch supervises changes each rollout, for the
-    worse, and no block collides."""
-    summary = adapt("certified", tmp_path / "a", **SMALL)  # the adversarial policy deployed
+    worse, and no block collides (without rollback: the adversarial policy stays deployed)."""
+    summary = adapt("certified", tmp_path / "a", **SMALL, rollback=False)
     blocks = summary["blocks"]
     assert [b["episodes"] for b in blocks] == [48, 48]
     assert all(b["collisions"] == 0 and b["failures"] == 0 for b in blocks)
@@ -55,10 +55,10 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, ad
 
 
 def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, adversarial_updates):
-    """With adversarial updates and rollback, every block's policy ranks below the frozen one,
-    so learning goes on from the frozen policy each time: the policy left after the last block
-    is the frozen one, not full throttle."""
-    summary = adapt("certified", tmp_path / "a", **SMALL, rollback=True)
+    """With adversarial updates and rollback (the default), every block's policy ranks below
+    the frozen one, so learning goes on from the frozen policy each time: the policy left after
+    the last block is the frozen one, not full throttle."""
+    summary = adapt("certified", tmp_path / "a", **SMALL)
     assert [b["rolled_back"] for b in summary["blocks"]] == [True, True]
     assert summary["collisions"] == 0 and summary["selected_block"] == 0
     last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")
@@ -66,6 +66,14 @@ def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, a
     for name, value in frozen.policy.state_dict().items():
         if name != "log_std":  # the noise is scheduled, not restored
             assert torch.equal(last.policy.state_dict()[name], value), name
+
+
+def test_rollback_is_on_unless_asked_off_on_the_command_line():
+    from safeswitch.cli import build_parser
+
+    base = ["adapt", "--model", "certified", "--out", "x"]
+    assert build_parser().parse_args(base).rollback is True
+    assert build_parser().parse_args([*base, "--no-rollback"]).rollback is False
 
 
 def test_the_exploration_noise_narrows_with_the_episodes_deployed():
@@ -105,6 +113,9 @@ def test_the_summary_reports_both_distributions_and_the_policy_evaluates(tmp_pat
         assert set(block) >= {"episodes", "collisions", "failures", "safety_activation_episodes",
                               "mean_efficiency", "speeding_episodes", "held_out"}  # fmt: skip
         assert 0.3 < block["mean_efficiency"] <= 1.05
+        # where the certified recipe's constraint multipliers stand after the block
+        assert set(block["multipliers"]) == {"comfort", "safety", "clear_time", "uncleared"}
+        assert all(0 <= m <= 1000 for m in block["multipliers"].values())
     assert (out / "adaptation.png").stat().st_size > 10_000
     # the adapted policy is a run directory evaluate accepts, deployed under certified
     assert main(["evaluate", "--model", str(out), "--episodes", "5", "--json"]) == 0

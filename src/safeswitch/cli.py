@@ -936,9 +936,10 @@ def build_parser() -> argparse.ArgumentParser:
              "quarter; 1: constant)",
     )  # fmt: skip
     adp.add_argument(
-        "--rollback", action="store_true",
+        "--rollback", action=argparse.BooleanOptionalAction, default=True,
         help="after a block whose policy the held-out evaluation ranks below the selected "
-             "one, go on learning from the selected policy",
+             "one, go on learning from the selected policy (default; --no-rollback: learn on "
+             "from where the block left it)",
     )  # fmt: skip
     adp.add_argument(
         "--rehearsal", type=float, default=None, metavar="SHARE",
