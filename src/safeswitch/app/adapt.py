@@ -139,10 +139,10 @@ def adapt(
     (:func:`selection_key`), learning goes on from the selected policy instead — a policy the
     held-out evaluation found worse is not deployed further. On by default: on ``north-slow``
     (docs/adapt.md) a policy learning on without it drifted back onto the filter late in the
-    run (up to 70 of a last block's 1,000 episodes; in one trial 962 of 1,000 held-out
-    scenarios); with it, at most 22. ``rehearsal``: the share of the learner's environments
-    (``None``: :data:`REHEARSAL`; rounded, at least one if not 0) that replay scenarios of the
-    policy's original distribution while it adapts — simulated episodes beside the deployed ones, on
+    run (35 and 70 of the last block's 1,000 episodes on two seeds of three; 22 and 7 with
+    it). ``rehearsal``: the share of the learner's environments (``None``:
+    :data:`REHEARSAL`; rounded, at least one if not 0) that replay scenarios of the policy's
+    original distribution while it adapts — simulated episodes beside the deployed ones, on
     whose states the actor is held near the original policy; not counted in ``blocks`` or
     ``episodes``. Needs a shift of the scenario distribution alone (``env.scenarios.*``).
 
