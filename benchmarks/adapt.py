@@ -23,7 +23,7 @@ One torch thread per run; runs go two at a time (two cores). The figure is writt
 the JSON (``--out``).
 
 Run: ``python benchmarks/adapt.py [--episodes 10000] [--shifts north-fast north-slow ego-fast]
-[--noise STD] [--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback]
+[--noise STD] [--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback] [--n-envs N]
 [--out results/adapt.json]`` (the ``adapt`` options of the same names, for the ablations of
 docs/adapt.md; ``--replot results/adapt.json`` redraws the figure of a saved result).
 """
@@ -69,6 +69,7 @@ def main() -> None:
     )
     parser.add_argument("--noise-decay", type=float, default=None, help="adapt --noise-decay")
     parser.add_argument("--rehearsal", type=float, default=None, help="adapt --rehearsal")
+    parser.add_argument("--n-envs", type=int, default=16, help="adapt --n-envs")
     parser.add_argument(
         "--rollback",
         action=argparse.BooleanOptionalAction,
@@ -92,7 +93,8 @@ def main() -> None:
         return
     with tempfile.TemporaryDirectory() as tmp:
         options = {"noise": args.noise, "noise_decay": args.noise_decay,
-                   "rehearsal": args.rehearsal, "rollback": args.rollback}  # fmt: skip
+                   "rehearsal": args.rehearsal, "rollback": args.rollback,
+                   "n_envs": args.n_envs}  # fmt: skip
         jobs = [
             (s, seed, args.episodes, args.block, tmp, options)
             for s in args.shifts
