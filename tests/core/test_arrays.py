@@ -46,3 +46,30 @@ def test_each_runs_the_function_it_is_given_and_is_never_served_from_the_disk_ca
     # each process instead (a stale entry once fed a campaign the wrong throttle).
     for loop in (_each1, _each2, _each3, _each4):
         assert type(loop._cache).__name__ == "NullCache"
+
+
+def test_put_rows_writes_back_what_take_rows_took_nested_and_optional_parts_too():
+    from dataclasses import dataclass
+
+    from safeswitch.core.arrays import put_rows, take_rows
+
+    @dataclass
+    class Inner:
+        b: np.ndarray
+
+    @dataclass
+    class Batch:
+        a: np.ndarray
+        inner: Inner
+        optional: Inner | None = None
+
+    batch = Batch(np.arange(5.0), Inner(np.arange(10.0).reshape(5, 2)))
+    rows = np.array([3, 1])
+    part = take_rows(batch, rows)
+    part.a *= -1
+    part.inner.b *= -1
+    put_rows(batch, rows, part)
+    np.testing.assert_array_equal(batch.a, [0, -1, 2, -3, 4])
+    np.testing.assert_array_equal(batch.inner.b[[1, 3]], -np.array([[2, 3], [6, 7]]))
+    np.testing.assert_array_equal(batch.inner.b[[0, 2, 4]], [[0, 1], [4, 5], [8, 9]])
+    assert batch.optional is None

@@ -145,3 +145,15 @@ def take_rows(batch: Any, rows: NDArray[Any]) -> Any:
         array = isinstance(value, np.ndarray)
         values[f.name] = value[rows] if array else take_rows(value, rows)
     return type(batch)(**values)
+
+
+def put_rows(batch: Any, rows: NDArray[Any], source: Any) -> None:
+    """``batch.f[rows] = source.f`` for every array field, in place, recursing into dataclass
+    fields (optional parts ``batch`` does not have are skipped): the in-place inverse of
+    :func:`take_rows`."""
+    for f in fields(batch):
+        mine, theirs = getattr(batch, f.name), getattr(source, f.name)
+        if isinstance(mine, np.ndarray):
+            mine[rows] = theirs
+        elif mine is not None:
+            put_rows(mine, rows, theirs)

@@ -34,7 +34,7 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import columns, jit, plain, take_rows
+from safeswitch.core.arrays import columns, jit, plain, put_rows, take_rows
 from safeswitch.core.pid import PIDState, pid_tick
 from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
@@ -122,22 +122,12 @@ class TaskState:
     def replace_at(self, index: NDArray[np.intp], other: TaskState) -> None:
         """Overwrite episodes ``index`` with the ``len(index)`` episodes of ``other``, in place
         (auto-reset of the episodes that ended)."""
-        _replace_arrays(self, index, other)
+        put_rows(self, index, other)
 
     def take(self, index: NDArray[np.intp]) -> TaskState:
         """A copy of episodes ``index`` (steps exactly as they would in the full batch: every
         episode is simulated on its own)."""
         return cast(TaskState, take_rows(self, index))
-
-
-def _replace_arrays(target: object, index: NDArray[np.intp], source: object) -> None:
-    """``target.f[index] = source.f`` for every array field, recursing into dataclasses."""
-    for f in fields(target):  # type: ignore[arg-type]
-        mine, theirs = getattr(target, f.name), getattr(source, f.name)
-        if isinstance(mine, np.ndarray):
-            mine[index] = theirs
-        elif mine is not None:
-            _replace_arrays(mine, index, theirs)
 
 
 @dataclass

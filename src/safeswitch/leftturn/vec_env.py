@@ -32,7 +32,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from safeswitch.core.arrays import concat_rows, take_rows
+from safeswitch.core.arrays import put_rows
 from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig
 from safeswitch.leftturn.info import BatchInfos, scenario_info
 from safeswitch.leftturn.make import build_task
@@ -152,15 +152,10 @@ class LeftTurnVecEnv(VecEnv):
         if self._rehearsal is None:
             return drawn
         task, count = self._rehearsal
-        other = env_ids >= self.num_envs - count
-        if not other.any():
-            return drawn
-        merged = concat_rows([
-            take_rows(drawn, ~other),
-            task.draw_scenarios(self._seed, env_ids[other], episodes[other]),
-        ])  # fmt: skip
-        order = np.concatenate([np.flatnonzero(~other), np.flatnonzero(other)])
-        return take_rows(merged, np.argsort(order))
+        rows = np.flatnonzero(env_ids >= self.num_envs - count)
+        if len(rows):
+            put_rows(drawn, rows, task.draw_scenarios(self._seed, env_ids[rows], episodes[rows]))
+        return drawn
 
     @property
     def state(self) -> TaskState:
