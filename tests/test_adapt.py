@@ -23,15 +23,19 @@ SMALL = dict(settings=SHIFT, episodes=96, block=48, n_envs=8, eval_episodes=40)
 @pytest.fixture
 def adversarial_updates(monkeypatch):
     """Every PPO update ends by driving the actor to full throttle (the action head's bias to
-    +5)."""
+    +5); returns, per update asked, whether learning was paused (then nothing is changed)."""
     original = SwitchPPO.train
+    paused = []
 
     def adversarial(self):
+        paused.append(self.learning_paused)
         original(self)
-        with torch.no_grad():
-            self.policy.action_net.bias.fill_(5.0)
+        if not self.learning_paused:
+            with torch.no_grad():
+                self.policy.action_net.bias.fill_(5.0)
 
     monkeypatch.setattr(SwitchPPO, "train", adversarial)
+    return paused
 
 
 def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, adversarial_updates):
@@ -76,6 +80,65 @@ def test_rollback_is_on_unless_asked_off_on_the_command_line():
     assert build_parser().parse_args([*base, "--no-rollback"]).rollback is False
 
 
+@pytest.fixture
+def updates(monkeypatch):
+    """Counts the PPO updates that ran (SB3's own ``PPO.train``, under ``SwitchPPO.train``)."""
+    from stable_baselines3 import PPO
+
+    count = [0]
+    original = PPO.train
+
+    def counted(self):
+        count[0] += 1
+        original(self)
+
+    monkeypatch.setattr(PPO, "train", counted)
+    return count
+
+
+def test_a_policy_within_every_target_is_deployed_without_noise_and_not_updated(
+    tmp_path, monkeypatch, updates
+):
+    """Settled (the frozen policy already meets every target: here a budget of 100 %), every
+    block deploys the selected policy without exploration noise, no update runs, and the
+    policy handed back is the frozen one, parameter for parameter."""
+    monkeypatch.setattr(adapt_module, "SAFETY_BUDGET", 1.0)
+    summary = adapt("certified", tmp_path / "a", **SMALL)
+    assert [b["settled"] for b in summary["blocks"]] == [True, True]
+    assert updates[0] == 0 and summary["selected_block"] == 0
+    frozen = load_policy("certified").model.policy.state_dict()
+    last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")
+    for name, value in last.policy.state_dict().items():
+        if name == "log_std":  # deployed without noise
+            assert float(value.max()) == adapt_module.SETTLED_LOG_STD
+        else:
+            assert torch.equal(value, frozen[name]), name
+    # ... and with --no-settle the same run learns
+    adapt("certified", tmp_path / "b", **SMALL, settle=False)
+    assert updates[0] > 0
+
+
+def test_a_deployed_block_over_the_budget_resumes_learning(tmp_path, monkeypatch, updates):
+    """The selection says the frozen policy meets its targets, but the field disagrees (a
+    budget of 0 deployed safety actions): the first block is settled, learning resumes after
+    it, and the selected policy settles again after the next block."""
+    monkeypatch.setattr(adapt_module, "meets_targets", lambda key: True)
+    monkeypatch.setattr(adapt_module, "SAFETY_BUDGET", 0.0)
+    summary = adapt("certified", tmp_path / "a", **{**SMALL, "episodes": 144})
+    blocks = summary["blocks"]
+    assert blocks[0]["safety_activation_episodes"] > 0  # ego-fast: the filter acts
+    assert [b["settled"] for b in blocks] == [True, False, True]
+    assert updates[0] > 0
+
+
+def test_settling_is_on_unless_asked_off_on_the_command_line():
+    from safeswitch.cli import build_parser
+
+    base = ["adapt", "--model", "certified", "--out", "x"]
+    assert build_parser().parse_args(base).settle is True
+    assert build_parser().parse_args([*base, "--no-settle"]).settle is False
+
+
 def test_the_exploration_noise_narrows_with_the_episodes_deployed():
     from safeswitch.app.adapt import NoiseSchedule
 
@@ -89,10 +152,21 @@ def test_the_exploration_noise_narrows_with_the_episodes_deployed():
 
     share = [0.0]
     schedule = NoiseSchedule(np.array([-2.0]), np.log(0.25), lambda: share[0])
-    schedule.model = Model()
+    schedule.model = model = Model()
     for share[0], expected in ((0.0, 0.1353), (0.5, 0.0677), (1.0, 0.0338), (1.2, 0.0338)):
         schedule._on_rollout_start()
         assert float(Model.policy.log_std.exp()) == pytest.approx(expected, abs=1e-4)
+        assert model.learning_paused is False
+    # settled: no noise, and the update after the rollout is skipped; then back on schedule
+    settled = [True]
+    schedule = NoiseSchedule(np.array([-2.0]), np.log(0.25), lambda: 0.5, lambda: settled[0])
+    schedule.model = model
+    schedule._on_rollout_start()
+    assert float(Model.policy.log_std) == adapt_module.SETTLED_LOG_STD and model.learning_paused
+    settled[0] = False
+    schedule._on_rollout_start()
+    assert float(Model.policy.log_std.exp()) == pytest.approx(0.0677, abs=1e-4)
+    assert model.learning_paused is False
 
 
 @pytest.mark.slow

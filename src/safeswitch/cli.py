@@ -589,8 +589,8 @@ def _adapt(args: argparse.Namespace) -> int:
         args.model, args.out, switching=args.switching, settings=args.set or (),
         episodes=args.episodes, block=args.block, n_envs=args.n_envs, seed=args.seed,
         eval_episodes=args.eval_episodes, noise=args.noise, noise_decay=args.noise_decay,
-        rehearsal=args.rehearsal, rollback=args.rollback, resume=args.resume,
-        progress=not args.no_progress,
+        rehearsal=args.rehearsal, rollback=args.rollback, settle=args.settle,
+        resume=args.resume, progress=not args.no_progress,
     )  # fmt: skip
     last = summary["blocks"][-1]
     for where in ("shifted", "original"):
@@ -605,6 +605,10 @@ def _adapt(args: argparse.Namespace) -> int:
         f"{summary['collisions']:,} collisions, {summary['failures']:,} failures; last block: "
         f"safety action in {last['safety_activation_episodes']:,} of {last['episodes']:,}"
     )
+    settled = sum(b["settled"] for b in summary["blocks"])
+    if settled:
+        print(f"learning paused in {settled} of {len(summary['blocks'])} blocks: the selected "
+              "policy met every target, deployed without noise")  # fmt: skip
     chosen = summary["selected_block"]
     which = f"after block {chosen}" if chosen else "the frozen one: no block ranked above it"
     print(f"adapted policy ({which}): {args.out} (safeswitch evaluate --model {args.out})")
@@ -922,7 +926,7 @@ def build_parser() -> argparse.ArgumentParser:
     adp.add_argument("--n-envs", type=at_least(1), default=16, help="environments at once")
     adp.add_argument("--seed", type=seed_value, default=0, help="seed of the deployment")
     adp.add_argument(
-        "--eval-episodes", type=at_least(1), default=1_000,
+        "--eval-episodes", type=at_least(1), default=2_000,
         help="held-out scenarios of each evaluation (frozen, each block, adapted)",
     )  # fmt: skip
     adp.add_argument(
@@ -940,6 +944,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="after a block whose policy the held-out evaluation ranks below the selected "
              "one, go on learning from the selected policy (default; --no-rollback: learn on "
              "from where the block left it)",
+    )  # fmt: skip
+    adp.add_argument(
+        "--settle", action=argparse.BooleanOptionalAction, default=True,
+        help="while the selected policy meets every target on the held-out scenarios, deploy "
+             "it without noise and pause learning until a deployed block needs the safety "
+             "action in more than 2 %% of its episodes (default; --no-settle: learn on)",
     )  # fmt: skip
     adp.add_argument(
         "--rehearsal", type=float, default=None, metavar="SHARE",

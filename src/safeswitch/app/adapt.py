@@ -22,17 +22,22 @@ deploying a worse policy:
   the shift and of the original distribution and ranked (:func:`selection_key`); the best so
   far — the frozen policy to begin with — is the one adapting hands back, and a block whose
   policy ranks below it is rolled back (unless ``rollback`` is off): learning goes on from the
-  selected one, so a policy the held-out evaluation found worse is not deployed further.
+  selected one, so a policy the held-out evaluation found worse is not deployed further;
+* settling: while the selected policy meets every target on the held-out scenarios, learning
+  pauses — the selected policy is deployed without exploration noise and nothing is updated —
+  until a deployed block needs the safety action more often than :data:`SAFETY_BUDGET` (or
+  fails), when learning resumes from it (unless ``settle`` is off). A policy that meets its
+  targets is not changed further in the field.
 
 Deployment runs in blocks of ``block`` episodes; after each, the block's deployed episodes
 are summarised (``blocks``: ``episodes``, ``collisions``, ``failures``,
 ``safety_activation_episodes``, ``speeding_episodes``, ``mean_efficiency`` against the oracle on
-the same scenarios, ``rolled_back``) together with the held-out evaluations (``held_out``,
-``held_out_original``), and a checkpoint is written whole: ``--resume`` continues after the
-last complete block (Ctrl-C leaves the last one). The adapted (selected) policy is a run
-directory (``model.zip``, ``vecnormalize.pkl``, ``config.yaml``) that ``safeswitch evaluate
---model`` accepts; it and the frozen one are evaluated on other unseen scenarios of both
-distributions (``summary.json``: ``shifted``, ``original``).
+the same scenarios, ``rolled_back``, ``settled``) together with the held-out evaluations
+(``held_out``, ``held_out_original``), and a checkpoint is written whole: ``--resume``
+continues after the last complete block (Ctrl-C leaves the last one). The adapted (selected)
+policy is a run directory (``model.zip``, ``vecnormalize.pkl``, ``config.yaml``) that
+``safeswitch evaluate --model`` accepts; it and the frozen one are evaluated on other unseen
+scenarios of both distributions (``summary.json``: ``shifted``, ``original``).
 """
 
 from __future__ import annotations
@@ -85,6 +90,10 @@ ANCHOR_WEIGHT = 1.0
 #: ``noise_decay``): the field's exploration narrows as the policy settles.
 NOISE_DECAY = 0.25
 
+#: The log standard deviation of the deployed actions while learning is paused (settled): a
+#: noise of 2e-9, the deterministic policy in effect.
+SETTLED_LOG_STD = -20.0
+
 
 class AdaptError(ValueError):
     """An adaptation cannot run as asked; the message says why."""
@@ -119,12 +128,13 @@ def adapt(
     block: int = 1_000,
     n_envs: int = 16,
     seed: int = 0,
-    eval_episodes: int = 1_000,
+    eval_episodes: int = 2_000,
     eval_seed: int = 1_000_003,
     noise: float | None = None,
     noise_decay: float | None = None,
     rehearsal: float | None = None,
     rollback: bool = True,
+    settle: bool = True,
     resume: bool = False,
     progress: bool = False,
 ) -> dict[str, Any]:
@@ -145,6 +155,12 @@ def adapt(
     original distribution while it adapts — simulated episodes beside the deployed ones, on
     whose states the actor is held near the original policy; not counted in ``blocks`` or
     ``episodes``. Needs a shift of the scenario distribution alone (``env.scenarios.*``).
+    ``settle``: while the selected policy meets every target on the held-out scenarios (its
+    :func:`selection_key` has no excess; the frozen policy too, if it already does), learning
+    pauses and the selected policy is deployed without exploration noise; a deployed block
+    with a failure or the safety action in more than :data:`SAFETY_BUDGET` of its episodes
+    resumes learning from it. On by default (docs/adapt.md: without it the policy keeps
+    drifting after it met the targets).
 
     Raises:
         AdaptError: Bad arguments, a folder that holds another adaptation, or (``resume``) one
@@ -167,7 +183,7 @@ def adapt(
         "model": str(model), "switching": switching, "settings": list(settings),
         "episodes": episodes, "block": block, "n_envs": n_envs, "seed": seed,
         "eval_episodes": eval_episodes, "eval_seed": eval_seed, "rehearsal": rehearsal,
-        "noise_decay": noise_decay, "rollback": rollback,
+        "noise_decay": noise_decay, "rollback": rollback, "settle": settle,
     }  # fmt: skip
     if noise is not None:  # asked only when given: adaptations asked before it resume as asked
         if not (math.isfinite(noise) and 0 < noise <= 1):
@@ -196,7 +212,7 @@ def adapt(
             raise AdaptError(
                 f"--resume: {folder} holds an adaptation asked differently; ask the same "
                 "(--model, --switching, --set, --episodes, --block, --seed, --noise, "
-                "--noise-decay, --rehearsal, --rollback)"
+                "--noise-decay, --rehearsal, --rollback, --settle)"
             )
         if (folder / "summary.json").is_file():
             raise AdaptError(f"--resume: the adaptation in {folder} is already complete")
@@ -294,30 +310,44 @@ def adapt(
         }
         state["frozen"] = frozen
         # The frozen policy is the first candidate: adapting never hands back a worse one.
-        state["selected"] = {"block": 0, "key": selection_key(frozen_held_out, frozen)}
+        state["selected"] = {"block": 0, "key": selection_key(frozen_held_out, frozen),
+                             "held_out": frozen_held_out}  # fmt: skip
+        state["settled"] = settle and meets_targets(state["selected"]["key"])
         write_snapshot(chosen, ppo, env, state["selected"])
     bar = Progress(episodes, "adapt", enabled=progress)
     deployed = sum(b["episodes"] for b in state["blocks"])
     bar.update(deployed)
 
     def finish_block(stats: dict[str, Any]) -> None:
-        measured = held_out(current())
+        stats["settled"] = settled = bool(state["settled"])
+        # settled, the deployed policy is the selected one: its held-out evaluation stands
+        measured = state["selected"]["held_out"] if settled else held_out(current())
         stats["held_out"], stats["held_out_original"] = measured["shifted"], measured["original"]
         if learning.constrained is not None:  # where the constraints' multipliers stand
             multipliers = learning.constrained.multipliers.items()
             stats["multipliers"] = {n: round(m.value, 6) for n, m in multipliers}
         state["blocks"].append(stats)
         bar.update(stats["episodes"])
-        key = selection_key(measured, state["frozen"])
         stats["rolled_back"] = False
-        if key < tuple(state["selected"]["key"]):
-            state["selected"] = {"block": len(state["blocks"]), "key": key}
-            # Written before the checkpoint: interrupted between the two, a resumed run
-            # replays this block exactly and writes it again.
-            write_snapshot(chosen, ppo, env, state["selected"])
-        elif rollback:  # not deployed further: on from the selected policy (and its optimiser)
-            ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
-            stats["rolled_back"] = True
+        if settled:  # the field says whether the selected policy still meets the targets
+            share = stats["safety_activation_episodes"] / stats["episodes"]
+            # learning resumes at the next rollout (this one was drawn without noise)
+            state["settled"] = not (stats["failures"] or share > SAFETY_BUDGET)
+        else:
+            key = selection_key(measured, state["frozen"])
+            if key < tuple(state["selected"]["key"]):
+                state["selected"] = {"block": len(state["blocks"]), "key": key,
+                                     "held_out": measured}  # fmt: skip
+                # Written before the checkpoint: interrupted between the two, a resumed run
+                # replays this block exactly and writes it again.
+                write_snapshot(chosen, ppo, env, state["selected"])
+            elif rollback:  # not deployed further: on from the selected policy (and optimiser)
+                ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
+                stats["rolled_back"] = True
+            if settle and meets_targets(state["selected"]["key"]):
+                # deployed from now on, unchanged: not even this rollout's update
+                ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
+                ppo.learning_paused = state["settled"] = True
         state.update(episode_counters=vec.episode_counters.tolist(), **learning.state())
         write_snapshot(checkpoint, ppo, env, state)  # renamed whole
 
@@ -327,6 +357,7 @@ def adapt(
     noise_schedule = NoiseSchedule(
         np.asarray(state["noise_start"]), math.log(noise_decay),
         lambda: (episodes - monitor.remaining + len(monitor.rows)) / episodes,
+        settled=lambda: bool(state["settled"]),
     )  # fmt: skip
     started = time.perf_counter()
     try:
@@ -400,6 +431,11 @@ def selection_key(measured: dict[str, Any], frozen: dict[str, Any]) -> tuple[flo
     return (round(excess, 12), -round(float(shift["mean_efficiency"]), 12))
 
 
+def meets_targets(key: Sequence[float]) -> bool:
+    """Whether a :func:`selection_key` is that of a policy within every target."""
+    return float(key[0]) == 0.0
+
+
 def rehearsal_count(share: float, n_envs: int) -> int:
     """The environments that rehearse: ``share`` of ``n_envs``, rounded, at least one if
     ``share`` > 0, and at least one left deployed.
@@ -453,16 +489,26 @@ class NoiseSchedule(BaseCallback):
     """Before each rollout, the exploration noise's log standard deviation: ``start`` plus
     ``change`` times the share of the episodes deployed so far (``progress()``). Set before the
     rollout, so the update that follows computes its ratios under the noise the actions were
-    drawn with; a rolled-back policy takes the scheduled noise at the next rollout."""
+    drawn with; a rolled-back policy takes the scheduled noise at the next rollout. While
+    ``settled()``, the rollout is drawn without noise (:data:`SETTLED_LOG_STD`) and the update
+    after it is skipped (``learning_paused``): learning resumes with a rollout drawn with the
+    scheduled noise."""
 
-    def __init__(self, start: np.ndarray, change: float, progress: Callable[[], float]) -> None:
+    def __init__(
+        self, start: np.ndarray, change: float, progress: Callable[[], float],
+        settled: Callable[[], bool] = lambda: False,
+    ) -> None:  # fmt: skip
         super().__init__()
-        self.start, self.change, self.progress = start, change, progress
+        self.start, self.change, self.progress, self.settled = start, change, progress, settled
 
     def _on_rollout_start(self) -> None:
         import torch
 
+        paused = self.settled()
+        self.model.learning_paused = paused
         value = self.start + self.change * min(1.0, self.progress())
+        if paused:
+            value = np.full_like(self.start, SETTLED_LOG_STD)
         log_std: Any = self.model.policy.log_std
         with torch.no_grad():
             log_std.copy_(torch.as_tensor(value, dtype=torch.float32))

@@ -347,7 +347,8 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
     a safety action and the efficiency against deployment episodes — the deployed episodes of
     each block and the deterministic policy on held-out scenarios after it, beside the frozen
     policy's on the same held-out scenarios (dashed); a star marks the selected policy (the one
-    adapting hands back), a red cross a block with a failure. Saved as PNG."""
+    adapting hands back), an open marker a block deployed with learning paused (settled), a red
+    cross a block with a failure. Saved as PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -368,7 +369,13 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
         left.plot(x, held, marker="s", ls=":", color=color, label=f"{label}: held out")
         left.axhline(frozen["safety_activation_episodes"] / frozen["episodes"], color=color,
                      ls="--", lw=1, label=f"{label}: frozen policy")  # fmt: skip
-        right.plot(x, [b.get("mean_efficiency", np.nan) for b in blocks], marker="o", color=color)
+        deployed_efficiency = [b.get("mean_efficiency", np.nan) for b in blocks]
+        right.plot(x, deployed_efficiency, marker="o", color=color)
+        settled = np.array([b.get("settled", False) for b in blocks], dtype=bool)
+        if settled.any():  # open markers: the selected policy deployed, learning paused
+            hollow = dict(marker="o", facecolors="white", edgecolors=color, zorder=4)
+            left.scatter(x[settled], np.asarray(safety)[settled], **hollow)
+            right.scatter(x[settled], np.asarray(deployed_efficiency)[settled], **hollow)
         right.plot(x, [b["held_out"]["mean_efficiency"] for b in blocks], marker="s", ls=":",
                    color=color)  # fmt: skip
         right.axhline(frozen["mean_efficiency"], color=color, ls="--", lw=1)
@@ -384,8 +391,9 @@ def adaptation_figure(summaries: list[dict[str, Any]] | dict[str, Any], path: Pa
         if failed.any():
             left.scatter(x[failed], np.asarray(safety)[failed], marker="x", s=80, color="red",
                          zorder=5, linewidths=2, label="a block with a failure")  # fmt: skip
-    fig.suptitle(f"learning after deployment under {runs[0]['switching']} "
-                 "(dashed: the frozen policy on the held-out scenarios)", fontsize=10)  # fmt: skip
+    fig.suptitle(f"learning after deployment under {runs[0]['switching']}\n(dashed: the frozen "
+                 "policy on the held-out scenarios; open markers: learning paused, the selected "
+                 "policy deployed)", fontsize=10)  # fmt: skip
     left.set_title("episodes with a safety action", fontsize=10)
     left.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
     right.set_title("efficiency against the oracle", fontsize=10)

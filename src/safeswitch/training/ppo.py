@@ -71,6 +71,9 @@ class SwitchPPO(PPO):
         self.intervention_imitation = intervention_imitation
         #: ``(reference policy, environment mask, weight)`` (see :meth:`anchor_to`).
         self._anchor: tuple[Any, np.ndarray, float] | None = None
+        #: While true, rollouts are collected but :meth:`train` updates nothing (``safeswitch
+        #: adapt`` pauses learning while its selected policy meets every target). Not saved.
+        self.learning_paused = False
         super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
@@ -134,6 +137,8 @@ class SwitchPPO(PPO):
         return bool(super().collect_rollouts(*args, **kwargs))
 
     def train(self) -> None:
+        if self.learning_paused:
+            return
         super().train()
         if self.intervention_imitation > 0:
             self.imitate_interventions()
@@ -155,7 +160,7 @@ class SwitchPPO(PPO):
         self._anchor = (reference, columns, float(weight))
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_anchor"]
+        return [*super()._excluded_save_params(), "_anchor", "learning_paused"]
 
     def keep_anchor(self) -> None:
         """The fit of :meth:`anchor_to` on this rollout's anchored states."""
