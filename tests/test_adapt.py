@@ -60,10 +60,14 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, ad
 
 def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, adversarial_updates):
     """With adversarial updates and rollback (the default), every block's policy ranks below
-    the frozen one, so learning goes on from the frozen policy each time: the policy left after
-    the last block is the frozen one, not full throttle."""
+    the frozen one, so learning goes on from the frozen policy each time (not from the rejected
+    policy's last rollout): the policy left after the last block is the frozen one, not full
+    throttle."""
     summary = adapt("certified", tmp_path / "a", **SMALL)
     assert [b["rolled_back"] for b in summary["blocks"]] == [True, True]
+    # the update after each rollback is skipped: the restored policy does not learn from the
+    # rejected policy's rollout
+    assert adversarial_updates.count(True) == 2 and adversarial_updates.count(False) > 2
     assert summary["collisions"] == 0 and summary["selected_block"] == 0
     last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")
     frozen = load_policy("certified").model

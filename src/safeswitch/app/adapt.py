@@ -343,7 +343,9 @@ def adapt(
                 write_snapshot(chosen, ppo, env, state["selected"])
             elif rollback:  # not deployed further: on from the selected policy (and optimiser)
                 ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
-                stats["rolled_back"] = True
+                # ... which does not learn from the rejected policy's rollout: learning
+                # resumes with the next one (NoiseSchedule)
+                ppo.learning_paused = stats["rolled_back"] = True
             if settle and meets_targets(state["selected"]["key"]):
                 # deployed from now on, unchanged: not even this rollout's update
                 ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
