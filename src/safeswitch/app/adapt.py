@@ -22,7 +22,8 @@ deploying a worse policy:
   the shift and of the original distribution and ranked (:func:`selection_key`); the best so
   far — the frozen policy to begin with — is the one adapting hands back, and a block whose
   policy ranks below it is rolled back (unless ``rollback`` is off): learning goes on from the
-  selected one, so a policy the held-out evaluation found worse is not deployed further;
+  selected one (with the next rollout, not the rejected policy's), so a policy the held-out
+  evaluation found worse is not deployed further;
 * settling: while the selected policy meets every target on the held-out scenarios, learning
   pauses — the selected policy is deployed without exploration noise and nothing is updated —
   until a deployed block needs the safety action more often than :data:`SAFETY_BUDGET` (or
@@ -413,8 +414,9 @@ def selection_key(measured: dict[str, Any], frozen: dict[str, Any]) -> tuple[flo
     (``frozen``: ``held_out``, ``held_out_original``): its excess over the targets first — a
     collision outranks any excess; the safety action in at most :data:`SAFETY_BUDGET` of the
     episodes of the shift, with an efficiency there no lower than the frozen policy's; on the
-    original distribution, the safety action in at most :data:`SAFETY_BUDGET` of the episodes
-    (or the frozen policy's share, if larger) and the efficiency within
+    original distribution, the safety action in no more of the episodes than the frozen
+    policy's (no forgetting; a bound of :data:`SAFETY_BUDGET` would pass a policy that forgot
+    a little when the frozen one sits under it) and the efficiency within
     :data:`EFFICIENCY_TOLERANCE` of the frozen policy's — then the shift's efficiency."""
     shift, original = measured["shifted"], measured["original"]
     if shift["collisions"] or original["collisions"]:
@@ -427,7 +429,7 @@ def selection_key(measured: dict[str, Any], frozen: dict[str, Any]) -> tuple[flo
     excess = (
         max(0.0, share(shift) - SAFETY_BUDGET)
         + max(0.0, before_shift["mean_efficiency"] - shift["mean_efficiency"])
-        + max(0.0, share(original) - max(SAFETY_BUDGET, share(before)))
+        + max(0.0, share(original) - share(before))
         + max(0.0, before["mean_efficiency"] - EFFICIENCY_TOLERANCE - original["mean_efficiency"])
     )
     return (round(excess, 12), -round(float(shift["mean_efficiency"]), 12))
