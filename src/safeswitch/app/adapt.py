@@ -509,7 +509,8 @@ class NoiseSchedule(BaseCallback):
         import torch
 
         paused = self.settled()
-        self.model.learning_paused = paused
+        model: Any = self.model  # a SwitchPPO
+        model.learning_paused = paused
         value = self.start + self.change * min(1.0, self.progress())
         if paused:
             value = np.full_like(self.start, SETTLED_LOG_STD)
