@@ -336,21 +336,22 @@ def adapt(
             state["settled"] = not (stats["failures"] or share > SAFETY_BUDGET)
         else:
             key = selection_key(measured, state["frozen"])
-            if key < tuple(state["selected"]["key"]):
+            better = key < tuple(state["selected"]["key"])
+            if better:
                 state["selected"] = {"block": len(state["blocks"]), "key": key,
                                      "held_out": measured}  # fmt: skip
                 # Written before the checkpoint: interrupted between the two, a resumed run
                 # replays this block exactly and writes it again.
                 write_snapshot(chosen, ppo, env, state["selected"])
-            elif rollback:  # not deployed further: on from the selected policy (and optimiser)
+            state["settled"] = settle and meets_targets(state["selected"]["key"])
+            if not better and (rollback or state["settled"]):
+                # not deployed further: on from (or settled on) the selected policy and its
+                # optimiser
                 ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
-                # ... which does not learn from the rejected policy's rollout: learning
-                # resumes with the next one (NoiseSchedule)
-                ppo.learning_paused = stats["rolled_back"] = True
-            if settle and meets_targets(state["selected"]["key"]):
-                # deployed from now on, unchanged: not even this rollout's update
-                ppo.set_parameters(str(chosen / "model.zip"), device="cpu")
-                ppo.learning_paused = state["settled"] = True
+                stats["rolled_back"] = True
+            # A restored policy does not learn from the rejected policy's rollout (learning
+            # resumes with the next one: NoiseSchedule), a settled one not even from its own.
+            ppo.learning_paused = stats["rolled_back"] or state["settled"]
         state.update(episode_counters=vec.episode_counters.tolist(), **learning.state())
         write_snapshot(checkpoint, ppo, env, state)  # renamed whole
 
