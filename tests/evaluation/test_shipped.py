@@ -49,9 +49,18 @@ def test_every_shipped_policy_loads_with_its_config_and_acts_in_bounds():
 
 
 def test_training_with_a_safety_net_was_collision_free_and_without_one_was_not():
-    for name in ("paper", "paper_warm", "paper_scratch", "certified"):
+    """Under a certified logic (the `paper` policy trains under `guarded`) training cannot
+    collide; under the paper logic alone, a heuristic on the friction plant, it rarely does;
+    without a switch a third of the training episodes end in a collision."""
+    for name in ("paper", "certified"):
+        config = load_config(SHIPPED_DIR / name / "config.yaml")
+        assert config.train_env.switching in ("guarded", "certified")
         assert metrics(name)["training"]["collisions"] == 0
-    assert metrics("none")["training"]["collisions"] > 0
+    for name in ("paper_warm", "paper_scratch", "no_adas"):
+        training = metrics(name)["training"]
+        assert training["collisions"] <= 0.005 * training["episodes"]
+    unswitched = metrics("none")["training"]
+    assert unswitched["collisions"] > 0.2 * unswitched["episodes"]
     for name in NAMES:
         assert metrics(name)["timesteps"] >= 1_200_000
     # the warm-started policy's warm start (the planner and its clone driving) did not collide

@@ -91,7 +91,7 @@ ENTRIES: tuple[Entry, ...] = (
         "ppo-paper-warm",
         "learned",
         "paper_warm",
-        "PPO, paper switching, R_ADAS on, warm-started from the planner (ours)",
+        "PPO, paper switching, R_ADAS on, warm-started from the planner, speed limiter (ours)",
     ),
     Entry(
         "ppo-paper-scratch",
@@ -104,7 +104,7 @@ ENTRIES: tuple[Entry, ...] = (
         "ppo-certified",
         "learned",
         "certified",
-        "PPO, certified switching, R_ADAS on, from scratch with progress shaping (ours)",
+        "PPO, certified switching, R_ADAS on, from scratch with constraints (ours)",
     ),
     Entry("ppo-unshielded", "learned", "none", "PPO trained and run without switching logic"),
 )
