@@ -2,8 +2,10 @@
 collides — the shipped traffic policies beside the gap planner and the rule.
 
 On the same random scenes (seed 1000003, the README's) of the ``train`` and ``test`` traffic
-families: the gap planner (``--controller gap_planner``, under ``certified``), the rule-based
-system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the shipped
+families: the gap planner (``--controller gap_planner``, under ``certified``, with the filter's
+default zones and with the narrower ones the shipped ``traffic-certified`` policy's recipe
+uses), the rule-based system (``PID_th`` proposing throughout) under ``certified`` and under
+``paper``, the shipped
 ``traffic-certified`` and ``traffic-paper`` policies (each under the logic it was trained with)
 and any trained runs given with ``--model``; and the shipped ``traffic-certified`` policy in
 ``light``, ``medium`` and ``heavy`` traffic too. Every row is ``safeswitch evaluate``'s summary, cut
@@ -31,9 +33,13 @@ FAMILIES = ("train", "test")
 #: The densities the shipped certified policy is also measured at.
 DENSITIES = ("light", "medium", "heavy")
 FIELDS = (
-    "switching", "episodes", "collisions", "safety_activation_episodes", "cleared_episodes",
-    "stops", "comfort_violation_fraction", "mean_efficiency", "mean_time_to_clear_s",
+    "switching", "episodes", "collisions", "failures", "safety_activation_episodes",
+    "cleared_episodes", "stops", "comfort_violation_fraction", "speeding_episodes",
+    "max_speed_kmh", "mean_efficiency", "mean_time_to_clear_s",
 )  # fmt: skip
+#: The certified filter's narrower zones (``configs/traffic_certified.yaml``; sound behind the
+#: speed limiter its policy drives with).
+NARROW_ZONES = ("env.certified.ego_max_lateral_m=0.45", "env.certified.zone_margin_m=0.9")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,23 +50,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args(argv)
-    shipped = ("learned:traffic-certified", "learned", "traffic-certified", None)
-    runs: list[tuple[str, str, str | None, str | None]] = [
-        ("gap_planner", "gap_planner", None, None),
-        ("rule", "rule", None, "certified"),
-        ("rule", "rule", None, "paper"),
+    shipped = ("learned:traffic-certified", "learned", "traffic-certified", None, ())
+    runs: list[tuple[str, str, str | None, str | None, tuple[str, ...]]] = [
+        ("gap_planner", "gap_planner", None, None, ()),
+        ("gap_planner (narrower zones)", "gap_planner", None, None, NARROW_ZONES),
+        ("rule", "rule", None, "certified", ()),
+        ("rule", "rule", None, "paper", ()),
         shipped,
-        ("learned:traffic-paper", "learned", "traffic-paper", None),
-        *((f"learned:{Path(m).name}", "learned", m, None) for m in args.model),
+        ("learned:traffic-paper", "learned", "traffic-paper", None, ()),
+        *((f"learned:{Path(m).name}", "learned", m, None, ()) for m in args.model),
     ]
     # every family for every controller; the shipped certified policy at every density too
     cells = [(family, run) for family in FAMILIES for run in runs]
     cells += [(preset, shipped) for preset in DENSITIES]
     rows = []
-    for family, (name, controller, model, switching) in cells:
+    for family, (name, controller, model, switching, settings) in cells:
         began = time.perf_counter()
         summary = evaluate(controller, model, "random", args.episodes, EVAL_SEED, switching,
-                           None, traffic=family)  # fmt: skip
+                           None, traffic=family, settings=settings)  # fmt: skip
         row = {"controller": name, "traffic": family, **{k: summary[k] for k in FIELDS}}
         row["wall_time_s"] = round(time.perf_counter() - began, 1)
         rows.append(row)
