@@ -16,7 +16,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from safeswitch.training.config import EnvPolicyConfig
+from safeswitch.leftturn.config import CertifiedConfig
+from safeswitch.training.config import EnvPolicyConfig, load_config
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -95,6 +96,78 @@ def left_turn(config: str, scenarios: int = 1000) -> Row | None:
         "measured": measured,
         "checks": checks,
         "source": source,
+    }
+
+
+#: The densities a traffic recipe's safety target holds at (``train_seeds.py --traffic-eval``).
+TRAFFIC_FAMILIES = ("test", "light", "medium", "heavy")
+
+
+def traffic(config: str = "traffic_certified") -> Row | None:
+    """Traffic from every leg under ``certified`` (``train_seeds.py --traffic-eval``), against
+    the gap planner under the same filter (``traffic_certified.py``)."""
+    data, planners = _load(f"train_seeds_{config}.json"), _load("traffic_certified.json")
+    if data is None or planners is None:
+        return None
+    runs = sorted(data["runs"], key=lambda r: r["seed"])
+    recipe = load_config(config)
+    narrow = recipe.env.certified.ego_max_lateral_m < CertifiedConfig().ego_max_lateral_m
+    planner_name = "gap_planner (narrower zones)" if narrow else "gap_planner"
+    planner = next(r for r in planners["rows"]
+                   if r["controller"] == planner_name and r["traffic"] == "test")  # fmt: skip
+    families = [f for f in TRAFFIC_FAMILIES if all(f in r.get("traffic", {}) for r in runs)]
+
+    def test(key: str) -> Callable[[dict[str, Any]], Any]:
+        return lambda run: run["traffic"]["test"][key]
+
+    checks = {
+        "from a random start (no demonstrations)": all(
+            r["warm_start_collisions"] is None for r in runs
+        ),
+        "0 collisions in training and on 1,000 `test` scenes": all(
+            r["training_collision_episodes"] == 0
+            and not r["warm_start_collisions"]
+            and r["traffic"]["test"]["failures"] == 0
+            for r in runs
+        ),
+        "safety action ≤ 5 % of episodes at every density": len(families) == 4
+        and all(
+            r["traffic"][f]["safety_activation_episodes"] <= 0.05 * r["traffic"][f]["episodes"]
+            for r in runs
+            for f in families
+        ),
+        f"efficiency ≥ the gap planner's ({planner['mean_efficiency']:.3f} on `test`, "
+        "the same filter)": all(test("mean_efficiency")(r) >= planner["mean_efficiency"]
+                                 for r in runs),  # fmt: skip
+    }
+    safety = "; ".join(
+        f"{f} {_col(runs, lambda r, f=f: r['traffic'][f]['safety_activation_episodes'])}"
+        for f in families
+    )
+    measured = (
+        f"collisions: warm start {_col(runs, lambda r: r['warm_start_collisions'] or 0)}, "
+        f"training {_col(runs, 'training_collision_episodes')}, `test` "
+        f"{_col(runs, test('failures'))}; safety action in episodes of 1,000: {safety}; "
+        f"`test`: cleared {_col(runs, test('cleared_episodes'))}, efficiency "
+        f"{_col(runs, test('mean_efficiency'), '.3f')}, top "
+        f"{_col(runs, test('max_speed_kmh'), '.1f')} km/h (the gap planner: cleared "
+        f"{planner['cleared_episodes']}, {planner['mean_efficiency']:.3f})"
+    )
+    taught = recipe.warm_start.episodes > 0
+    method = (
+        f"a clone of the {recipe.warm_start.teacher.replace('_', ' ')} "
+        f"({recipe.warm_start.rounds} DAgger rounds), then PPO with R_ADAS"
+        if taught
+        else "PPO with R_ADAS from a random start"
+    )
+    return {
+        "plant": "traffic from every leg, `certified`",
+        "method": f"{method}, `configs/{config}.yaml`",
+        "seeds": [r["seed"] for r in runs],
+        "measured": measured,
+        "checks": checks,
+        "source": f"python benchmarks/train_seeds.py --config {config} --parallel 2 "
+        f"--traffic-eval {' '.join(TRAFFIC_FAMILIES)}; python benchmarks/traffic_certified.py",
     }
 
 
@@ -269,7 +342,7 @@ def own_plant(name: str, label: str, command: str) -> list[Row]:
 
 def rows() -> list[Row]:
     sources: list[Callable[[], list[Row]]] = [
-        lambda: [r for r in (left_turn("paper"), left_turn("certified")) if r],
+        lambda: [r for r in (left_turn("paper"), left_turn("certified"), traffic()) if r],
         highway,
         lambda: own_plant(
             "Follow-v0_100k",

@@ -11,8 +11,12 @@ full stops, cuts, cleared, efficiency.
 Every seed's row is reported (no seed is picked over another). 2 to 4 minutes per seed on a
 two-core machine, by recipe.
 
+With ``--traffic-eval FAMILY ...`` (a recipe trained in traffic) each run is also evaluated on
+1,000 scenes of each traffic family named, as ``safeswitch evaluate --model RUN --traffic
+FAMILY`` does.
+
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
-[--deploy LOGIC] [--parallel N] [--keep DIR] [--out FILE]``; writes
+[--deploy LOGIC] [--parallel N] [--keep DIR] [--traffic-eval FAMILY ...] [--out FILE]``; writes
 ``benchmarks/results/train_seeds_<config>[_<switching>][_deployed_<logic>].json``.
 """
 
@@ -27,6 +31,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import _common
+from safeswitch.app.evaluate import evaluate
 from safeswitch.io import write_json
 from safeswitch.training import train
 from safeswitch.training.config import TrainConfig, load_config
@@ -34,6 +39,8 @@ from safeswitch.training.policies import load_policy
 from safeswitch.training.run import evaluate_trained
 
 RESULTS = Path(__file__).parent / "results"
+#: Scenes per traffic family with ``--traffic-eval``.
+TRAFFIC_EPISODES = 1000
 #: What each evaluation reports (``safeswitch evaluate``'s fields).
 EVALUATED = (
     "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
@@ -43,10 +50,11 @@ EVALUATED = (
 
 
 def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
-    t, e = metrics["training"], metrics["evaluation"]
+    t, e, warm = metrics["training"], metrics["evaluation"], metrics.get("warm_start")
     assert isinstance(t, dict) and isinstance(e, dict)
     return {
         "seed": seed,
+        "warm_start_collisions": warm["collisions"] if isinstance(warm, dict) else None,
         "timesteps": metrics["timesteps"],
         "wall_time_s": metrics["wall_time_s"],
         "training_collision_episodes": t["collision_episodes"],
@@ -59,11 +67,16 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
 
 
 def one_seed(
-    config: TrainConfig, seed: int, deploy: str | None, keep: Path | None = None
+    config: TrainConfig,
+    seed: int,
+    deploy: str | None,
+    keep: Path | None = None,
+    families: tuple[str, ...] = (),
 ) -> dict[str, object]:
     """Train ``config`` with ``seed`` (one torch thread) in a temporary run directory (or in
     ``keep/seed_<seed>``) and return its row (with ``deploy``: also evaluated under that
-    logic)."""
+    logic; with ``families``: also on 1,000 scenes of each of those traffic families, as
+    ``safeswitch evaluate --model RUN --traffic FAMILY`` does)."""
     with tempfile.TemporaryDirectory() as tmp:
         run = keep / f"seed_{seed}" if keep else Path(tmp)
         metrics = train(replace(config, seed=seed, torch_threads=1), run, progress_bar=False)
@@ -75,6 +88,13 @@ def one_seed(
             e = evaluate_trained(load_policy(run), deployed, config.eval_episodes,
                                  config.eval_seed)  # fmt: skip
             result["deployed"] = {"switching": deploy, **{k: e[k] for k in EVALUATED}}
+        if families:
+            result["traffic"] = {
+                family: {k: e[k] for k in (*EVALUATED, "failures", "episodes")}
+                for family in families
+                for e in [evaluate("learned", str(run), "random", TRAFFIC_EPISODES,
+                                   config.eval_seed, None, None, traffic=family)]
+            }  # fmt: skip
     return result
 
 
@@ -98,14 +118,22 @@ def main(argv: list[str] | None = None) -> int:
         "--keep", type=Path,
         help="keep each run as KEEP/seed_<seed> (for a campaign: bench_campaign.py --model)",
     )  # fmt: skip
+    parser.add_argument(
+        "--traffic-eval", nargs="+", default=[], metavar="FAMILY",
+        help="a recipe trained in traffic: also evaluate each run on 1,000 scenes of each of "
+        "these traffic families (e.g. test light medium heavy)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     config = load_config(args.config)
+    if args.traffic_eval and config.traffic_settings is None:
+        parser.error(f"--traffic-eval needs a recipe trained in traffic; {args.config!r} is not")
     if args.switching:
         config = replace(config, env=replace(config.env, switching=args.switching),
                          deploy_switching=None)  # fmt: skip
     with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
         futures = [
-            pool.submit(one_seed, config, seed, args.deploy, args.keep) for seed in args.seeds
+            pool.submit(one_seed, config, seed, args.deploy, args.keep, tuple(args.traffic_eval))
+            for seed in args.seeds
         ]
         rows = []
         for future in futures:

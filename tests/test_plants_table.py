@@ -1,0 +1,79 @@
+"""``benchmarks/plants.py``: issue #39's table is computed from the benchmarks' results — the
+traffic row's checks against what a results file records."""
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
+
+
+@pytest.fixture
+def plants(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    spec = importlib.util.spec_from_file_location("plants_under_test", BENCHMARKS / "plants.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(module, "RESULTS", tmp_path)
+    yield module
+    sys.modules.pop("plants_under_test", None)
+
+
+def family(safety, efficiency=0.40, failures=0):
+    return {"episodes": 1000, "failures": failures, "safety_activation_episodes": safety,
+            "cleared_episodes": 200, "mean_efficiency": efficiency, "max_speed_kmh": 30.0}
+
+
+def write(tmp_path, runs, planners):
+    (tmp_path / "train_seeds_traffic_certified.json").write_text(json.dumps({"runs": runs}))
+    (tmp_path / "traffic_certified.json").write_text(json.dumps({"rows": planners}))
+
+
+PLANNERS = [
+    {"controller": "gap_planner", "traffic": "test", "cleared_episodes": 100,
+     "mean_efficiency": 0.30},
+    {"controller": "gap_planner (narrower zones)", "traffic": "test", "cleared_episodes": 230,
+     "mean_efficiency": 0.38},
+]  # fmt: skip
+
+
+def run(seed, warm=0, **families):
+    densities = {f: family(20) for f in ("test", "light", "medium", "heavy")}
+    densities.update(families)
+    return {"seed": seed, "warm_start_collisions": warm, "training_collision_episodes": 0,
+            "traffic": densities}  # fmt: skip
+
+
+def test_the_traffic_row_checks_every_density_and_the_planner_under_the_same_filter(
+    plants, tmp_path
+):
+    write(tmp_path, [run(1), run(2), run(3)], PLANNERS)
+    row = plants.traffic()
+    checks = row["checks"]
+    # the shipped recipe is a clone: a run with a warm start is not "from a random start"
+    assert checks["from a random start (no demonstrations)"] is False
+    assert "clone of the gap planner" in row["method"] and row["seeds"] == [1, 2, 3]
+    assert checks["0 collisions in training and on 1,000 `test` scenes"] is True
+    assert checks["safety action ≤ 5 % of episodes at every density"] is True
+    # the recipe's narrower zones: compared with the planner under them (0.38), not 0.30
+    efficiency = [k for k in checks if k.startswith("efficiency")]
+    assert efficiency == ["efficiency ≥ the gap planner's (0.380 on `test`, the same filter)"]
+    assert checks[efficiency[0]] is True  # 0.40 ≥ 0.38
+
+
+def test_one_density_over_the_budget_or_one_failure_misses_the_row(plants, tmp_path):
+    write(tmp_path, [run(1), run(2, light=family(51)), run(3)], PLANNERS)
+    assert plants.traffic()["checks"]["safety action ≤ 5 % of episodes at every density"] is False
+    write(tmp_path, [run(1), run(2), run(3, test=family(20, failures=1))], PLANNERS)
+    checks = plants.traffic()["checks"]
+    assert checks["0 collisions in training and on 1,000 `test` scenes"] is False
+    write(tmp_path, [run(1), run(2, test=family(20, efficiency=0.37)), run(3)], PLANNERS)
+    checks = plants.traffic()["checks"]
+    assert not checks["efficiency ≥ the gap planner's (0.380 on `test`, the same filter)"]
+
+
+def test_no_results_no_row(plants):
+    assert plants.traffic() is None
