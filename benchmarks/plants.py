@@ -137,8 +137,9 @@ def traffic(config: str = "traffic_certified") -> Row | None:
             for f in families
         ),
         f"efficiency ≥ the gap planner's ({planner['mean_efficiency']:.3f} on `test`, "
-        "the same filter)": all(test("mean_efficiency")(r) >= planner["mean_efficiency"]
-                                 for r in runs),  # fmt: skip
+        "the same filter)": all(
+            test("mean_efficiency")(r) >= planner["mean_efficiency"] for r in runs
+        ),
     }
     safety = "; ".join(
         f"{f} {_col(runs, lambda r, f=f: r['traffic'][f]['safety_activation_episodes'])}"

@@ -23,8 +23,14 @@ def plants(monkeypatch, tmp_path):
 
 
 def family(safety, efficiency=0.40, failures=0):
-    return {"episodes": 1000, "failures": failures, "safety_activation_episodes": safety,
-            "cleared_episodes": 200, "mean_efficiency": efficiency, "max_speed_kmh": 30.0}
+    return {
+        "episodes": 1000,
+        "failures": failures,
+        "safety_activation_episodes": safety,
+        "cleared_episodes": 200,
+        "mean_efficiency": efficiency,
+        "max_speed_kmh": 30.0,
+    }
 
 
 def write(tmp_path, runs, planners):
