@@ -30,6 +30,9 @@ from safeswitch.training.policies import load_policy
 
 PATH = Path(__file__).resolve().parent.parent / "data" / "leftturn_golden.npz"
 PRE_FRICTION = PATH.with_name("leftturn_golden_pre_friction.npz")
+#: The learned policies the runs drive (``golden_policies/<name>``: the shipped policies' files
+#: at commit f53b12d, before their retraining).
+POLICIES = PATH.with_name("golden_policies")
 EPISODES = 300
 SEED = 1_000_003
 COLUMNS = ("throttle", "brake", "safety_active", "reason", "reward", "ego_speed", "separation")
@@ -37,10 +40,11 @@ COLUMNS = ("throttle", "brake", "safety_active", "reason", "reward", "ego_speed"
 
 def runs():
     """(name, task config, policy factory) of every recorded run."""
-    # the policy shipped as `paper` when the runs were recorded: the warm-started one, which
-    # ships as `paper-warm` since the `paper` policy is trained from a random initialisation
-    shipped = load_policy("paper-warm")
-    scratch = load_policy("paper-scratch")
+    # the policies shipped as `paper-warm` (`paper` when the runs were recorded) and
+    # `paper-scratch` until they were retrained on the plant with tyre friction (issue #39),
+    # kept as test data: the golden runs pin the task's decisions, whatever ships
+    shipped = load_policy(POLICIES / "paper_warm")
+    scratch = load_policy(POLICIES / "paper_scratch")
     episode = {"episode": {"learned_scope": "episode"}}
 
     def learned(policy):
