@@ -3,16 +3,15 @@ collides — the shipped traffic policies beside the gap planner and the rule.
 
 On the same random scenes (seed 1000003, the README's) of the ``train`` and ``test`` traffic
 families: the gap planner (``--controller gap_planner``, under ``certified``, with the filter's
-default zones and with the narrower ones the shipped ``traffic-certified`` policy's recipe
-uses), the rule-based system (``PID_th`` proposing throughout) under ``certified`` and under
-``paper``, the shipped
-``traffic-certified`` and ``traffic-paper`` policies (each under the logic it was trained with)
-and any trained runs given with ``--model``; and the shipped ``traffic-certified`` policy in
-``light``, ``medium`` and ``heavy`` traffic too. Every row is ``safeswitch evaluate``'s summary, cut
-to the fields the README quotes.
+default zones and with the zones of the shipped ``traffic-certified`` policy's recipe), the
+rule-based system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the
+shipped ``traffic-certified`` and ``traffic-paper`` policies (each under the logic it was
+trained with) and any trained runs given with ``--model``; and the shipped
+``traffic-certified`` policy in ``light``, ``medium`` and ``heavy`` traffic too. Every row is
+``safeswitch evaluate``'s summary, cut to the fields the README quotes.
 
 Run: ``python benchmarks/traffic_certified.py [--episodes N] [--model RUN ...] [--json]``
-(about six minutes at the default 1,000 scenes per family); writes
+(about eight minutes at the default 1,000 scenes per family, one core); writes
 ``benchmarks/results/traffic_certified.json``.
 """
 
@@ -27,6 +26,7 @@ import _common
 from safeswitch.app.evaluate import evaluate
 from safeswitch.app.reproduce import EVAL_SEED
 from safeswitch.io import write_json
+from safeswitch.training.config import load_config
 
 RESULTS = Path(__file__).parent / "results" / "traffic_certified.json"
 FAMILIES = ("train", "test")
@@ -37,9 +37,15 @@ FIELDS = (
     "cleared_episodes", "stops", "comfort_violation_fraction", "speeding_episodes",
     "max_speed_kmh", "mean_efficiency", "mean_time_to_clear_s",
 )  # fmt: skip
-#: The certified filter's narrower zones (``configs/traffic_certified.yaml``; sound behind the
-#: speed limiter its policy drives with).
-NARROW_ZONES = ("env.certified.ego_max_lateral_m=0.45", "env.certified.zone_margin_m=0.9")
+
+
+def recipe_zones() -> tuple[str, ...]:
+    """The certified filter's zones of the shipped ``traffic-certified`` recipe
+    (``configs/traffic_certified.yaml``: narrower than the default, sound behind the speed
+    limiter its policy drives with), as ``--set`` settings."""
+    zones = load_config("traffic_certified").env.certified
+    return (f"env.certified.ego_max_lateral_m={zones.ego_max_lateral_m}",
+            f"env.certified.zone_margin_m={zones.zone_margin_m}")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     shipped = ("learned:traffic-certified", "learned", "traffic-certified", None, ())
     runs: list[tuple[str, str, str | None, str | None, tuple[str, ...]]] = [
         ("gap_planner", "gap_planner", None, None, ()),
-        ("gap_planner (narrower zones)", "gap_planner", None, None, NARROW_ZONES),
+        ("gap_planner (narrower zones)", "gap_planner", None, None, recipe_zones()),
         ("rule", "rule", None, "certified", ()),
         ("rule", "rule", None, "paper", ()),
         shipped,
