@@ -5,7 +5,7 @@ import csv
 import pytest
 from PIL import Image
 
-from safeswitch.report.training import training_curves, training_story
+from safeswitch.report.training import collision_steps, training_curves, training_story
 from safeswitch.training.callbacks import PROGRESS_FIELDS
 
 
@@ -54,3 +54,19 @@ def test_a_log_without_finished_episodes_is_refused_by_name(tmp_path):
     write_progress(path, [{"timesteps": 100, "return": ""}])
     with pytest.raises(ValueError, match=r"progress\.csv has no finished episodes"):
         training_story(path)
+
+
+def test_the_curves_mark_every_rollout_in_which_training_collided(tmp_path):
+    """A figure that leaves out a collision is a defect: the running total's increments are
+    the collisions, the rollout that finished no episode included."""
+    rows = [rollout(1000 * (k + 1), 1500.0) | {"collisions_total": 0} for k in range(10)]
+    rows[3]["collisions_total"] = 2
+    rows[4]["collisions_total"] = rows[5]["collisions_total"] = 2
+    rows[6] = {"timesteps": 7000, "return": "", "collisions_total": 3}
+    rows[7]["collisions_total"] = rows[8]["collisions_total"] = rows[9]["collisions_total"] = 3
+    path = tmp_path / "progress.csv"
+    write_progress(path, rows)
+    assert collision_steps(path) == [(4000, 2), (7000, 1)]
+    training_curves(path, tmp_path / "curves.png")
+    write_progress(path, [rollout(1000, 1500.0)])  # a log without the running total
+    assert collision_steps(path) == []

@@ -36,27 +36,51 @@ def steps_label(steps: float) -> str:
     return f"{steps:.0f}"
 
 
+def collision_steps(progress_csv: str | Path) -> list[tuple[int, int]]:
+    """``(time step, collisions)`` of every rollout in which training collided, from the log's
+    running total (empty for a log that does not record it)."""
+    with open(progress_csv, encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    out, before = [], 0
+    for row in rows:
+        total = int(float(row.get("collisions_total") or before))
+        if total > before:
+            out.append((int(row["timesteps"]), total - before))
+        before = total
+    return out
+
+
 def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = "") -> None:
     """Eight panels against timesteps: the episode return and each reward term's per-episode
     sum (not normalised; the paper's Fig. 5), then the share of episodes that cut in front and
-    the share with a safety action, each averaged over a rollout's finished episodes."""
+    the share with a safety action, each averaged over a rollout's finished episodes. Every
+    rollout in which training collided is marked along the return panel's foot (a red tick)
+    and the total is in the title."""
     with open(progress_csv, encoding="utf-8") as handle:
         rows = [r for r in csv.DictReader(handle) if r["return"] != ""]
     if not rows:
         raise ValueError(f"{progress_csv} has no finished episodes yet")
     steps = [int(r["timesteps"]) for r in rows]
+    collisions = collision_steps(progress_csv)
     fig, axes = plt.subplots(4, 2, figsize=(10, 10.5), sharex=True)
     for ax, (key, label) in zip(axes.ravel(), PANELS, strict=True):
         ax.plot(steps, [float(r[key]) for r in rows], lw=1.2)
         ax.set_title(label, fontsize=10)
         ax.grid(alpha=0.3)
+    total = sum(n for _, n in collisions)
+    if collisions:  # a rug of red ticks along the return panel's foot, one per rollout
+        ax = axes[0, 0]
+        ax.plot([step for step, _ in collisions], [0.03] * len(collisions), "|", color="red",
+                ms=10, transform=ax.get_xaxis_transform(),
+                label=f"collision in training ({total})")  # fmt: skip
+        ax.legend(fontsize=8, loc="lower right")
+    title = (title + "; " if title else "") + f"collisions in training: {total}"
     for ax in axes[-1]:
         ax.set_xlabel("time steps")
         # a few ticks, written short (400k, 1.2M): legible at any run length
         ax.xaxis.set_major_locator(MaxNLocator(5))
         ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: steps_label(x)))
-    if title:
-        fig.suptitle(title)
+    fig.suptitle(title)
     fig.tight_layout()
     with replacing(out_png) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
