@@ -89,12 +89,12 @@ def one_seed(
                                  config.eval_seed)  # fmt: skip
             result["deployed"] = {"switching": deploy, **{k: e[k] for k in EVALUATED}}
         if families:
-            result["traffic"] = {
-                family: {k: e[k] for k in (*EVALUATED, "failures", "episodes")}
-                for family in families
-                for e in [evaluate("learned", str(run), "random", TRAFFIC_EPISODES,
-                                   config.eval_seed, None, None, traffic=family)]
-            }  # fmt: skip
+            per_family = {}
+            for family in families:
+                e = evaluate("learned", str(run), "random", TRAFFIC_EPISODES, config.eval_seed,
+                             None, None, traffic=family)  # fmt: skip
+                per_family[family] = {k: e[k] for k in (*EVALUATED, "failures", "episodes")}
+            result["traffic"] = per_family
     return result
 
 

@@ -40,7 +40,10 @@ def collision_steps(progress_csv: str | Path) -> list[tuple[int, int]]:
     """``(time step, collisions)`` of every rollout in which training collided, from the log's
     running total (empty for a log that does not record it)."""
     with open(progress_csv, encoding="utf-8") as handle:
-        rows = list(csv.DictReader(handle))
+        return _collision_steps(list(csv.DictReader(handle)))
+
+
+def _collision_steps(rows: list[dict[str, str]]) -> list[tuple[int, int]]:
     out, before = [], 0
     for row in rows:
         total = int(float(row.get("collisions_total") or before))
@@ -57,11 +60,13 @@ def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = 
     rollout in which training collided is marked along the return panel's foot (a red tick)
     and the total is in the title."""
     with open(progress_csv, encoding="utf-8") as handle:
-        rows = [r for r in csv.DictReader(handle) if r["return"] != ""]
+        logged = list(csv.DictReader(handle))
+    # every rollout counts its collisions, those that finished no episode too
+    collisions = _collision_steps(logged)
+    rows = [r for r in logged if r["return"] != ""]
     if not rows:
         raise ValueError(f"{progress_csv} has no finished episodes yet")
     steps = [int(r["timesteps"]) for r in rows]
-    collisions = collision_steps(progress_csv)
     fig, axes = plt.subplots(4, 2, figsize=(10, 10.5), sharex=True)
     for ax, (key, label) in zip(axes.ravel(), PANELS, strict=True):
         ax.plot(steps, [float(r[key]) for r in rows], lw=1.2)
