@@ -269,7 +269,7 @@ def test_the_certified_traffic_policy_clears_more_scenes_than_the_rule(traffic_r
 @missing("traffic_certified")
 def test_the_certified_traffic_policy_learned_from_a_random_start():
     """Issue #39's traffic row asks for PPO from a random start; the shipped policy is a clone of
-    the gap planner (from a random start PPO clears about half as many `test` scenes:
+    the gap planner (from a random start PPO clears fewer `test` scenes:
     docs/learning_experiments.md, "A coarser decision rate")."""
     config = load_config(SHIPPED_DIR / "traffic_certified" / "config.yaml")
     assert config.warm_start.episodes == 0 and metrics("traffic_certified")["warm_start"] is None

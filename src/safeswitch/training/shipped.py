@@ -36,8 +36,8 @@ MISSING_TARGETS = {
         "benchmarks/certified_ceiling.py, docs/learning_experiments.md)"
     ),
     "traffic_certified": (
-        "a clone of the gap planner, not PPO from a random start (which clears about half as "
-        "many test scenes, docs/learning_experiments.md); it needs the filter in 58 of 1,000 "
+        "a clone of the gap planner, not PPO from a random start (which clears fewer test "
+        "scenes, docs/learning_experiments.md); it needs the filter in 58 of 1,000 "
         "test-family scenes (issue #39 asks <= 5 %; 4.8-8.6 % across the densities) and "
         "reaches 0.366 of the oracle, its teacher 0.384 under the same filter "
         "(benchmarks/traffic_certified.py, docs/traffic.md)"
