@@ -55,9 +55,11 @@ def test_the_best_validated_policy_becomes_the_runs_policy(tmp_path):
     assert metrics["selected"]["best_timesteps"] == int(table[chosen]["timesteps"])
     assert metrics["selected"]["best_return"] == pytest.approx(returns[chosen])
     assert (run / "model.zip").read_bytes() == (run / "best" / "model.zip").read_bytes()
-    assert (run / "last" / "model.zip").is_file()
     # the files that ship are the policy that was validated: same return on the same scenarios
     assert validation_return(run, config) == pytest.approx(returns[chosen], rel=1e-9)
+    # the last policy stays usable beside it: its config is the run's, one level up
+    assert load_policy(run / "last").config == load_policy(run).config
+    assert main(["evaluate", "--model", str(run / "last"), "--episodes", "4", "--json"]) == 0
 
 
 def test_a_resumed_run_keeps_the_best_it_had(tmp_path, interrupted_training):

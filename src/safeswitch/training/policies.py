@@ -182,9 +182,9 @@ def resolve_model_dir(model: str | Path) -> Path:
 
 
 def run_config_path(model_dir: Path) -> Path:
-    """The ``config.yaml`` of the run a model folder belongs to (a checkpoint's is two levels
-    up)."""
-    for folder in (model_dir, model_dir.parent.parent):
+    """The ``config.yaml`` of the run a model folder belongs to: the run's own, one level up
+    for its ``best/`` and ``last/`` policies, two for a checkpoint."""
+    for folder in (model_dir, model_dir.parent, model_dir.parent.parent):
         if (folder / "config.yaml").is_file():
             return folder / "config.yaml"
     raise FileNotFoundError(f"no config.yaml for the policy in {model_dir} (nor in its run)")
