@@ -20,6 +20,14 @@ policy can (the search is finite). Run::
     python benchmarks/certified_ceiling.py [--config certified] [--default-zones] \
         [--episodes 1000] [--out benchmarks/results/certified_ceiling.json]
 
+``--careful`` asks the same of a careful driver: the cross-entropy method on *every* scene,
+each tick on which a sequence breaks a comfort limit, passes the speed limit or needs the
+filter costing it 10 s — more than any difference in time to clear, so the ranking is: clear,
+then the fewest such ticks, then soonest. It reports how many scenes a sequence clears
+cleanly (no such tick), how many only by breaking a rule or leaning on the filter, and the
+careful driver's efficiency against the oracle (a scene not cleared cleanly counts as never
+cleared) — the ceiling of a policy that keeps the rules the shipped policies keep.
+
 ``--default-zones`` puts the filter's default conflict zones (the ego within 0.6 m of its route,
 1.2 m of margin) in place of the recipe's (``configs/certified.yaml``: 0.45 m and 0.9 m).
 """
@@ -39,13 +47,16 @@ SEGMENT_S = 0.5  # one open-loop action per half second
 EVAL_SEED = 1_000_003
 
 
-def _outcome(task: Any, scenarios: Any, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Time to clear (NaN: never) and final progress of the ego, one episode per row of
-    ``actions`` [B, segments] (the learned action held over each segment)."""
+def _outcome(
+    task: Any, scenarios: Any, actions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Time to clear (NaN: never), final progress of the ego and the ticks on which a comfort
+    limit was broken, the speed limit passed or the filter acted (a careful driver's "dirty"
+    ticks), one episode per row of ``actions`` [B, segments] (the learned action held over
+    each segment)."""
     from safeswitch.evaluation.rollout import rollout
 
-    config = task.config
-    per_segment = round(SEGMENT_S / config.episode.dt)
+    per_segment = task.config.episode.horizon_ticks // actions.shape[1]
     last: list[np.ndarray] = []
 
     def policy(obs: Any, state: Any, tick: int) -> np.ndarray:
@@ -56,7 +67,78 @@ def _outcome(task: Any, scenarios: Any, actions: np.ndarray) -> tuple[np.ndarray
 
     result = rollout(task, scenarios, policy, on_tick)
     assert not result.collision.any(), "a collision under certified: the filter is broken"
-    return np.asarray(result.time_to_clear, dtype=float), last[0]
+    dirty = result.comfort_violation_steps + result.speeding_steps + result.safety_steps
+    return np.asarray(result.time_to_clear, dtype=float), last[0], np.asarray(dirty)
+
+
+def _careful_search(
+    task: Any, scenarios: Any, seeds: np.ndarray, start: np.ndarray | None,
+    args: argparse.Namespace,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The cross-entropy method on every scene (chunks of 100), ranked clear first, then the
+    fewest dirty ticks, then soonest. The first round holds members of ``seeds`` [K, segments]
+    (the structured drivers) and, if given, each scene's ``start`` [n, segments] (a policy's
+    own actions), around which the search then begins (std 0.3 instead of 0.8 about half
+    throttle). Returns each scene's best time to clear (NaN: none), its dirty ticks and its
+    sequence [n, segments]."""
+    n = len(scenarios.north_speed)
+    horizon = task.config.episode.horizon_s
+    segments = seeds.shape[1]
+    rng = np.random.default_rng(args.seed)
+    best_clear, best_dirty = np.full(n, np.nan), np.zeros(n, dtype=np.int64)
+    best_score, best_seqs = np.full(n, np.inf), np.ones((n, segments))
+    pop, elite = args.population, 16
+    for begin in range(0, n, 100):
+        idx = np.arange(begin, min(n, begin + 100))
+        batch = scenarios.take(np.repeat(idx, pop))
+        if start is None:
+            mean, std = np.full((idx.size, segments), 0.3), np.full((idx.size, segments), 0.8)
+        else:
+            mean, std = start[idx].copy(), np.full((idx.size, segments), 0.3)
+        best = np.ones((idx.size, segments))
+        for round_ in range(args.rounds):
+            noise = rng.standard_normal((idx.size, pop, segments))
+            seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
+            if round_ == 0:  # the structured drivers (and the policy) seed the search
+                k = min(len(seeds), pop // 2)
+                seqs[:, :k] = seeds[rng.choice(len(seeds), k, replace=False)]
+                if start is not None:
+                    seqs[:, 0] = start[idx]
+            else:
+                seqs[:, 0] = best
+            clear, progress, dirty = _outcome(task, batch, seqs.reshape(-1, segments))
+            score = _score(clear, progress, horizon) + 1000.0 * np.isnan(clear) + 10.0 * dirty
+            score, clear, dirty = (a.reshape(idx.size, pop) for a in (score, clear, dirty))
+            order = np.argsort(score, axis=1)[:, :elite]
+            elites = np.take_along_axis(seqs, order[:, :, None], axis=1)
+            mean, std = elites.mean(axis=1), np.maximum(elites.std(axis=1), 0.05)
+            rows, top = np.arange(idx.size), order[:, 0]
+            improved = score[rows, top] < best_score[idx]
+            best_score[idx[improved]] = score[rows, top][improved]
+            best_clear[idx[improved]] = clear[rows, top][improved]
+            best_dirty[idx[improved]] = dirty[rows, top][improved]
+            best[improved] = seqs[rows, top][improved]
+        best_seqs[idx] = best
+    return best_clear, best_dirty, best_seqs
+
+
+def _policy_actions(task: Any, scenarios: Any, model: str) -> np.ndarray:
+    """A trained policy's actions [n, decisions] on ``scenarios`` under the task's filter:
+    replayed open loop, they drive exactly its episodes (the scene is deterministic)."""
+    from safeswitch.evaluation.rollout import rollout
+    from safeswitch.training.policies import load_policy
+
+    act = load_policy(model).as_policy()
+    interval = task.config.episode.decision_interval
+    actions = np.zeros((len(scenarios.north_speed), task.config.episode.horizon_ticks // interval))
+
+    def policy(obs: Any, state: Any, tick: int) -> np.ndarray:
+        a = np.clip(np.asarray(act(obs, state, tick), dtype=float).reshape(-1), -1.0, 1.0)
+        actions[:, tick // interval] = a
+        return a
+
+    rollout(task, scenarios, policy)
+    return actions
 
 
 def _score(clear: np.ndarray, progress: np.ndarray, horizon: float) -> np.ndarray:
@@ -65,6 +147,8 @@ def _score(clear: np.ndarray, progress: np.ndarray, horizon: float) -> np.ndarra
 
 
 def _family(segments: int) -> np.ndarray:
+    """The "drive at a, coast from t1 to t2, then full throttle" drivers, one per row (at
+    ``SEGMENT_S`` per column)."""
     rows = []
     t = np.arange(segments) * SEGMENT_S
     for a in (1.0, 0.5, 0.0):
@@ -84,6 +168,15 @@ def main() -> None:
     parser.add_argument(
         "--default-zones", action="store_true",
         help="the filter's default zones instead of the recipe's",
+    )  # fmt: skip
+    parser.add_argument(
+        "--careful", action="store_true",
+        help="search every scene for a clear that breaks no rule and needs no filter",
+    )  # fmt: skip
+    parser.add_argument(
+        "--from", dest="model", metavar="MODEL",
+        help="with --careful: start each scene's search at this policy's own actions (one "
+        "per decision; a shipped name or a run directory)",
     )  # fmt: skip
     parser.add_argument("--out", type=Path)
     parser.add_argument("--json", action="store_true")
@@ -115,9 +208,13 @@ def main() -> None:
     planner, plan = run_controller(task, Planner(task), scenarios, trace=False)
     oracle_clear = np.asarray(plan.time_to_clear, dtype=float)
 
+    if args.careful:
+        _careful(task, scenarios, oracle_clear, segments, args, env, started)
+        return
+
     drivers: dict[str, np.ndarray] = {}
     best_seq = np.ones((n, segments))
-    clear, progress = _outcome(task, scenarios, np.ones((n, segments)))  # full throttle
+    clear, progress, _ = _outcome(task, scenarios, np.ones((n, segments)))  # full throttle
     drivers["full throttle"] = clear
     best_score = _score(clear, progress, horizon)
     drivers["planner"] = np.asarray(planner.time_to_clear, dtype=float)
@@ -128,7 +225,7 @@ def main() -> None:
     if left.size:
         rows = np.repeat(left, len(family))
         seqs = np.tile(family, (left.size, 1))
-        clear, progress = _outcome(task, scenarios.take(rows), seqs)
+        clear, progress, _ = _outcome(task, scenarios.take(rows), seqs)
         score = _score(clear, progress, horizon).reshape(left.size, len(family))
         pick = score.argmin(axis=1)
         family_clear[left] = clear.reshape(left.size, len(family))[np.arange(left.size), pick]
@@ -151,7 +248,7 @@ def main() -> None:
             noise = rng.standard_normal((left.size, pop, segments))
             seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
             seqs[:, 0] = best_seq[left]  # the best so far stays in the population
-            clear, progress = _outcome(task, batch, seqs.reshape(-1, segments))
+            clear, progress, _ = _outcome(task, batch, seqs.reshape(-1, segments))
             score = _score(clear, progress, horizon).reshape(left.size, pop)
             clear = clear.reshape(left.size, pop)
             order = np.argsort(score, axis=1)[:, :16]
@@ -212,6 +309,79 @@ def main() -> None:
               f"{row['north_speed_kmh']:.1f} km/h; ego {row['ego_speed_kmh']:.1f} km/h, "
               f"{row['ego_start_distance_m']:.1f} m out; oracle clears at "
               f"{row['oracle_time_to_clear_s']:.2f} s")  # fmt: skip
+    print(f"  {result['wall_time_s']} s")
+
+
+def _careful(
+    task: Any, scenarios: Any, oracle_clear: np.ndarray, segments: int,
+    args: argparse.Namespace, env: Any, started: float,
+) -> None:  # fmt: skip
+    """``--careful``: the search on every scene, and its table."""
+    from safeswitch.evaluation.oracle import efficiency
+
+    horizon = env.episode.horizon_s
+    seeds, start, own = _family(segments), None, None
+    if args.model:
+        start = _policy_actions(task, scenarios, args.model)
+        seeds = np.repeat(seeds, start.shape[1] // segments, axis=1)
+        own_clear, _, own_dirty = _outcome(task, scenarios, start)
+        own = {
+            "cleared": int(np.sum(~np.isnan(own_clear))),
+            "cleared_cleanly": int(np.sum(~np.isnan(own_clear) & (own_dirty == 0))),
+            "efficiency": round(float(np.nanmean(efficiency(oracle_clear, own_clear, horizon))), 4),
+        }
+    clear, dirty, _ = _careful_search(task, scenarios, seeds, start, args)
+    n = len(clear)
+    cleared, clean = ~np.isnan(clear), ~np.isnan(clear) & (dirty == 0)
+    careful_eff = efficiency(oracle_clear, np.where(clean, clear, np.inf), horizon)
+    any_eff = efficiency(oracle_clear, np.where(cleared, clear, np.inf), horizon)
+    result: dict[str, Any] = {
+        "config": args.config,
+        "mode": "careful",
+        "episodes": n,
+        "seed": args.seed,
+        "switching": env.switching,
+        "zone_margin_m": env.certified.zone_margin_m,
+        "ego_max_lateral_m": env.certified.ego_max_lateral_m,
+        "searched": {
+            "rounds": args.rounds,
+            "population": args.population,
+            "segment_s": horizon / seeds.shape[1],
+            "from": args.model,
+        },
+        "the_policy_itself": own,
+        "cleared_cleanly": int(clean.sum()),
+        "cleared_only_breaking_a_rule_or_with_the_filter": int((cleared & ~clean).sum()),
+        "never_cleared": int((~cleared).sum()),
+        "careful_efficiency": round(float(np.nanmean(careful_eff)), 4),
+        "efficiency_of_the_best_found": round(float(np.nanmean(any_eff)), 4),
+        "dirty_scenes": [
+            {
+                "scenario": int(i),
+                "arrival_offset_s": round(float(scenarios.arrival_offset[i]), 3),
+                "north_speed_kmh": round(3.6 * float(scenarios.north_speed[i]), 2),
+                "ego_speed_kmh": round(3.6 * float(scenarios.ego_speed[i]), 2),
+                "time_to_clear_s": None if np.isnan(clear[i]) else round(float(clear[i]), 2),
+                "dirty_ticks": int(dirty[i]),
+            }
+            for i in np.flatnonzero(~clean)
+        ],
+        "wall_time_s": round(time.perf_counter() - started, 1),
+        "machine": _common.machine(),
+    }
+    if _common.publish(result, args.out, args.json):
+        return
+    print(f"{args.config}, a careful driver under {env.switching} ({n} scenes, seed {args.seed})")
+    if own is not None:
+        print(f"  {args.model} itself: cleared {own['cleared']}, cleanly {own['cleared_cleanly']}, "
+              f"efficiency {own['efficiency']:.3f}; the search from its actions:")  # fmt: skip
+    print(f"  cleared with no rule broken and no filter   {result['cleared_cleanly']:5d}")
+    print(f"  cleared only breaking a rule or with it     "
+          f"{result['cleared_only_breaking_a_rule_or_with_the_filter']:5d}")  # fmt: skip
+    print(f"  never cleared                               {result['never_cleared']:5d}")
+    print(f"  efficiency, careful (others: never cleared) {result['careful_efficiency']:.3f}")
+    print(f"  efficiency, the best found                  "
+          f"{result['efficiency_of_the_best_found']:.3f}")  # fmt: skip
     print(f"  {result['wall_time_s']} s")
 
 
