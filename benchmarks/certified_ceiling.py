@@ -47,7 +47,7 @@ SEGMENT_S = 0.5  # one open-loop action per half second
 EVAL_SEED = 1_000_003
 
 
-def _outcome(
+def drive_open_loop(
     task: Any, scenarios: Any, actions: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Time to clear (NaN: never), final progress of the ego and the ticks on which a comfort
@@ -71,7 +71,7 @@ def _outcome(
     return np.asarray(result.time_to_clear, dtype=float), last[0], np.asarray(dirty)
 
 
-def _careful_search(
+def careful_search(
     task: Any, scenarios: Any, seeds: np.ndarray, start: np.ndarray | None,
     args: argparse.Namespace,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
@@ -106,7 +106,7 @@ def _careful_search(
                     seqs[:, 0] = start[idx]
             else:
                 seqs[:, 0] = best
-            clear, progress, dirty = _outcome(task, batch, seqs.reshape(-1, segments))
+            clear, progress, dirty = drive_open_loop(task, batch, seqs.reshape(-1, segments))
             score = _score(clear, progress, horizon) + 1000.0 * np.isnan(clear) + 10.0 * dirty
             score, clear, dirty = (a.reshape(idx.size, pop) for a in (score, clear, dirty))
             order = np.argsort(score, axis=1)[:, :elite]
@@ -122,13 +122,12 @@ def _careful_search(
     return best_clear, best_dirty, best_seqs
 
 
-def _policy_actions(task: Any, scenarios: Any, model: str) -> np.ndarray:
-    """A trained policy's actions [n, decisions] on ``scenarios`` under the task's filter:
-    replayed open loop, they drive exactly its episodes (the scene is deterministic)."""
+def policy_actions(task: Any, scenarios: Any, act: Any) -> np.ndarray:
+    """A policy's actions [n, decisions] on ``scenarios`` under the task's filter (``act``: a
+    rollout policy, e.g. ``load_policy(name).as_policy()``): replayed open loop, they drive
+    exactly its episodes (the scene is deterministic)."""
     from safeswitch.evaluation.rollout import rollout
-    from safeswitch.training.policies import load_policy
 
-    act = load_policy(model).as_policy()
     interval = task.config.episode.decision_interval
     actions = np.zeros((len(scenarios.north_speed), task.config.episode.horizon_ticks // interval))
 
@@ -146,7 +145,7 @@ def _score(clear: np.ndarray, progress: np.ndarray, horizon: float) -> np.ndarra
     return np.where(np.isnan(clear), horizon + 10.0 - 0.01 * progress, clear)
 
 
-def _family(segments: int) -> np.ndarray:
+def family_of_drivers(segments: int) -> np.ndarray:
     """The "drive at a, coast from t1 to t2, then full throttle" drivers, one per row (at
     ``SEGMENT_S`` per column)."""
     rows = []
@@ -214,18 +213,18 @@ def main() -> None:
 
     drivers: dict[str, np.ndarray] = {}
     best_seq = np.ones((n, segments))
-    clear, progress, _ = _outcome(task, scenarios, np.ones((n, segments)))  # full throttle
+    clear, progress, _ = drive_open_loop(task, scenarios, np.ones((n, segments)))  # full throttle
     drivers["full throttle"] = clear
     best_score = _score(clear, progress, horizon)
     drivers["planner"] = np.asarray(planner.time_to_clear, dtype=float)
 
-    family = _family(segments)
+    family = family_of_drivers(segments)
     left = np.flatnonzero(np.isnan(drivers["full throttle"]) & np.isnan(drivers["planner"]))
     family_clear = np.full(n, np.nan)
     if left.size:
         rows = np.repeat(left, len(family))
         seqs = np.tile(family, (left.size, 1))
-        clear, progress, _ = _outcome(task, scenarios.take(rows), seqs)
+        clear, progress, _ = drive_open_loop(task, scenarios.take(rows), seqs)
         score = _score(clear, progress, horizon).reshape(left.size, len(family))
         pick = score.argmin(axis=1)
         family_clear[left] = clear.reshape(left.size, len(family))[np.arange(left.size), pick]
@@ -248,7 +247,7 @@ def main() -> None:
             noise = rng.standard_normal((left.size, pop, segments))
             seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
             seqs[:, 0] = best_seq[left]  # the best so far stays in the population
-            clear, progress, _ = _outcome(task, batch, seqs.reshape(-1, segments))
+            clear, progress, _ = drive_open_loop(task, batch, seqs.reshape(-1, segments))
             score = _score(clear, progress, horizon).reshape(left.size, pop)
             clear = clear.reshape(left.size, pop)
             order = np.argsort(score, axis=1)[:, :16]
@@ -320,17 +319,19 @@ def _careful(
     from safeswitch.evaluation.oracle import efficiency
 
     horizon = env.episode.horizon_s
-    seeds, start, own = _family(segments), None, None
+    seeds, start, own = family_of_drivers(segments), None, None
     if args.model:
-        start = _policy_actions(task, scenarios, args.model)
+        from safeswitch.training.policies import load_policy
+
+        start = policy_actions(task, scenarios, load_policy(args.model).as_policy())
         seeds = np.repeat(seeds, start.shape[1] // segments, axis=1)
-        own_clear, _, own_dirty = _outcome(task, scenarios, start)
+        own_clear, _, own_dirty = drive_open_loop(task, scenarios, start)
         own = {
             "cleared": int(np.sum(~np.isnan(own_clear))),
             "cleared_cleanly": int(np.sum(~np.isnan(own_clear) & (own_dirty == 0))),
             "efficiency": round(float(np.nanmean(efficiency(oracle_clear, own_clear, horizon))), 4),
         }
-    clear, dirty, _ = _careful_search(task, scenarios, seeds, start, args)
+    clear, dirty, _ = careful_search(task, scenarios, seeds, start, args)
     n = len(clear)
     cleared, clean = ~np.isnan(clear), ~np.isnan(clear) & (dirty == 0)
     careful_eff = efficiency(oracle_clear, np.where(clean, clear, np.inf), horizon)
