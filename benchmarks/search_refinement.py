@@ -1,6 +1,7 @@
 """Search-guided refinement of a trained left-turn policy under `certified` (a probe, issue #39).
 
-A one-off probe for docs/learning_experiments.md ("Search-guided refinement"). The scene is
+A probe for docs/learning_experiments.md ("A careful driver's ceiling, and search-guided
+refinement"), not a stage of the training pipeline. The scene is
 deterministic given its start (the north car holds its speed), so a policy's actions replayed
 open loop drive exactly its episode, and a trajectory search can start from them. Each
 iteration (ours; the idea is expert iteration / guided policy search with a sampling
@@ -21,16 +22,15 @@ optimiser):
 
 Every iteration's evaluation is printed (none is selected on it). Run::
 
-    python experiments/probe_search_refinement.py --model certified [--iters 4] \\
-        [--out benchmarks/results/probe_search_refinement.json]
+    python benchmarks/search_refinement.py --model certified [--seed 1] [--iters 4] \\
+        [--out benchmarks/results/search_refinement_seed1.json]
 
-One torch thread. Not part of the training pipeline (the wall time is the probe's).
+One torch thread.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -39,8 +39,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import _common
+import _common  # pins the numeric libraries to one thread first
 import certified_ceiling as ceiling
 
 EVAL_SEED = 1_000_003
