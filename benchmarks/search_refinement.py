@@ -14,7 +14,10 @@ optimiser):
    --careful`` starts from its actions (population 128, ``--rounds``); where the search clears
    with at most ``--allow-dirty`` such ticks, its actions become the labels;
 3. on ``--speed-scenes`` of the scenes it drives cleanly, a cheaper search (population 32, 6
-   rounds) looks for a clean clear at least 0.1 s sooner; found, its actions become the labels;
+   rounds) looks for a clean clear at least 0.1 s sooner; found, its actions become the labels
+   (with ``--margin m``, an improved sequence of steps 2 and 3 is kept only if it stays as
+   clean with ``m`` more throttle on every decision: a label the fitted policy may overshoot
+   a little);
 4. the actor's mean is fitted (mean squared error, Adam, ``--epochs`` passes, step ``--lr``) to
    the labels at the observations they drive through — the policy's own actions everywhere
    else, so it keeps what it does well — the improved scenes repeated ``--weight`` times;
@@ -56,6 +59,11 @@ def main() -> None:
     parser.add_argument("--speed-scenes", type=int, default=600)
     parser.add_argument("--allow-dirty", type=int, default=0)
     parser.add_argument("--weight", type=int, default=5)
+    parser.add_argument(
+        "--margin", type=float, default=0.0,
+        help="keep an improved sequence only if it also stays within --allow-dirty (a sped-up "
+        "one: clean) with this much more throttle on every decision",
+    )  # fmt: skip
     parser.add_argument("--epochs", type=int, default=20)
     parser.add_argument("--lr", type=float, default=1e-4)
     parser.add_argument("--seed", type=int, default=1, help="the training seed's scenes")
@@ -105,6 +113,15 @@ def main() -> None:
         alive = np.arange(decisions)[None, :] * interval < result.ticks[:, None]
         return obs, alive
 
+    def robust(scenarios: Any, seqs: np.ndarray, allowed: int) -> np.ndarray:
+        """Which sequences stay within ``allowed`` dirty ticks with ``--margin`` more
+        throttle (all, without a margin)."""
+        if args.margin <= 0:
+            return np.ones(len(seqs), dtype=bool)
+        pushed = np.clip(seqs + args.margin, -1.0, 1.0)
+        _, _, dirty = ceiling.drive_open_loop(task, scenarios, pushed)
+        return np.asarray(dirty <= allowed)
+
     rows: list[dict[str, Any]] = [{"iteration": 0, "evaluation": evaluate()}]
     print(f"before: {rows[0]['evaluation']}", flush=True)
     seeds = np.repeat(ceiling.family_of_drivers(24), decisions // 24, axis=1)
@@ -119,6 +136,7 @@ def main() -> None:
             task, scenes.take(failing), seeds, actions[failing], search
         )
         fixed = ~np.isnan(f_clear) & (f_dirty <= args.allow_dirty)
+        fixed &= robust(scenes.take(failing), f_seqs, args.allow_dirty)
         labels, weight = actions.copy(), np.ones(args.scenes, dtype=int)
         labels[failing[fixed]] = f_seqs[fixed]
         weight[failing[fixed]] = args.weight
@@ -128,6 +146,7 @@ def main() -> None:
             task, scenes.take(clean), seeds, actions[clean], quick
         )
         faster = ~np.isnan(s_clear) & (s_dirty == 0) & (s_clear < clear[clean] - 0.1)
+        faster &= robust(scenes.take(clean), s_seqs, 0)
         labels[clean[faster]] = s_seqs[faster]
         weight[clean[faster]] = args.weight
         obs, alive = observed(scenes, labels)
