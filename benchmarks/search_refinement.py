@@ -68,6 +68,11 @@ def main() -> None:
     parser.add_argument("--lr", type=float, default=1e-4)
     parser.add_argument("--seed", type=int, default=1, help="the training seed's scenes")
     parser.add_argument("--out", type=Path)
+    parser.add_argument(
+        "--save", type=Path, metavar="DIR",
+        help="write the refined policy as a run folder (model.zip, vecnormalize.pkl and the "
+        "source run's config.yaml): `safeswitch evaluate --model DIR` loads it",
+    )  # fmt: skip
     args = parser.parse_args()
 
     import torch
@@ -176,6 +181,15 @@ def main() -> None:
         "iterations": rows,
         "machine": _common.machine(),
     }
+    if args.save is not None:
+        import shutil
+
+        from safeswitch.io import write_policy_files
+        from safeswitch.training.policies import run_config_path
+
+        args.save.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(run_config_path(policy.path), args.save / "config.yaml")
+        write_policy_files(args.save, policy.model, policy.normalizer)
     _common.publish(result, args.out, False)
 
 

@@ -249,11 +249,16 @@ class WarmStartConfig:
             baseline's). A lower ``accel_lat`` leaves the clone, which tracks the planner's
             turn speed only approximately, a margin below the lateral comfort limit.
         gap_planner: Tuning of the gap planner (``teacher: gap_planner``).
+        policy: Start from this trained policy instead of cloning a teacher: a run folder
+            (or a checkpoint, or a shipped policy's name) whose network has this run's
+            architecture; its weights and observation statistics become the run's starting
+            point (fine-tuning, e.g. after ``benchmarks/search_refinement.py``). Excludes
+            ``episodes``.
         freeze_obs_stats: Keep ``VecNormalize``'s observation statistics at the
-            demonstrations' for the rest of the run. The clone was fitted to inputs normalised
-            with exactly these; left running, they drift with PPO's state distribution and
-            move the clone's cut/yield decisions (measured: the clone with the statistics of a
-            1.2 M-step run went from 21 to 205 episodes with a safety action).
+            demonstrations' (or ``policy``'s) for the rest of the run. The clone was fitted
+            to inputs normalised with exactly these; left running, they drift with PPO's state
+            distribution and move the clone's cut/yield decisions (measured: the clone with the
+            statistics of a 1.2 M-step run went from 21 to 205 episodes with a safety action).
     """
 
     episodes: Annotated[int, Bounds(0)] = 0
@@ -263,10 +268,13 @@ class WarmStartConfig:
     teacher: Literal["planner", "gap_planner"] = "planner"
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     gap_planner: GapPlannerConfig = field(default_factory=GapPlannerConfig)
+    policy: str | None = None
     freeze_obs_stats: bool = True
 
     def __post_init__(self) -> None:
         check_bounds(self, "warm_start")
+        check(self.policy is None or not self.episodes, "warm_start", "policy", self.policy,
+              "starts from a trained policy: leave episodes at 0 (no cloning)")  # fmt: skip
         check(self.teacher in TEACHERS, "warm_start", "teacher", self.teacher,
               f"must be one of {TEACHERS}")  # fmt: skip
 

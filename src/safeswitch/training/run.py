@@ -61,7 +61,7 @@ from safeswitch.training.shaping import (
     ShapingSchedule,
 )
 from safeswitch.training.validation import Validator
-from safeswitch.training.warm_start import warm_start
+from safeswitch.training.warm_start import check_start_policy, start_from_policy, warm_start
 
 
 class RunDirectoryError(RuntimeError):
@@ -396,10 +396,20 @@ class LeftTurnPlant(Plant):
         assert isinstance(vec, LeftTurnVecEnv)
         vec.episode_counters = np.asarray(checkpoint["episode_counters"], dtype=np.int64)
 
+    def check(self, vec: VecEnv) -> None:
+        start = self.config.warm_start.policy
+        if start is not None:
+            shape = tuple(vec.observation_space.shape or ())
+            check_start_policy(start, tuple(self.config.ppo.net_arch), shape)
+
     def warm_start(self, model: SwitchPPO, env: VecNormalize, run: Path) -> bool:
-        if self.config.warm_start.episodes <= 0:
+        ws = self.config.warm_start
+        if ws.policy is not None:
+            record = start_from_policy(model, env, ws.policy, ws.freeze_obs_stats)
+        elif ws.episodes > 0:
+            record = warm_start(model, env, self.config)
+        else:
             return False
-        record = warm_start(model, env, self.config)
         write_atomic(run / "warm_start.json", json.dumps(record, indent=2))
         return True
 

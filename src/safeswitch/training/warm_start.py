@@ -166,3 +166,82 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
         "mse": round(mse, 6),
         "wall_time_s": round(time.perf_counter() - began, 2),
     }
+
+
+def start_from_policy(
+    model: SwitchPPO, env: VecNormalize, source: str, freeze_obs_stats: bool
+) -> dict[str, Any]:
+    """Start ``model`` from a trained policy (``warm_start.policy``): its network's weights
+    (actor, critic and log std; the optimiser starts afresh) and its observation statistics
+    into ``env`` (frozen if ``freeze_obs_stats``, as after a cloning).
+
+    Raises:
+        ConfigError: ``source`` has another architecture or observation normalisation
+            (named), or is not a trained policy.
+    """
+    from safeswitch.core.config import ConfigError
+
+    began = time.perf_counter()
+    trained = _start_policy(source)
+    theirs, ours = trained.model.policy.state_dict(), model.policy.state_dict()
+    shapes = {k: tuple(v.shape) for k, v in theirs.items()}
+    wanted = {k: tuple(v.shape) for k, v in ours.items()}
+    if shapes != wanted:
+        differ = sorted(k for k in shapes.keys() | wanted.keys() if shapes.get(k) != wanted.get(k))
+        where = ", ".join(f"{k}: {shapes.get(k)} there, {wanted.get(k)} here" for k in differ[:3])
+        raise ConfigError(f"warm_start.policy={source!r}: its network is not this run's ({where})")
+    if trained.normalizer is None:
+        raise ConfigError(
+            f"warm_start.policy={source!r} did not normalise its observations and this run "
+            "does (ppo.normalize_observations)"
+        )
+    model.policy.load_state_dict(theirs)
+    source_rms = trained.normalizer.obs_rms
+    assert isinstance(source_rms, RunningMeanStd) and isinstance(env.obs_rms, RunningMeanStd)
+    rms = FrozenRunningMeanStd(shape=source_rms.mean.shape) if freeze_obs_stats else env.obs_rms
+    rms.mean, rms.var, rms.count = source_rms.mean.copy(), source_rms.var.copy(), source_rms.count
+    env.obs_rms = rms
+    return {
+        "policy": str(trained.path),
+        "parameters": int(sum(v.numel() for v in theirs.values())),
+        "wall_time_s": round(time.perf_counter() - began, 2),
+    }
+
+
+def _start_policy(source: str) -> Any:
+    """The trained policy ``warm_start.policy`` names (a ``TrainedPolicy``).
+
+    Raises:
+        ConfigError: There is none there (named).
+    """
+    from safeswitch.core.config import ConfigError
+    from safeswitch.training.policies import load_policy
+
+    try:
+        return load_policy(source)
+    except FileNotFoundError as error:
+        raise ConfigError(f"warm_start.policy={source!r}: {error}") from error
+
+
+def check_start_policy(source: str, net_arch: tuple[int, ...], obs_shape: tuple[int, ...]) -> None:
+    """Refuse, before a run directory is written, a ``warm_start.policy`` this run cannot
+    start from: none there, other hidden layers or another observation.
+
+    Raises:
+        ConfigError: Naming the value and what differs.
+    """
+    from safeswitch.core.config import ConfigError
+
+    trained = _start_policy(source)
+    layers = tuple(
+        m.out_features
+        for m in trained.model.policy.mlp_extractor.policy_net
+        if isinstance(m, torch.nn.Linear)
+    )
+    shape = tuple(trained.model.observation_space.shape or ())
+    if layers != tuple(net_arch) or shape != tuple(obs_shape):
+        raise ConfigError(
+            f"warm_start.policy={source!r}: its network is not this run's (hidden layers "
+            f"{list(layers)} there, {list(net_arch)} here; observations {shape} there, "
+            f"{tuple(obs_shape)} here)"
+        )
