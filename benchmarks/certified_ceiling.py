@@ -71,19 +71,24 @@ def drive_open_loop(
     return np.asarray(result.time_to_clear, dtype=float), last[0], np.asarray(dirty)
 
 
-def careful_search(
-    task: Any, scenarios: Any, seeds: np.ndarray, start: np.ndarray | None,
-    args: argparse.Namespace,
+def search_sequences(
+    task: Any, scenarios: Any, start: np.ndarray | None, args: argparse.Namespace, *,
+    seeds: np.ndarray | None = None, start_std: float = 0.3, dirty_cost: float = 10.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """The cross-entropy method on every scene (chunks of 100), ranked clear first, then the
-    fewest dirty ticks, then soonest. The first round holds members of ``seeds`` [K, segments]
-    (the structured drivers) and, if given, each scene's ``start`` [n, segments] (a policy's
-    own actions), around which the search then begins (std 0.3 instead of 0.8 about half
-    throttle). Returns each scene's best time to clear (NaN: none), its dirty ticks and its
-    sequence [n, segments]."""
+    """The cross-entropy method per scene (chunks of 100; ``args``' population, rounds and
+    seed; 16 elites): each scene's sequences ranked clear first, then by ``dirty_cost`` per
+    dirty tick (10 s: the fewest such ticks before the soonest; 0: the ceiling's plain time to
+    clear), then soonest. The search begins about each scene's ``start`` [n, segments] (a
+    policy's own actions, or the best simple driver) with ``start_std``, or about half
+    throttle with std 0.8; ``start`` stays in the first round and the best so far in every
+    later one, and ``seeds`` [K, segments] (the structured drivers), if given, fill half of
+    the first round. Returns each scene's best time to clear (NaN: none), its dirty ticks and
+    its sequence [n, segments]."""
     n = len(scenarios.north_speed)
     horizon = task.config.episode.horizon_s
-    segments = seeds.shape[1]
+    shaped = start if start is not None else seeds
+    assert shaped is not None, "a start or seeds: they give the sequences' length"
+    segments = shaped.shape[1]
     rng = np.random.default_rng(args.seed)
     best_clear, best_dirty = np.full(n, np.nan), np.zeros(n, dtype=np.int64)
     best_score, best_seqs = np.full(n, np.inf), np.ones((n, segments))
@@ -94,20 +99,22 @@ def careful_search(
         if start is None:
             mean, std = np.full((idx.size, segments), 0.3), np.full((idx.size, segments), 0.8)
         else:
-            mean, std = start[idx].copy(), np.full((idx.size, segments), 0.3)
+            mean, std = start[idx].copy(), np.full((idx.size, segments), start_std)
         best = np.ones((idx.size, segments))
         for round_ in range(args.rounds):
             noise = rng.standard_normal((idx.size, pop, segments))
             seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
-            if round_ == 0:  # the structured drivers (and the policy) seed the search
-                k = min(len(seeds), pop // 2)
-                seqs[:, :k] = seeds[rng.choice(len(seeds), k, replace=False)]
+            if round_ == 0:  # the structured drivers (and the start) seed the search
+                if seeds is not None:
+                    k = min(len(seeds), pop // 2)
+                    seqs[:, :k] = seeds[rng.choice(len(seeds), k, replace=False)]
                 if start is not None:
                     seqs[:, 0] = start[idx]
             else:
                 seqs[:, 0] = best
             clear, progress, dirty = drive_open_loop(task, batch, seqs.reshape(-1, segments))
-            score = _score(clear, progress, horizon) + 1000.0 * np.isnan(clear) + 10.0 * dirty
+            score = _score(clear, progress, horizon) + 1000.0 * np.isnan(clear)
+            score = score + dirty_cost * dirty
             score, clear, dirty = (a.reshape(idx.size, pop) for a in (score, clear, dirty))
             order = np.argsort(score, axis=1)[:, :elite]
             elites = np.take_along_axis(seqs, order[:, :, None], axis=1)
@@ -237,28 +244,10 @@ def main() -> None:
         np.isnan(drivers["full throttle"]) & np.isnan(drivers["planner"]) & np.isnan(family_clear)
     )
     search_clear = np.full(n, np.nan)
-    rng = np.random.default_rng(args.seed)
     if left.size:
-        mean, std = best_seq[left].copy(), np.full((left.size, segments), 0.8)
-        pop = args.population
-        rows = np.repeat(left, pop)
-        batch = scenarios.take(rows)
-        for _ in range(args.rounds):
-            noise = rng.standard_normal((left.size, pop, segments))
-            seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
-            seqs[:, 0] = best_seq[left]  # the best so far stays in the population
-            clear, progress, _ = drive_open_loop(task, batch, seqs.reshape(-1, segments))
-            score = _score(clear, progress, horizon).reshape(left.size, pop)
-            clear = clear.reshape(left.size, pop)
-            order = np.argsort(score, axis=1)[:, :16]
-            elites = np.take_along_axis(seqs, order[:, :, None], axis=1)
-            mean, std = elites.mean(axis=1), np.maximum(elites.std(axis=1), 0.05)
-            top = order[:, 0]
-            found = clear[np.arange(left.size), top]
-            improved = score[np.arange(left.size), top] < best_score[left]
-            best_score[left[improved]] = score[np.arange(left.size), top][improved]
-            best_seq[left[improved]] = seqs[np.arange(left.size), top][improved]
-            search_clear[left] = np.where(np.isnan(search_clear[left]), found, search_clear[left])
+        search_clear[left], _, _ = search_sequences(
+            task, scenarios.take(left), best_seq[left], args, start_std=0.8, dirty_cost=0.0
+        )
     drivers["cross-entropy search"] = search_clear
 
     cleared_by_any = np.zeros(n, dtype=bool)
@@ -331,7 +320,7 @@ def _careful(
             "cleared_cleanly": int(np.sum(~np.isnan(own_clear) & (own_dirty == 0))),
             "efficiency": round(float(np.nanmean(efficiency(oracle_clear, own_clear, horizon))), 4),
         }
-    clear, dirty, _ = careful_search(task, scenarios, seeds, start, args)
+    clear, dirty, _ = search_sequences(task, scenarios, start, args, seeds=seeds)
     n = len(clear)
     cleared, clean = ~np.isnan(clear), ~np.isnan(clear) & (dirty == 0)
     careful_eff = efficiency(oracle_clear, np.where(clean, clear, np.inf), horizon)

@@ -137,8 +137,8 @@ def main() -> None:
         clear, _, dirty = ceiling.drive_open_loop(task, scenes, actions)
         failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
         search = SimpleNamespace(seed=args.seed + it, population=128, rounds=args.rounds)
-        f_clear, f_dirty, f_seqs = ceiling.careful_search(
-            task, scenes.take(failing), seeds, actions[failing], search
+        f_clear, f_dirty, f_seqs = ceiling.search_sequences(
+            task, scenes.take(failing), actions[failing], search, seeds=seeds
         )
         fixed = ~np.isnan(f_clear) & (f_dirty <= args.allow_dirty)
         fixed &= robust(scenes.take(failing), f_seqs, args.allow_dirty)
@@ -147,8 +147,8 @@ def main() -> None:
         weight[failing[fixed]] = args.weight
         clean = np.setdiff1d(np.arange(args.scenes), failing)[: args.speed_scenes]
         quick = SimpleNamespace(seed=args.seed + it, population=32, rounds=6)
-        s_clear, s_dirty, s_seqs = ceiling.careful_search(
-            task, scenes.take(clean), seeds, actions[clean], quick
+        s_clear, s_dirty, s_seqs = ceiling.search_sequences(
+            task, scenes.take(clean), actions[clean], quick, seeds=seeds
         )
         faster = ~np.isnan(s_clear) & (s_dirty == 0) & (s_clear < clear[clean] - 0.1)
         faster &= robust(scenes.take(clean), s_seqs, 0)

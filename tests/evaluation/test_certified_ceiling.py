@@ -68,7 +68,7 @@ def test_the_careful_search_ranks_no_scene_below_its_start(ceiling, scene):
     assert np.isnan(clear0).all()
     search = SimpleNamespace(seed=3, population=24, rounds=3)
     seeds = ceiling.family_of_drivers(24)
-    clear, dirty, seqs = ceiling.careful_search(task, scenarios, seeds, start, search)
+    clear, dirty, seqs = ceiling.search_sequences(task, scenarios, start, search, seeds=seeds)
     assert all(a <= b for a, b in zip(rank(clear, dirty), rank(clear0, dirty0), strict=True))
     assert (~np.isnan(clear)).sum() >= 12  # it finds clears the start never makes
     # what it reports is what its sequences drive

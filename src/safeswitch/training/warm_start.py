@@ -176,26 +176,21 @@ def start_from_policy(
     into ``env`` (frozen if ``freeze_obs_stats``, as after a cloning).
 
     Raises:
-        ConfigError: ``source`` has another architecture or observation normalisation
-            (named), or is not a trained policy.
+        ConfigError: ``source`` did not normalise its observations, or is not a trained
+            policy (its shape is :func:`check_start_policy`'s to refuse, before the run
+            directory is written).
     """
     from safeswitch.core.config import ConfigError
 
     began = time.perf_counter()
     trained = _start_policy(source)
-    theirs, ours = trained.model.policy.state_dict(), model.policy.state_dict()
-    shapes = {k: tuple(v.shape) for k, v in theirs.items()}
-    wanted = {k: tuple(v.shape) for k, v in ours.items()}
-    if shapes != wanted:
-        differ = sorted(k for k in shapes.keys() | wanted.keys() if shapes.get(k) != wanted.get(k))
-        where = ", ".join(f"{k}: {shapes.get(k)} there, {wanted.get(k)} here" for k in differ[:3])
-        raise ConfigError(f"warm_start.policy={source!r}: its network is not this run's ({where})")
     if trained.normalizer is None:
         raise ConfigError(
             f"warm_start.policy={source!r} did not normalise its observations and this run "
             "does (ppo.normalize_observations)"
         )
-    model.policy.load_state_dict(theirs)
+    theirs = trained.model.policy.state_dict()
+    model.policy.load_state_dict(theirs)  # its shape checked by check_start_policy first
     source_rms = trained.normalizer.obs_rms
     assert isinstance(source_rms, RunningMeanStd) and isinstance(env.obs_rms, RunningMeanStd)
     rms = FrozenRunningMeanStd(shape=source_rms.mean.shape) if freeze_obs_stats else env.obs_rms
