@@ -42,126 +42,16 @@ from typing import Any
 import numpy as np
 
 import _common  # pins the numeric libraries to one thread first
+from safeswitch.evaluation.search import (
+    SEGMENT_S,
+    drive_open_loop,
+    family_of_drivers,
+    policy_actions,
+    rank_score,
+    search_sequences,
+)
 
-SEGMENT_S = 0.5  # one open-loop action per half second
 EVAL_SEED = 1_000_003
-
-
-def drive_open_loop(
-    task: Any, scenarios: Any, actions: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Time to clear (NaN: never), final progress of the ego and the ticks on which a comfort
-    limit was broken, the speed limit passed or the filter acted (a careful driver's "dirty"
-    ticks), one episode per row of ``actions`` [B, segments] (the learned action held over
-    each segment)."""
-    from safeswitch.evaluation.rollout import rollout
-
-    per_segment = task.config.episode.horizon_ticks // actions.shape[1]
-    last: list[np.ndarray] = []
-
-    def policy(obs: Any, state: Any, tick: int) -> np.ndarray:
-        return actions[:, min(tick // per_segment, actions.shape[1] - 1)]
-
-    def on_tick(state: Any, record: Any, tick: int) -> None:
-        last[:] = [state.world.progress[:, 0].copy()]
-
-    result = rollout(task, scenarios, policy, on_tick)
-    assert not result.collision.any(), "a collision under certified: the filter is broken"
-    dirty = result.comfort_violation_steps + result.speeding_steps + result.safety_steps
-    return np.asarray(result.time_to_clear, dtype=float), last[0], np.asarray(dirty)
-
-
-def search_sequences(
-    task: Any, scenarios: Any, start: np.ndarray | None, args: argparse.Namespace, *,
-    seeds: np.ndarray | None = None, start_std: float = 0.3, dirty_cost: float = 10.0,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """The cross-entropy method per scene (chunks of 100; ``args``' population, rounds and
-    seed; 16 elites): each scene's sequences ranked clear first, then by ``dirty_cost`` per
-    dirty tick (10 s: the fewest such ticks before the soonest; 0: the ceiling's plain time to
-    clear), then soonest. The search begins about each scene's ``start`` [n, segments] (a
-    policy's own actions, or the best simple driver) with ``start_std``, or about half
-    throttle with std 0.8; ``start`` stays in the first round and the best so far in every
-    later one, and ``seeds`` [K, segments] (the structured drivers), if given, fill half of
-    the first round. Returns each scene's best time to clear (NaN: none), its dirty ticks and
-    its sequence [n, segments]."""
-    n = len(scenarios.north_speed)
-    horizon = task.config.episode.horizon_s
-    shaped = start if start is not None else seeds
-    assert shaped is not None, "a start or seeds: they give the sequences' length"
-    segments = shaped.shape[1]
-    rng = np.random.default_rng(args.seed)
-    best_clear, best_dirty = np.full(n, np.nan), np.zeros(n, dtype=np.int64)
-    best_score, best_seqs = np.full(n, np.inf), np.ones((n, segments))
-    pop, elite = args.population, 16
-    for begin in range(0, n, 100):
-        idx = np.arange(begin, min(n, begin + 100))
-        batch = scenarios.take(np.repeat(idx, pop))
-        if start is None:
-            mean, std = np.full((idx.size, segments), 0.3), np.full((idx.size, segments), 0.8)
-        else:
-            mean, std = start[idx].copy(), np.full((idx.size, segments), start_std)
-        best = np.ones((idx.size, segments))
-        for round_ in range(args.rounds):
-            noise = rng.standard_normal((idx.size, pop, segments))
-            seqs = np.clip(mean[:, None, :] + std[:, None, :] * noise, -1.0, 1.0)
-            if round_ == 0:  # the structured drivers (and the start) seed the search
-                if seeds is not None:
-                    k = min(len(seeds), pop // 2)
-                    seqs[:, :k] = seeds[rng.choice(len(seeds), k, replace=False)]
-                if start is not None:
-                    seqs[:, 0] = start[idx]
-            else:
-                seqs[:, 0] = best
-            clear, progress, dirty = drive_open_loop(task, batch, seqs.reshape(-1, segments))
-            score = _score(clear, progress, horizon) + 1000.0 * np.isnan(clear)
-            score = score + dirty_cost * dirty
-            score, clear, dirty = (a.reshape(idx.size, pop) for a in (score, clear, dirty))
-            order = np.argsort(score, axis=1)[:, :elite]
-            elites = np.take_along_axis(seqs, order[:, :, None], axis=1)
-            mean, std = elites.mean(axis=1), np.maximum(elites.std(axis=1), 0.05)
-            rows, top = np.arange(idx.size), order[:, 0]
-            improved = score[rows, top] < best_score[idx]
-            best_score[idx[improved]] = score[rows, top][improved]
-            best_clear[idx[improved]] = clear[rows, top][improved]
-            best_dirty[idx[improved]] = dirty[rows, top][improved]
-            best[improved] = seqs[rows, top][improved]
-        best_seqs[idx] = best
-    return best_clear, best_dirty, best_seqs
-
-
-def policy_actions(task: Any, scenarios: Any, act: Any) -> np.ndarray:
-    """A policy's actions [n, decisions] on ``scenarios`` under the task's filter (``act``: a
-    rollout policy, e.g. ``load_policy(name).as_policy()``): replayed open loop, they drive
-    exactly its episodes (the scene is deterministic)."""
-    from safeswitch.evaluation.rollout import rollout
-
-    interval = task.config.episode.decision_interval
-    actions = np.zeros((len(scenarios.north_speed), task.config.episode.horizon_ticks // interval))
-
-    def policy(obs: Any, state: Any, tick: int) -> np.ndarray:
-        a = np.clip(np.asarray(act(obs, state, tick), dtype=float).reshape(-1), -1.0, 1.0)
-        actions[:, tick // interval] = a
-        return a
-
-    rollout(task, scenarios, policy)
-    return actions
-
-
-def _score(clear: np.ndarray, progress: np.ndarray, horizon: float) -> np.ndarray:
-    """Lower is better: the time to clear, else the horizon minus a little for each metre."""
-    return np.where(np.isnan(clear), horizon + 10.0 - 0.01 * progress, clear)
-
-
-def family_of_drivers(segments: int) -> np.ndarray:
-    """The "drive at a, coast from t1 to t2, then full throttle" drivers, one per row (at
-    ``SEGMENT_S`` per column)."""
-    rows = []
-    t = np.arange(segments) * SEGMENT_S
-    for a in (1.0, 0.5, 0.0):
-        for t1 in np.arange(0.0, 6.01, SEGMENT_S):
-            for hold in np.arange(SEGMENT_S, 6.01, SEGMENT_S):
-                rows.append(np.where(t < t1, a, np.where(t < t1 + hold, -1.0, 1.0)))
-    return np.array(rows)
 
 
 def main() -> None:
@@ -222,7 +112,7 @@ def main() -> None:
     best_seq = np.ones((n, segments))
     clear, progress, _ = drive_open_loop(task, scenarios, np.ones((n, segments)))  # full throttle
     drivers["full throttle"] = clear
-    best_score = _score(clear, progress, horizon)
+    best_score = rank_score(clear, progress, horizon)
     drivers["planner"] = np.asarray(planner.time_to_clear, dtype=float)
 
     family = family_of_drivers(segments)
@@ -232,7 +122,7 @@ def main() -> None:
         rows = np.repeat(left, len(family))
         seqs = np.tile(family, (left.size, 1))
         clear, progress, _ = drive_open_loop(task, scenarios.take(rows), seqs)
-        score = _score(clear, progress, horizon).reshape(left.size, len(family))
+        score = rank_score(clear, progress, horizon).reshape(left.size, len(family))
         pick = score.argmin(axis=1)
         family_clear[left] = clear.reshape(left.size, len(family))[np.arange(left.size), pick]
         better = score[np.arange(left.size), pick] < best_score[left]
@@ -246,8 +136,9 @@ def main() -> None:
     search_clear = np.full(n, np.nan)
     if left.size:
         search_clear[left], _, _ = search_sequences(
-            task, scenarios.take(left), best_seq[left], args, start_std=0.8, dirty_cost=0.0
-        )
+            task, scenarios.take(left), best_seq[left], population=args.population,
+            rounds=args.rounds, seed=args.seed, start_std=0.8, dirty_cost=0.0,
+        )  # fmt: skip
     drivers["cross-entropy search"] = search_clear
 
     cleared_by_any = np.zeros(n, dtype=bool)
@@ -320,7 +211,10 @@ def _careful(
             "cleared_cleanly": int(np.sum(~np.isnan(own_clear) & (own_dirty == 0))),
             "efficiency": round(float(np.nanmean(efficiency(oracle_clear, own_clear, horizon))), 4),
         }
-    clear, dirty, _ = search_sequences(task, scenarios, start, args, seeds=seeds)
+    clear, dirty, _ = search_sequences(
+        task, scenarios, start, population=args.population, rounds=args.rounds,
+        seed=args.seed, seeds=seeds,
+    )  # fmt: skip
     n = len(clear)
     cleared, clean = ~np.isnan(clear), ~np.isnan(clear) & (dirty == 0)
     careful_eff = efficiency(oracle_clear, np.where(clean, clear, np.inf), horizon)

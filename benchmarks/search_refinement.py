@@ -1,34 +1,19 @@
-"""Search-guided refinement of a trained left-turn policy under `certified` (a probe, issue #39).
+"""Search-guided refinement of a finished left-turn policy under `certified`, each iteration
+evaluated on the 1,000 unseen scenarios (issue #39).
 
-A probe for docs/learning_experiments.md ("A careful driver's ceiling, and search-guided
-refinement"), not a stage of the training pipeline. The scene is
-deterministic given its start (the north car holds its speed), so a policy's actions replayed
-open loop drive exactly its episode, and a trajectory search can start from them. Each
-iteration (ours; the idea is expert iteration / guided policy search with a sampling
-optimiser):
+The pipeline's last stage (``refine:`` in a recipe; :mod:`safeswitch.training.refine`, whose
+docstring has the steps) run on any trained policy, with every iteration's evaluation on the
+test scenarios printed — a probe for docs/learning_experiments.md; none is selected on it.
+Run::
 
-1. the policy drives ``--scenes`` fresh training scenarios (the run's training seed, ids no
-   training environment uses) under `certified`;
-2. where it fails — never clears, or breaks a comfort limit, passes the speed limit or needs the
-   filter on some tick — the cross-entropy search of ``benchmarks/certified_ceiling.py
-   --careful`` starts from its actions (population 128, ``--rounds``); where the search clears
-   with at most ``--allow-dirty`` such ticks, its actions become the labels;
-3. on ``--speed-scenes`` of the scenes it drives cleanly, a cheaper search (population 32, 6
-   rounds) looks for a clean clear at least 0.1 s sooner; found, its actions become the labels
-   (with ``--margin m``, an improved sequence of steps 2 and 3 is kept only if it stays as
-   clean with ``m`` more throttle on every decision: a label the fitted policy may overshoot
-   a little);
-4. the actor's mean is fitted (mean squared error, Adam, ``--epochs`` passes, step ``--lr``) to
-   the labels at the observations they drive through — the policy's own actions everywhere
-   else, so it keeps what it does well — the improved scenes repeated ``--weight`` times;
-5. the policy is evaluated on the 1,000 unseen scenarios (seed 1000003) under `certified`.
+    python benchmarks/search_refinement.py --model certified [--seed 1] [--iters 3] \\
+        [--scenes 1000] [--rounds 8] [--speed-scenes 300] [--knot 5] \\
+        [--out benchmarks/results/search_refinement_seed1.json] [--save DIR]
 
-Every iteration's evaluation is printed (none is selected on it). Run::
-
-    python benchmarks/search_refinement.py --model certified [--seed 1] [--iters 4] \\
-        [--out benchmarks/results/search_refinement_seed1.json]
-
-One torch thread.
+The first records of the learning log were made with ``--scenes 2000 --rounds 12
+--speed-scenes 600 --knot 1`` (the defaults then); ``--margin`` (an improved sequence kept only
+if it stays as clean with more throttle on every decision) was a flag of this script up to
+commit 882680a. One torch thread.
 """
 
 from __future__ import annotations
@@ -37,35 +22,28 @@ import argparse
 import time
 from dataclasses import replace
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
-import numpy as np
-
 import _common  # pins the numeric libraries to one thread first
-import certified_ceiling as ceiling
 
 EVAL_SEED = 1_000_003
-REFINE_ENV_OFFSET = 5_000_000  # scenario ids of the refinement's scenes (training seed)
 
 
 def main() -> None:
+    from safeswitch.training.config import RefineConfig
+
+    defaults = RefineConfig()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", default="certified", help="a shipped name or a run dir")
     parser.add_argument("--config", default="certified", help="the recipe whose env it drives")
-    parser.add_argument("--scenes", type=int, default=2000)
-    parser.add_argument("--iters", type=int, default=4)
-    parser.add_argument("--rounds", type=int, default=12)
-    parser.add_argument("--speed-scenes", type=int, default=600)
-    parser.add_argument("--allow-dirty", type=int, default=0)
-    parser.add_argument("--weight", type=int, default=5)
-    parser.add_argument(
-        "--margin", type=float, default=0.0,
-        help="keep an improved sequence only if it also stays within --allow-dirty (a sped-up "
-        "one: clean) with this much more throttle on every decision",
-    )  # fmt: skip
-    parser.add_argument("--epochs", type=int, default=20)
-    parser.add_argument("--lr", type=float, default=1e-4)
+    parser.add_argument("--iters", type=int, default=3)
+    parser.add_argument("--scenes", type=int, default=defaults.scenes)
+    parser.add_argument("--rounds", type=int, default=defaults.rounds)
+    parser.add_argument("--speed-scenes", type=int, default=defaults.speed_scenes)
+    parser.add_argument("--knot", type=int, default=defaults.knot)
+    parser.add_argument("--weight", type=int, default=defaults.weight)
+    parser.add_argument("--epochs", type=int, default=defaults.epochs)
+    parser.add_argument("--lr", type=float, default=defaults.learning_rate)
     parser.add_argument("--seed", type=int, default=1, help="the training seed's scenes")
     parser.add_argument("--out", type=Path)
     parser.add_argument(
@@ -78,21 +56,23 @@ def main() -> None:
     import torch
 
     from safeswitch.evaluation.evaluate import run_controller, scenario_set, summary_against_oracle
-    from safeswitch.evaluation.rollout import rollout
     from safeswitch.leftturn.task import LeftTurnTask
     from safeswitch.training.config import load_config
     from safeswitch.training.policies import load_policy
-    from safeswitch.training.warm_start import fit_actor
+    from safeswitch.training.refine import refine_iteration
 
     torch.set_num_threads(1)
     started = time.perf_counter()
+    refine = replace(
+        defaults, iterations=args.iters, scenes=args.scenes, rounds=args.rounds,
+        speed_scenes=args.speed_scenes, knot=args.knot, weight=args.weight, epochs=args.epochs,
+        learning_rate=args.lr,
+    )  # fmt: skip
     env = load_config(args.config).env
     env = replace(env, episode=replace(env.episode, learned_scope="episode"))
     if env.switching != "certified":
         raise SystemExit(f"--config {args.config} trains under {env.switching!r}, not certified")
     task = LeftTurnTask(env)
-    interval = env.episode.decision_interval
-    decisions = env.episode.horizon_ticks // interval
     policy = load_policy(args.model)
     test, _ = scenario_set(task, "random", 1000, EVAL_SEED)
     keys = ("collisions", "safety_activation_episodes", "cleared_episodes", "mean_efficiency",
@@ -103,81 +83,18 @@ def main() -> None:
         summary = summary_against_oracle(result, plan, env.episode.horizon_s)
         return {k: summary[k] for k in keys}
 
-    def observed(scenarios: Any, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The observation at each decision of ``labels`` driven open loop, and which
-        decisions fall before the episode's end."""
-        size = int(np.prod(task.observation_bounds[0].shape))
-        obs = np.zeros((len(labels), decisions, size), np.float32)
-
-        def drive(o: Any, state: Any, tick: int) -> np.ndarray:
-            obs[:, tick // interval] = o
-            return labels[:, tick // interval]
-
-        result = rollout(task, scenarios, drive)
-        assert not result.collision.any(), "a collision under certified: the filter is broken"
-        alive = np.arange(decisions)[None, :] * interval < result.ticks[:, None]
-        return obs, alive
-
-    def robust(scenarios: Any, seqs: np.ndarray, allowed: int) -> np.ndarray:
-        """Which sequences stay within ``allowed`` dirty ticks with ``--margin`` more
-        throttle (all, without a margin)."""
-        if args.margin <= 0:
-            return np.ones(len(seqs), dtype=bool)
-        pushed = np.clip(seqs + args.margin, -1.0, 1.0)
-        _, _, dirty = ceiling.drive_open_loop(task, scenarios, pushed)
-        return np.asarray(dirty <= allowed)
-
     rows: list[dict[str, Any]] = [{"iteration": 0, "evaluation": evaluate()}]
     print(f"before: {rows[0]['evaluation']}", flush=True)
-    seeds = np.repeat(ceiling.family_of_drivers(24), decisions // 24, axis=1)
     for it in range(1, args.iters + 1):
-        ids = REFINE_ENV_OFFSET * it + np.arange(args.scenes)
-        scenes = task.draw_scenarios(args.seed, ids, np.zeros(args.scenes, dtype=np.int64))
-        actions = ceiling.policy_actions(task, scenes, policy.as_policy())
-        clear, _, dirty = ceiling.drive_open_loop(task, scenes, actions)
-        failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
-        search = SimpleNamespace(seed=args.seed + it, population=128, rounds=args.rounds)
-        f_clear, f_dirty, f_seqs = ceiling.search_sequences(
-            task, scenes.take(failing), actions[failing], search, seeds=seeds
-        )
-        fixed = ~np.isnan(f_clear) & (f_dirty <= args.allow_dirty)
-        fixed &= robust(scenes.take(failing), f_seqs, args.allow_dirty)
-        labels, weight = actions.copy(), np.ones(args.scenes, dtype=int)
-        labels[failing[fixed]] = f_seqs[fixed]
-        weight[failing[fixed]] = args.weight
-        clean = np.setdiff1d(np.arange(args.scenes), failing)[: args.speed_scenes]
-        quick = SimpleNamespace(seed=args.seed + it, population=32, rounds=6)
-        s_clear, s_dirty, s_seqs = ceiling.search_sequences(
-            task, scenes.take(clean), actions[clean], quick, seeds=seeds
-        )
-        faster = ~np.isnan(s_clear) & (s_dirty == 0) & (s_clear < clear[clean] - 0.1)
-        faster &= robust(scenes.take(clean), s_seqs, 0)
-        labels[clean[faster]] = s_seqs[faster]
-        weight[clean[faster]] = args.weight
-        obs, alive = observed(scenes, labels)
-        take = np.repeat(np.arange(args.scenes), weight)
-        x = policy.normalise(obs[take][alive[take]]).astype(np.float32)
-        y = labels[take][alive[take]].astype(np.float32)
-        mse = fit_actor(policy.model, x, y, args.epochs, args.lr)
-        row = {
-            "iteration": it,
-            "failing": int(failing.size),
-            "fixed": int(fixed.sum()),
-            "sped_up": int(faster.sum()),
-            "sped_up_by_s": round(float(np.mean(clear[clean][faster] - s_clear[faster])), 3)
-            if faster.any()
-            else 0.0,
-            "samples": len(x),
-            "mse": round(mse, 5),
-            "evaluation": evaluate(),
-            "wall_time_s": round(time.perf_counter() - started, 1),
-        }
+        row = {"iteration": it, **refine_iteration(task, policy, refine, args.seed, it)}
+        row["evaluation"] = evaluate()
+        row["wall_time_s"] = round(time.perf_counter() - started, 1)
         rows.append(row)
         print(row, flush=True)
     result = {
         "model": args.model,
         "config": args.config,
-        "args": {k: v for k, v in vars(args).items() if k != "out"},
+        "args": {k: v for k, v in vars(args).items() if k not in ("out", "save")},
         "iterations": rows,
         "machine": _common.machine(),
     }

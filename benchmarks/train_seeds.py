@@ -57,12 +57,24 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         "warm_start_collisions": warm["collisions"] if isinstance(warm, dict) else None,
         "timesteps": metrics["timesteps"],
         "wall_time_s": metrics["wall_time_s"],
+        **_refined(metrics.get("refined")),
         "training_collision_episodes": t["collision_episodes"],
         "training_safety_episodes": t["safety_activation_episodes"],
         "constraints": metrics.get("constraints"),
         "training_episodes": t["episodes"],
         "selected_timesteps": (metrics.get("selected") or {}).get("best_timesteps"),
         **{k: e[k] for k in EVALUATED},
+    }
+
+
+def _refined(record: object) -> dict[str, object]:
+    """A run's refinement stage in its row: its wall time (beside PPO's) and the iteration
+    it selected (nothing for a run without the stage)."""
+    if not isinstance(record, dict):
+        return {}
+    return {
+        "refine_wall_time_s": record["wall_time_s"],
+        "refine_selected_iteration": record["selected_iteration"],
     }
 
 

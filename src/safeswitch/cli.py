@@ -244,6 +244,15 @@ def _train(args: argparse.Namespace) -> int:
         f"trained {metrics['timesteps']:,} steps in {metrics['wall_time_s']:.0f} s "
         f"({metrics['steps_per_s']:,.0f} steps/s); " + _training_counts(t)
     )
+    refined = metrics.get("refined")
+    if refined:
+        chosen = refined["selected_iteration"]
+        print(
+            f"refined in {refined['wall_time_s']:.0f} s: "
+            + (f"iteration {chosen} of {refined['iterations']} selected"
+               if chosen else f"none of {refined['iterations']} iterations beat PPO's policy")
+            + " (refine.csv)"
+        )  # fmt: skip
     if e.get("episodes"):
         from safeswitch.evaluation.verdict import headline
 

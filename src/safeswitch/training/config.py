@@ -280,6 +280,51 @@ class WarmStartConfig:
 
 
 @dataclass(frozen=True)
+class RefineConfig:
+    """Search-guided refinement after PPO (ours; off by default; the single-car left turn;
+    see :mod:`safeswitch.training.refine`). Each iteration drives ``scenes`` fresh training
+    scenarios with the run's policy, searches better action sequences where it fails or
+    could clear sooner (the cross-entropy method of :mod:`safeswitch.evaluation.search`,
+    started from the policy's own actions) and fits the actor to them; every iteration is
+    validated and the run keeps the best (``refine.csv``).
+
+    Attributes:
+        iterations: Refinement iterations after PPO (0: none).
+        scenes: Training scenarios driven per iteration.
+        population: Sequences per scene and round of the search where the policy fails
+            (never clears, or a dirty tick: a comfort limit broken, the speed limit passed,
+            the safety action executed).
+        rounds: Rounds of that search.
+        speed_scenes: Scenes the policy drives cleanly searched for a clean clear at least
+            ``min_gain_s`` sooner.
+        speed_population: Sequences per scene and round of that search.
+        speed_rounds: Its rounds.
+        min_gain_s: How much sooner a clean clear must be to become a label [s].
+        knot: Decisions per knot of the search's perturbations (interpolated between: a
+            smooth change of the policy's actions, which the actor can fit).
+        weight: How many times an improved scene's samples count in the fit.
+        epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
+        learning_rate: The fit's step size.
+    """
+
+    iterations: Annotated[int, Bounds(0, 50)] = 0
+    scenes: Annotated[int, Bounds(1)] = 1000
+    population: Annotated[int, Bounds(2)] = 128
+    rounds: Annotated[int, Bounds(1)] = 8
+    speed_scenes: Annotated[int, Bounds(0)] = 300
+    speed_population: Annotated[int, Bounds(2)] = 32
+    speed_rounds: Annotated[int, Bounds(1)] = 6
+    min_gain_s: Annotated[float, Bounds(0, unit="s")] = 0.1
+    knot: Annotated[int, Bounds(1)] = 5
+    weight: Annotated[int, Bounds(1, 100)] = 5
+    epochs: Annotated[int, Bounds(1)] = 20
+    learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4
+
+    def __post_init__(self) -> None:
+        check_bounds(self, "refine")
+
+
+@dataclass(frozen=True)
 class StressConfig:
     """A second validation set where rare collisions concentrate (ours; off by default).
 
@@ -496,6 +541,7 @@ class TrainConfig:
         warm_start: Behaviour cloning of the planner before PPO (off by default).
         validation: Selection of the run's policy on a validation set (off by default).
         constraints: Constrained PPO: costs with self-adjusting multipliers (off by default).
+        refine: Search-guided refinement of the run's policy after PPO (off by default).
         env: The environment: switching logic, ``R_ADAS`` on or off, and everything else.
         train_only: Changes of ``env`` for the training environments alone (ours; a mapping
             merged into ``env``, key by key, as ``base:`` merges (:func:`read_config`);
@@ -524,6 +570,7 @@ class TrainConfig:
     warm_start: WarmStartConfig = field(default_factory=WarmStartConfig)
     validation: ValidationConfig = field(default_factory=ValidationConfig)
     constraints: ConstraintsConfig = field(default_factory=ConstraintsConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)
     env: LeftTurnConfig = field(default_factory=LeftTurnConfig)
     traffic: str | dict[str, Any] | None = None
     train_only: dict[str, Any] | None = None
@@ -575,6 +622,15 @@ class TrainConfig:
                   "must differ from the training, eval and validation seeds")  # fmt: skip
             check(self.traffic is None, "validation", "stress", "set",
                   "is for the paper's scene (a traffic scene draws its own scenarios)")  # fmt: skip
+        if self.refine.iterations:
+            check(self.traffic is None, "refine", "iterations", self.refine.iterations,
+                  "searches the single-car scene open loop: needs no traffic")  # fmt: skip
+            check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
+                  f"needs random scenarios (env.scenario is {self.env.scenario!r})")  # fmt: skip
+            for where, env in (("env", self.train_env), ("deploy_switching", self.deployed_env)):
+                check(env.switching == "certified", "refine", "iterations",
+                      self.refine.iterations, "searches open loop under the certified filter "
+                      f"(no sequence can collide): {where} has {env.switching!r}")  # fmt: skip
 
     @property
     def train_env(self) -> LeftTurnConfig:

@@ -12,8 +12,9 @@ steps, in the same run directory (see :mod:`safeswitch.training.run`):
 3. PPO (built, or loaded from the checkpoint), an optional warm start (the left turn's planner),
    validation with best-policy selection (``validation.every``), progress rows, TensorBoard,
    checkpoints every ``checkpoint_every`` steps and on Ctrl-C;
-4. the final model, the run's policy selected, the final evaluation on unseen scenarios or
-   seeds, and ``metrics.json`` last.
+4. the final model, the run's policy selected, a plant's stage after PPO (the left turn's
+   search-guided refinement, :mod:`safeswitch.training.refine`, when ``refine:`` asks), the
+   final evaluation on unseen scenarios or seeds, and ``metrics.json`` last.
 
 What differs between plants is a :class:`Plant`: how its environments are built, what its
 monitor counts (a driving plant's collisions are its failures; any plant's failures are what it
@@ -135,6 +136,7 @@ def train(
     if validator is not None and validator.state["best_timesteps"] is not None:
         select_best(run)
         selected = {"validation_seed": config.validation.seed, **validator.state}
+    refined = plant.refine(run)
     started = time.perf_counter()
     evaluation = plant.evaluate(run) if config.eval_episodes else {}
     metrics: dict[str, Any] = {
@@ -146,6 +148,7 @@ def train(
         "torch_threads": config.torch_threads,
         "seed": config.seed,
         "selected": selected,
+        **({"refined": refined} if refined is not None else {}),
         **learning.state(),
         "training": plant.training(monitor.totals),
         "evaluation": {

@@ -59,6 +59,11 @@ class Plant:
         """The validator (``None`` without ``validation.every``)."""
         return None
 
+    def refine(self, run: Path) -> dict[str, Any] | None:
+        """A stage after PPO that may replace the run's policy (the left turn's search-guided
+        refinement); returns its record for ``metrics.json`` (``None``: none here)."""
+        return None
+
     def evaluate(self, run: Path) -> dict[str, Any]:
         """The run's policy on the final evaluation set."""
         raise NotImplementedError

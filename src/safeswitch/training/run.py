@@ -416,6 +416,11 @@ class LeftTurnPlant(Plant):
     def validator(self, run: Path) -> Validator | None:
         return Validator(self.config, run) if self.config.validation.every else None
 
+    def refine(self, run: Path) -> dict[str, Any] | None:
+        from safeswitch.training.refine import refine_run
+
+        return refine_run(run, self.config)
+
     def evaluate(self, run: Path) -> dict[str, Any]:
         c = self.config
         return evaluate_trained(load_policy(run), c, c.eval_episodes, c.eval_seed)

@@ -42,6 +42,7 @@ from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.io import replacing, write_snapshot
 from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import TrainedPolicy
 
@@ -190,12 +191,9 @@ class Validator(BestPolicy):
     def __init__(self, config: TrainConfig, run: Path) -> None:
         super().__init__(config, run)
         v = config.validation
-        env = config.deployed_env
-        if v.switching is not None:
-            env = dataclasses.replace(env, switching=v.switching)
-        self.task = build_task(None, env, traffic=config.traffic_settings)
-        self.scenarios = self.task.scenario_set(v.seed, v.episodes)
-        self._plan: OraclePlan | None = None
+        self.validation_set = ValidationSet(config)
+        self.task, self.scenarios = self.validation_set.task, self.validation_set.scenarios
+        env = self.task.config
         self.stress_task, self.stress_scenarios = None, None
         if v.stress is not None:
             stress = v.stress
@@ -256,8 +254,31 @@ class Validator(BestPolicy):
 
     def validate(self) -> dict[str, Any]:
         """The current deterministic policy's summary on the validation scenarios."""
+        return self.validation_set.summary(self._policy())
+
+
+class ValidationSet:
+    """A run's validation scenarios (``validation.episodes`` drawn with ``validation.seed``)
+    under the deployment logic (or ``validation.switching``), and the oracle's plan of them
+    (made at the first summary, kept for the next).
+
+    Args:
+        config: The run's configuration.
+    """
+
+    def __init__(self, config: TrainConfig) -> None:
+        v = config.validation
+        env = config.deployed_env
+        if v.switching is not None:
+            env = dataclasses.replace(env, switching=v.switching)
+        self.task: LeftTurnTask = build_task(None, env, traffic=config.traffic_settings)
+        self.scenarios = self.task.scenario_set(v.seed, v.episodes)
+        self._plan: OraclePlan | None = None
+
+    def summary(self, policy: TrainedPolicy) -> dict[str, Any]:
+        """``policy``'s deterministic summary on the validation scenarios."""
         result, self._plan = run_controller(
-            self.task, self._policy().as_policy(), self.scenarios, plan=self._plan, trace=False
+            self.task, policy.as_policy(), self.scenarios, plan=self._plan, trace=False
         )
         return summary_against_oracle(result, self._plan, self.task.config.episode.horizon_s)
 

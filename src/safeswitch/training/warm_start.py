@@ -68,10 +68,18 @@ def actor_mean(model: SwitchPPO, obs: torch.Tensor) -> torch.Tensor:
 
 
 def fit_actor(
-    model: SwitchPPO, obs: NDArray[np.float32], actions: NDArray[np.float32], epochs: int, lr: float
+    model: SwitchPPO,
+    obs: NDArray[np.float32],
+    actions: NDArray[np.float32],
+    epochs: int,
+    lr: float,
+    *,
+    clipped: bool = False,
 ) -> float:
     """Fit the actor's mean to ``actions`` ``[N]`` at normalised ``obs`` ``[N, 6]``; returns
-    the last epoch's mean squared error."""
+    the last epoch's mean squared error. ``clipped``: the policy acts with its mean clipped
+    to [-1, 1], so a mean beyond a bound the label sits on is no error (a full-throttle label
+    leaves a mean of 1.8 where it is)."""
     x = torch.as_tensor(obs)
     y = torch.as_tensor(actions).reshape(-1, 1)
     # A learned log std gets no gradient from this loss, so Adam leaves it alone.
@@ -84,12 +92,22 @@ def fit_actor(
         loss_sum = 0.0
         for start in range(0, x.shape[0], batch):
             idx = order[start : start + batch]
-            loss = torch.mean((actor_mean(model, x[idx]) - y[idx]) ** 2)
+            loss = torch.mean(action_error(actor_mean(model, x[idx]), y[idx], clipped) ** 2)
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
             loss_sum += float(loss.detach()) * len(idx)
     return loss_sum / max(x.shape[0], 1)
+
+
+def action_error(mean: torch.Tensor, label: torch.Tensor, clipped: bool) -> torch.Tensor:
+    """``mean − label``; with ``clipped``, 0 where the label is on a bound of [-1, 1] and the
+    mean beyond it."""
+    error = mean - label
+    if clipped:
+        error = torch.where(label >= 1.0, torch.clamp(error, max=0.0), error)
+        error = torch.where(label <= -1.0, torch.clamp(error, min=0.0), error)
+    return error
 
 
 def _labelling_driver(

@@ -1,0 +1,239 @@
+"""Search-guided refinement of a trained left-turn policy: the pipeline's last stage
+(``refine:``; ours, off by default).
+
+PPO under constraints leaves time on the table: a careful driver that knows each scene clears
+sooner than the policy in most scenes (``benchmarks/certified_ceiling.py --careful``). The
+single-car scene is deterministic given its start (the north car holds its speed), so the
+policy's own actions replayed open loop drive exactly its episode, and a trajectory search can
+start from them. Each iteration (the idea is expert iteration / guided policy search with a
+sampling optimiser):
+
+1. the policy drives ``refine.scenes`` fresh training scenarios (the run's seed, environment
+   ids no training environment uses) under the run's logic;
+2. where it fails — never clears, or breaks a comfort limit, passes the speed limit or needs
+   the safety action on some tick — the cross-entropy search
+   (:func:`~safeswitch.evaluation.search.search_sequences`) starts from its actions; where it
+   clears cleanly, its actions become the labels;
+3. on ``refine.speed_scenes`` of the scenes it drives cleanly, a cheaper search looks for a
+   clean clear at least ``refine.min_gain_s`` sooner; found, its actions become the labels;
+4. the actor's mean is fitted to the labels at the observations they drive through — the
+   policy's own actions everywhere else, so it keeps what it does well — the improved scenes
+   counted ``refine.weight`` times;
+5. the policy is validated on the run's validation scenarios.
+
+The run keeps the iteration (0: PPO's own policy) with no collision, then the least excess over
+the comfort budget (``constraints.comfort``'s validation budget, when set), then the fewest
+episodes over the speed limit, then the highest efficiency against the oracle (a scenario never
+cleared counts 0). The safety action's share is not in the ranking: a label is clean, but the
+fitted policy touches the filter near the edge it was taught to drive along — in our runs in
+5–8 % of the episodes, a median of 2 ticks each (docs/learning_experiments.md); it is in every
+row of ``refine.csv`` and in the evaluation.
+
+The search needs a logic under which no action sequence can collide: ``certified``.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.evaluation.search import (
+    SEGMENT_S,
+    drive_open_loop,
+    family_of_drivers,
+    policy_actions,
+    search_sequences,
+)
+from safeswitch.io import write_atomic, write_policy_files
+from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.task import LeftTurnTask, TaskState
+from safeswitch.training.config import RefineConfig, TrainConfig
+from safeswitch.training.policies import TrainedPolicy, load_policy
+from safeswitch.training.validation import VALIDATION_FIELDS, ValidationSet, constraint_measures
+from safeswitch.training.warm_start import action_error, actor_mean, fit_actor
+
+#: Environment ids of iteration ``i``'s scenes start at ``i`` times this (training uses the
+#: first ``n_envs``).
+REFINE_ENV_OFFSET = 5_000_000
+
+#: The validation's columns of ``refine.csv`` (``validation.csv``'s summary fields).
+VALIDATED = tuple(
+    f for f in VALIDATION_FIELDS if f not in ("timesteps", "stress_collisions", "best")
+)
+
+#: Columns of ``refine.csv``: the iteration's work, its validation, whether it was selected.
+REFINE_FIELDS = (
+    "iteration", "failing", "fixed", "sped_up", "samples", "mse_before", "mse", "wall_time_s",
+    *VALIDATED, "selected",
+)  # fmt: skip
+
+
+def refine_iteration(
+    task: LeftTurnTask, policy: TrainedPolicy, config: RefineConfig, seed: int, iteration: int
+) -> dict[str, Any]:
+    """One iteration of the module docstring's steps 1–4 on ``policy`` (its actor changed in
+    place), on the scenes of ``seed`` and ``iteration``; returns what it did."""
+    episode = task.config.episode
+    decisions = episode.horizon_ticks // episode.decision_interval
+    n = config.scenes
+    ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
+    scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
+    actions = policy_actions(task, scenes, policy.as_policy())
+    clear, _, dirty = drive_open_loop(task, scenes, actions)
+    drivers = _drivers(episode.horizon_s, decisions)
+    failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
+    f_clear, f_dirty, f_seqs = search_sequences(
+        task, scenes.take(failing), actions[failing], population=config.population,
+        rounds=config.rounds, seed=seed + iteration, seeds=drivers, knot=config.knot,
+    )  # fmt: skip
+    fixed = ~np.isnan(f_clear) & (f_dirty == 0)
+    labels, weight = actions.copy(), np.ones(n, dtype=np.int64)
+    labels[failing[fixed]] = f_seqs[fixed]
+    weight[failing[fixed]] = config.weight
+    clean = np.setdiff1d(np.arange(n), failing)[: config.speed_scenes]
+    sped_up = 0
+    if clean.size:
+        s_clear, s_dirty, s_seqs = search_sequences(
+            task, scenes.take(clean), actions[clean], population=config.speed_population,
+            rounds=config.speed_rounds, seed=seed + iteration, seeds=drivers, knot=config.knot,
+        )  # fmt: skip
+        faster = ~np.isnan(s_clear) & (s_dirty == 0) & (s_clear < clear[clean] - config.min_gain_s)
+        labels[clean[faster]] = s_seqs[faster]
+        weight[clean[faster]] = config.weight
+        sped_up = int(faster.sum())
+    obs, alive = observed(task, scenes, labels)
+    take = np.repeat(np.arange(n), weight)
+    x = policy.normalise(obs[take][alive[take]]).astype(np.float32)
+    y = labels[take][alive[take]].astype(np.float32)
+    before = _label_error(policy, x, y)
+    fit_actor(policy.model, x, y, config.epochs, config.learning_rate, clipped=True)
+    return {
+        "failing": int(failing.size),
+        "fixed": int(fixed.sum()),
+        "sped_up": sped_up,
+        "samples": len(x),
+        "mse_before": round(before, 6),
+        "mse": round(_label_error(policy, x, y), 6),
+    }
+
+
+def _label_error(policy: TrainedPolicy, x: NDArray[np.float32], y: NDArray[np.float32]) -> float:
+    """The mean squared error of the actions the policy takes (its mean, clipped to [-1, 1])
+    to the labels ``y`` at normalised observations ``x``."""
+    if not len(y):
+        return 0.0
+    with torch.no_grad():
+        mean = actor_mean(policy.model, torch.as_tensor(x))
+        error = action_error(mean, torch.as_tensor(y).reshape(-1, 1), clipped=True)
+    return float(torch.mean(error**2))
+
+
+def observed(
+    task: LeftTurnTask, scenarios: Scenarios, labels: NDArray[np.float64]
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """The observation at each decision of ``labels`` [n, decisions] driven open loop
+    [n, decisions, obs], and which decisions fall before the episode's end [n, decisions]."""
+    episode = task.config.episode
+    interval, decisions = episode.decision_interval, labels.shape[1]
+    size = int(np.prod(task.observation_bounds[0].shape))
+    obs = np.zeros((len(labels), decisions, size), np.float32)
+
+    def drive(o: NDArray[np.float32], state: TaskState, tick: int) -> NDArray[np.float64]:
+        obs[:, tick // interval] = o.reshape(len(labels), size)
+        return labels[:, tick // interval]
+
+    result = rollout(task, scenarios, drive)
+    alive = np.arange(decisions)[None, :] * interval < result.ticks[:, None]
+    return obs, alive
+
+
+def _drivers(horizon_s: float, decisions: int) -> NDArray[np.float64] | None:
+    """The structured drivers at one action per decision (``None`` where the decisions do
+    not divide into half-second segments)."""
+    segments = round(horizon_s / SEGMENT_S)
+    if segments < 1 or decisions % segments:
+        return None
+    return np.repeat(family_of_drivers(segments), decisions // segments, axis=1)
+
+
+def selection_key(config: TrainConfig, summary: dict[str, Any]) -> tuple[float, ...]:
+    """What the stage maximises over its iterations (see the module docstring)."""
+    horizon = config.env.episode.horizon_s
+    comfort = config.constraints.comfort
+    excess = 0.0
+    if comfort is not None:
+        measured = constraint_measures(summary, horizon)["comfort"]
+        excess = max(0.0, measured / comfort.selection_budget - 1.0)
+    efficiency = summary.get("mean_efficiency")
+    return (
+        -float(summary["collisions"]),
+        -excess,
+        -float(summary["speeding_episodes"]),
+        float(efficiency) if efficiency is not None else float("-inf"),
+    )
+
+
+def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
+    """The stage on a finished run's policy (``run/model.zip``): ``refine.iterations``
+    iterations, each validated; the selected one becomes the run's policy (PPO's own moves to
+    ``run/ppo/``); ``refine.csv`` records every iteration. Returns the record for
+    ``metrics.json`` (``None``: no refinement configured). Nothing is written until the
+    iterations are done, so an interrupted stage leaves PPO's policy in place (``--resume``
+    runs the stage again)."""
+    r = config.refine
+    if not r.iterations:
+        return None
+    started = time.perf_counter()
+    policy = load_policy(run)
+    task = LeftTurnTask(config.train_env)
+    validation = ValidationSet(config)
+    horizon = validation.task.config.episode.horizon_s
+    rows: list[dict[str, Any]] = []
+    states: list[dict[str, Any]] = []
+
+    def validate(row: dict[str, Any]) -> None:
+        summary = validation.summary(policy)
+        row.update({k: summary.get(k) for k in VALIDATED if k in summary})
+        row["clear_time_s"] = constraint_measures(summary, horizon)["clear_time"]
+        row["key"] = selection_key(config, summary)
+        row["wall_time_s"] = round(time.perf_counter() - started, 1)
+        rows.append(row)
+        states.append(copy.deepcopy(policy.model.policy.state_dict()))
+
+    validate({"iteration": 0})
+    for it in range(1, r.iterations + 1):
+        validate({"iteration": it, **refine_iteration(task, policy, r, config.seed, it)})
+    best = max(range(len(rows)), key=lambda i: rows[i]["key"])
+    for i, row in enumerate(rows):
+        row["selected"] = int(i == best)
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=REFINE_FIELDS, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+    if best > 0:
+        ppo = run / "ppo"
+        ppo.mkdir(exist_ok=True)
+        for name in ("model.zip", "vecnormalize.pkl"):
+            shutil.copyfile(run / name, ppo / f".{name}.tmp")
+            os.replace(ppo / f".{name}.tmp", ppo / name)
+        policy.model.policy.load_state_dict(states[best])
+        write_policy_files(run, policy.model, policy.normalizer)
+    write_atomic(run / "refine.csv", buffer.getvalue())
+    chosen = rows[best]
+    return {
+        "iterations": r.iterations,
+        "selected_iteration": best,
+        "wall_time_s": round(time.perf_counter() - started, 1),
+        "validation": {k: chosen.get(k) for k in VALIDATED},
+    }

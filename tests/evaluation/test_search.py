@@ -1,0 +1,83 @@
+"""The open-loop search (:mod:`safeswitch.evaluation.search`): a policy's actions replayed
+open loop drive exactly its episodes, the search never ranks a scene below where it started
+and reports what its sequences drive, and its smooth perturbations are linear between knots."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from safeswitch.evaluation.evaluate import scenario_set
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.evaluation.search import (
+    drive_open_loop,
+    family_of_drivers,
+    policy_actions,
+    search_sequences,
+    smooth_noise,
+)
+from safeswitch.leftturn.task import LeftTurnTask
+from safeswitch.training.config import load_config
+from safeswitch.training.policies import load_policy
+
+
+@pytest.fixture(scope="module")
+def scene():
+    env = load_config("certified").env
+    task = LeftTurnTask(replace(env, episode=replace(env.episode, learned_scope="episode")))
+    scenarios, _ = scenario_set(task, "random", 24, 7_000_001)
+    return task, scenarios
+
+
+def rank(clear, dirty):
+    """What the search minimises, as comparable tuples: never cleared, dirty ticks, time."""
+    return [(bool(np.isnan(c)), int(d), 0.0 if np.isnan(c) else float(c))
+            for c, d in zip(clear, dirty, strict=True)]  # fmt: skip
+
+
+def test_a_policys_actions_replayed_open_loop_drive_its_episodes(scene):
+    task, scenarios = scene
+    act = load_policy("certified").as_policy()
+    closed = rollout(task, scenarios, act)
+    actions = policy_actions(task, scenarios, act)
+    clear, _, dirty = drive_open_loop(task, scenarios, actions)
+    np.testing.assert_array_equal(clear, np.asarray(closed.time_to_clear, dtype=float))
+    np.testing.assert_array_equal(
+        dirty, closed.comfort_violation_steps + closed.speeding_steps + closed.safety_steps
+    )
+
+
+@pytest.mark.parametrize("knot", [1, 5])
+def test_the_search_ranks_no_scene_below_its_start(scene, knot):
+    task, scenarios = scene
+    start = np.full((24, 24), -1.0)  # the throttle closed throughout: never clears
+    clear0, _, dirty0 = drive_open_loop(task, scenarios, start)
+    assert np.isnan(clear0).all()
+    clear, dirty, seqs = search_sequences(
+        task, scenarios, start, population=24, rounds=3, seed=3,
+        seeds=family_of_drivers(24), knot=knot,
+    )  # fmt: skip
+    assert all(a <= b for a, b in zip(rank(clear, dirty), rank(clear0, dirty0), strict=True))
+    assert (~np.isnan(clear)).sum() >= 12  # it finds clears the start never makes
+    # what it reports is what its sequences drive
+    again, _, dirty_again = drive_open_loop(task, scenarios, seqs)
+    np.testing.assert_array_equal(again, clear)
+    np.testing.assert_array_equal(dirty_again, dirty)
+
+
+def test_a_search_needs_a_start_or_seeds(scene):
+    task, scenarios = scene
+    with pytest.raises(ValueError, match="a start or seeds"):
+        search_sequences(task, scenarios, None, population=4, rounds=1, seed=0)
+
+
+def test_smooth_perturbations_are_linear_between_knots():
+    rng = np.random.default_rng(0)
+    noise = smooth_noise(rng, (3, 4, 20), knot=5)
+    assert noise.shape == (3, 4, 20)
+    second = np.diff(noise, 2, axis=-1)  # zero inside each knot interval, not at the knots
+    inside = [i for i in range(18) if (i + 1) % 5 != 0]
+    np.testing.assert_allclose(second[..., inside], 0.0, atol=1e-12)
+    assert np.abs(second[..., 4]).min() > 0  # a bend at the knot (segment 5)
+    independent = smooth_noise(np.random.default_rng(0), (3, 4, 20), knot=1)
+    assert np.abs(np.diff(independent, 2, axis=-1)).min() > 0

@@ -1,0 +1,168 @@
+"""The pipeline's search-guided refinement (``refine:``, :mod:`safeswitch.training.refine`):
+it fits the actor toward the search's labels, keeps the iteration its criterion ranks first,
+makes that the run's policy with PPO's kept beside it, leaves PPO's policy in place when
+interrupted, and is refused where its search cannot run."""
+
+import csv
+import shutil
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.training import refine as refine_module
+from safeswitch.training import train
+from safeswitch.training.config import RefineConfig, TrainConfig, load_config
+from safeswitch.training.policies import load_policy, resolve_model_dir, run_config_path
+from safeswitch.training.refine import refine_run
+from safeswitch.training.run import evaluate_trained
+from safeswitch.training.validation import ValidationSet
+from safeswitch.training.warm_start import action_error
+
+SMALL_REFINE = RefineConfig(
+    iterations=2, scenes=60, population=16, rounds=3, speed_scenes=40, speed_population=8,
+    speed_rounds=3,
+)  # fmt: skip
+
+
+def shipped_run(folder):
+    """The shipped ``certified`` policy as a finished run in ``folder``."""
+    folder.mkdir(parents=True)
+    source = resolve_model_dir("certified")
+    for name in ("model.zip", "vecnormalize.pkl"):
+        shutil.copyfile(source / name, folder / name)
+    shutil.copyfile(run_config_path(source), folder / "config.yaml")
+    return folder
+
+
+def small_config(**refine):
+    config = load_config("certified")
+    return replace(
+        config,
+        refine=replace(SMALL_REFINE, **refine),
+        validation=replace(config.validation, episodes=200),
+    )
+
+
+def rows_of(run):
+    with open(run / "refine.csv", newline="", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
+@pytest.fixture(scope="module")
+def refined(tmp_path_factory):
+    run = shipped_run(tmp_path_factory.mktemp("refine") / "run")
+    original = (run / "model.zip").read_bytes()
+    config = small_config()
+    return run, config, refine_run(run, config), original
+
+
+def test_an_iteration_fits_the_actor_toward_the_searchs_labels(refined):
+    run = refined[0]
+    rows = rows_of(run)
+    first = rows[1]
+    assert int(first["fixed"]) + int(first["sped_up"]) > 0  # the search improved some scenes
+    assert float(first["mse"]) < float(first["mse_before"])
+
+
+def test_the_stage_keeps_the_iteration_its_criterion_ranks_first(refined):
+    run, config, record, _ = refined
+    rows = rows_of(run)
+    assert [int(r["iteration"]) for r in rows] == [0, 1, 2]
+    assert [int(r["selected"]) for r in rows].count(1) == 1
+    chosen = next(int(r["iteration"]) for r in rows if r["selected"] == "1")
+    assert record["selected_iteration"] == chosen
+    budget = config.constraints.comfort.selection_budget
+
+    def key(r):
+        excess = max(0.0, float(r["comfort_violation_fraction"]) / budget - 1.0)
+        return (-int(r["collisions"]), -excess, -int(r["speeding_episodes"]),
+                float(r["mean_efficiency"]))  # fmt: skip
+
+    assert key(rows[chosen]) == max(key(r) for r in rows)
+
+
+def test_the_selected_iteration_is_the_runs_policy_and_ppos_is_kept(refined):
+    run, config, record, original = refined
+    chosen = record["selected_iteration"]
+    if chosen == 0:
+        assert (run / "model.zip").read_bytes() == original
+        assert not (run / "ppo").exists()
+    else:
+        assert (run / "ppo" / "model.zip").read_bytes() == original
+        assert (run / "model.zip").read_bytes() != original
+    # what the stage reports is what the run's policy now does
+    summary = ValidationSet(config).summary(load_policy(run))
+    assert summary["mean_efficiency"] == pytest.approx(record["validation"]["mean_efficiency"])
+    assert summary["cleared_episodes"] == record["validation"]["cleared_episodes"]
+
+
+def test_an_interrupted_stage_leaves_ppos_policy(tmp_path, monkeypatch):
+    run = shipped_run(tmp_path / "run")
+    original = (run / "model.zip").read_bytes()
+    real = refine_module.refine_iteration
+
+    def interrupted(task, policy, config, seed, iteration):
+        if iteration == 2:
+            raise KeyboardInterrupt
+        return real(task, policy, config, seed, iteration)
+
+    monkeypatch.setattr(refine_module, "refine_iteration", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        refine_run(run, small_config())
+    assert (run / "model.zip").read_bytes() == original
+    assert not (run / "refine.csv").exists() and not (run / "ppo").exists()
+
+
+def test_the_pipeline_evaluates_the_refined_policy(tmp_path):
+    config = load_config("certified")
+    small = replace(
+        config, timesteps=4096, n_envs=16, eval_episodes=100, torch_threads=1,
+        validation=replace(config.validation, start=2048, every=2048, episodes=100),
+        refine=replace(SMALL_REFINE, iterations=1, scenes=20, speed_scenes=10),
+    )  # fmt: skip
+    run = tmp_path / "run"
+    metrics = train(small, run, progress_bar=False)
+    assert metrics["refined"]["iterations"] == 1
+    chosen = metrics["refined"]["selected_iteration"]
+    assert rows_of(run)[chosen]["selected"] == "1"
+    again = evaluate_trained(load_policy(run), small, small.eval_episodes, small.eval_seed)
+    assert metrics["evaluation"]["mean_efficiency"] == pytest.approx(again["mean_efficiency"])
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"traffic": "light"}, "needs no traffic"),
+        ({"env": {"switching": "paper"}}, "env has 'paper'"),
+        ({"deploy_switching": "paper"}, "deploy_switching has 'paper'"),
+        ({"env": {"scenario": "cut"}}, "needs random scenarios"),
+    ],
+)
+def test_refinement_is_refused_where_its_search_cannot_run(change, message):
+    base = to_dict(load_config("certified"))
+    base["refine"] = {"iterations": 1}
+    for key, value in change.items():
+        if isinstance(value, dict):
+            base[key] = {**base[key], **value}
+        else:
+            base[key] = value
+    with pytest.raises(ConfigError, match=rf"refine\.iterations .*{message}.*got 1"):
+        from_dict(TrainConfig, base)
+
+
+def test_refinement_settings_are_checked_by_name():
+    with pytest.raises(ConfigError, match=r"refine\.scenes.*got 0"):
+        RefineConfig(scenes=0)
+    with pytest.raises(ConfigError, match=r"refine\.knot.*got 0"):
+        RefineConfig(knot=0)
+
+
+def test_a_mean_beyond_the_bound_its_label_sits_on_is_no_error():
+    mean = torch.tensor([[1.8], [0.5], [1.8], [-1.4], [-1.4]])
+    label = torch.tensor([[1.0], [1.0], [0.3], [-1.0], [0.0]])
+    clipped = action_error(mean, label, clipped=True)
+    np.testing.assert_allclose(clipped.numpy()[:, 0], [0.0, -0.5, 1.5, 0.0, -1.4], atol=1e-6)
+    np.testing.assert_allclose(action_error(mean, label, clipped=False), mean - label)
