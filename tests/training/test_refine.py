@@ -16,7 +16,7 @@ from safeswitch.training import refine as refine_module
 from safeswitch.training import train
 from safeswitch.training.config import RefineConfig, TrainConfig, load_config
 from safeswitch.training.policies import load_policy, resolve_model_dir, run_config_path
-from safeswitch.training.refine import refine_run
+from safeswitch.training.refine import refine_run, search_task
 from safeswitch.training.run import evaluate_trained
 from safeswitch.training.validation import ValidationSet
 from safeswitch.training.warm_start import action_error
@@ -166,3 +166,10 @@ def test_a_mean_beyond_the_bound_its_label_sits_on_is_no_error():
     clipped = action_error(mean, label, clipped=True)
     np.testing.assert_allclose(clipped.numpy()[:, 0], [0.0, -0.5, 1.5, 0.0, -1.4], atol=1e-6)
     np.testing.assert_allclose(action_error(mean, label, clipped=False), mean - label)
+
+
+def test_the_search_may_keep_a_stricter_margin_than_the_deployed_filter():
+    config = small_config(time_margin_s=0.3)
+    assert search_task(config).config.certified.time_margin_s == 0.3
+    assert ValidationSet(config).task.config.certified.time_margin_s == 0.1  # as deployed
+    assert search_task(small_config()).config.certified.time_margin_s == 0.1

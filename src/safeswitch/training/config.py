@@ -305,6 +305,10 @@ class RefineConfig:
         weight: How many times an improved scene's samples count in the fit.
         epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
         learning_rate: The fit's step size.
+        time_margin_s: The search's filter keeps this margin [s] instead of
+            ``env.certified.time_margin_s`` (``null``: the same): a label clean under a
+            stricter filter leaves the fitted policy, which tracks it only approximately, room
+            before the deployed filter acts. Deployment and validation keep the env's.
     """
 
     iterations: Annotated[int, Bounds(0, 50)] = 0
@@ -319,6 +323,7 @@ class RefineConfig:
     weight: Annotated[int, Bounds(1, 100)] = 5
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4
+    time_margin_s: Annotated[float | None, Bounds(0, 5, unit="s")] = None
 
     def __post_init__(self) -> None:
         check_bounds(self, "refine")

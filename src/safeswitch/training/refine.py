@@ -9,7 +9,8 @@ start from them. Each iteration (the idea is expert iteration / guided policy se
 sampling optimiser):
 
 1. the policy drives ``refine.scenes`` fresh training scenarios (the run's seed, environment
-   ids no training environment uses) under the run's logic;
+   ids no training environment uses) under the run's logic (its filter's time margin
+   ``refine.time_margin_s`` where set: labels clean under a stricter filter);
 2. where it fails — never clears, or breaks a comfort limit, passes the speed limit or needs
    the safety action on some tick — the cross-entropy search
    (:func:`~safeswitch.evaluation.search.search_sequences`) starts from its actions; where it
@@ -40,6 +41,7 @@ import io
 import os
 import shutil
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -167,6 +169,16 @@ def _drivers(horizon_s: float, decisions: int) -> NDArray[np.float64] | None:
     return np.repeat(family_of_drivers(segments), decisions // segments, axis=1)
 
 
+def search_task(config: TrainConfig) -> LeftTurnTask:
+    """The task the stage drives and searches: the training environment, its filter's time
+    margin ``refine.time_margin_s`` where set."""
+    env = config.train_env
+    margin = config.refine.time_margin_s
+    if margin is not None:
+        env = replace(env, certified=replace(env.certified, time_margin_s=margin))
+    return LeftTurnTask(env)
+
+
 def selection_key(config: TrainConfig, summary: dict[str, Any]) -> tuple[float, ...]:
     """What the stage maximises over its iterations (see the module docstring)."""
     horizon = config.env.episode.horizon_s
@@ -196,7 +208,7 @@ def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
         return None
     started = time.perf_counter()
     policy = load_policy(run)
-    task = LeftTurnTask(config.train_env)
+    task = search_task(config)
     validation = ValidationSet(config)
     horizon = validation.task.config.episode.horizon_s
     rows: list[dict[str, Any]] = []
