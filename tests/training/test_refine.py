@@ -74,12 +74,14 @@ def test_the_stage_keeps_the_iteration_its_criterion_ranks_first(refined):
     assert [int(r["selected"]) for r in rows].count(1) == 1
     chosen = next(int(r["iteration"]) for r in rows if r["selected"] == "1")
     assert record["selected_iteration"] == chosen
-    budget = config.constraints.comfort.selection_budget
+    comfort = config.constraints.comfort.selection_budget
+    safety = config.constraints.safety.selection_budget
+    episodes = config.validation.episodes
 
-    def key(r):
-        excess = max(0.0, float(r["comfort_violation_fraction"]) / budget - 1.0)
-        return (-int(r["collisions"]), -excess, -int(r["speeding_episodes"]),
-                float(r["mean_efficiency"]))  # fmt: skip
+    def key(r):  # the recipe limits comfort and the filter's episodes, not speeding
+        excess = max(0.0, float(r["comfort_violation_fraction"]) / comfort - 1.0)
+        excess += max(0.0, int(r["safety_activation_episodes"]) / episodes / safety - 1.0)
+        return (-int(r["collisions"]), -excess, float(r["mean_efficiency"]))
 
     assert key(rows[chosen]) == max(key(r) for r in rows)
 

@@ -22,13 +22,14 @@ sampling optimiser):
    counted ``refine.weight`` times;
 5. the policy is validated on the run's validation scenarios.
 
-The run keeps the iteration (0: PPO's own policy) with no collision, then the least excess over
-the comfort budget (``constraints.comfort``'s validation budget, when set), then the fewest
-episodes over the speed limit, then the highest efficiency against the oracle (a scenario never
-cleared counts 0). The safety action's share is not in the ranking: a label is clean, but the
-fitted policy touches the filter near the edge it was taught to drive along — in our runs in
-5–8 % of the episodes, a median of 2 ticks each (docs/learning_experiments.md); it is in every
-row of ``refine.csv`` and in the evaluation.
+The run keeps the iteration (0: PPO's own policy) with no collision, then the least summed
+excess of the comfort, speeding and safety constraints over their validation budgets (the
+recipe's own ``constraints``, ranked as ``validation.criterion: constraints_then_return``
+ranks them), then the highest efficiency against the oracle (a scenario never cleared counts
+0). A label is clean, but a policy fitted to labels that drive along the filter's edge touches
+the filter near it (in our runs in 5–9 % of the episodes, a median of 2 ticks each:
+docs/learning_experiments.md); ``refine.time_margin_s`` searches under a stricter filter for a
+margin from that edge.
 
 The search needs a logic under which no action sequence can collide: ``certified``.
 """
@@ -62,7 +63,13 @@ from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.training.config import RefineConfig, TrainConfig
 from safeswitch.training.policies import TrainedPolicy, load_policy
-from safeswitch.training.validation import VALIDATION_FIELDS, ValidationSet, constraint_measures
+from safeswitch.training.validation import (
+    SAFETY_CONSTRAINTS,
+    VALIDATION_FIELDS,
+    ValidationSet,
+    constraint_excess,
+    constraint_measures,
+)
 from safeswitch.training.warm_start import action_error, actor_mean, fit_actor
 
 #: Environment ids of iteration ``i``'s scenes start at ``i`` times this (training uses the
@@ -180,18 +187,15 @@ def search_task(config: TrainConfig) -> LeftTurnTask:
 
 
 def selection_key(config: TrainConfig, summary: dict[str, Any]) -> tuple[float, ...]:
-    """What the stage maximises over its iterations (see the module docstring)."""
-    horizon = config.env.episode.horizon_s
-    comfort = config.constraints.comfort
-    excess = 0.0
-    if comfort is not None:
-        measured = constraint_measures(summary, horizon)["comfort"]
-        excess = max(0.0, measured / comfort.selection_budget - 1.0)
+    """What the stage maximises over its iterations: no collision, then the least summed
+    excess of the comfort, speeding and safety constraints over their selection budgets (as
+    ``constraints_then_return`` ranks them; none without constraints), then the efficiency
+    against the oracle."""
+    excess = constraint_excess(config, summary, config.env.episode.horizon_s)
     efficiency = summary.get("mean_efficiency")
     return (
         -float(summary["collisions"]),
-        -excess,
-        -float(summary["speeding_episodes"]),
+        -sum(excess.get(name, 0.0) for name in SAFETY_CONSTRAINTS),
         float(efficiency) if efficiency is not None else float("-inf"),
     )
 

@@ -313,15 +313,27 @@ def constraint_key(
     summed excess of ``clear_time`` and ``uncleared``), then the mean return — the constrained
     problem's priorities: a policy that keeps its limits before a faster one, a faster one
     (until it is fast enough) before a better-rewarded one."""
+    excess = constraint_excess(config, summary, horizon_s)
+    safe = sum(excess.get(name, 0.0) for name in SAFETY_CONSTRAINTS)
+    task = excess.get("clear_time", 0.0) + excess.get("uncleared", 0.0)
+    return (-safe, -task, float(summary["mean_return"]))
+
+
+#: The constraints a policy keeps before it is fast (``constraints_then_return``'s first term).
+SAFETY_CONSTRAINTS = ("comfort", "speeding", "safety")
+
+
+def constraint_excess(
+    config: TrainConfig, summary: dict[str, Any], horizon_s: float
+) -> dict[str, float]:
+    """Each active constraint's excess over its selection budget, ``max(0, measured / budget
+    − 1)``, by name (those :func:`constraint_measures` measures)."""
     measured = constraint_measures(summary, horizon_s)
-    excess = {  # ``overrule`` has no measure outside ``guarded``: collisions come first anyway
+    return {  # ``overrule`` has no measure outside ``guarded``: collisions come first anyway
         name: max(0.0, measured[name] / c.selection_budget - 1.0)
         for name, c in config.constraints.active().items()
         if name in measured
     }
-    safe = sum(excess.get(name, 0.0) for name in ("comfort", "speeding", "safety"))
-    task = excess.get("clear_time", 0.0) + excess.get("uncleared", 0.0)
-    return (-safe, -task, float(summary["mean_return"]))
 
 
 def select_best(run: Path) -> None:
