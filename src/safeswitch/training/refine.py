@@ -27,7 +27,7 @@ excess of the comfort, speeding and safety constraints over their validation bud
 recipe's own ``constraints``, ranked as ``validation.criterion: constraints_then_return``
 ranks them), then the highest efficiency against the oracle (a scenario never cleared counts
 0). A label is clean, but a policy fitted to labels that drive along the filter's edge touches
-the filter near it (in our runs in 5–9 % of the episodes, a median of 2 ticks each:
+the filter near it (in our runs in 5–9 % of the episodes, a median of 2–3 ticks each:
 docs/learning_experiments.md); ``refine.time_margin_s`` searches under a stricter filter for a
 margin from that edge.
 
