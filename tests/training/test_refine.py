@@ -170,8 +170,21 @@ def test_a_mean_beyond_the_bound_its_label_sits_on_is_no_error():
     np.testing.assert_allclose(action_error(mean, label, clipped=False), mean - label)
 
 
-def test_the_search_may_keep_a_stricter_margin_than_the_deployed_filter():
-    config = small_config(time_margin_s=0.3)
-    assert search_task(config).config.certified.time_margin_s == 0.3
-    assert ValidationSet(config).task.config.certified.time_margin_s == 0.1  # as deployed
-    assert search_task(small_config()).config.certified.time_margin_s == 0.1
+def test_the_search_may_run_under_a_stricter_filter_than_the_deployed_one():
+    config = small_config(certified={"time_margin_s": 0.3, "progress_factor": 1.15})
+    searched = search_task(config).config.certified
+    assert (searched.time_margin_s, searched.progress_factor) == (0.3, 1.15)
+    assert searched.zone_margin_m == 0.9  # the recipe's, unchanged
+    deployed = ValidationSet(config).task.config.certified
+    assert (deployed.time_margin_s, deployed.progress_factor) == (0.1, 1.05)
+    assert search_task(small_config()).config.certified == deployed
+
+
+def test_a_bad_setting_of_the_searchs_filter_is_refused_by_name():
+    base = to_dict(load_config("certified"))
+    base["refine"] = {"iterations": 1, "certified": {"time_margin": 0.4}}
+    with pytest.raises(ConfigError, match="time_margin"):
+        from_dict(TrainConfig, base)
+    base["refine"] = {"iterations": 1, "certified": {"progress_factor": 3.0}}
+    with pytest.raises(ConfigError, match=r"progress_factor.*3\.0"):
+        from_dict(TrainConfig, base)

@@ -305,10 +305,11 @@ class RefineConfig:
         weight: How many times an improved scene's samples count in the fit.
         epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
         learning_rate: The fit's step size.
-        time_margin_s: The search's filter keeps this margin [s] instead of
-            ``env.certified.time_margin_s`` (``null``: the same): a label clean under a
-            stricter filter leaves the fitted policy, which tracks it only approximately, room
-            before the deployed filter acts. Deployment and validation keep the env's.
+        certified: Settings of ``env.certified`` changed for the search alone (``null``:
+            none), e.g. ``{time_margin_s: 0.4}`` or ``{progress_factor: 1.15}``: a label clean
+            under a stricter filter leaves the fitted policy, which tracks it only
+            approximately, room before the deployed filter acts. Deployment and validation
+            keep the env's.
     """
 
     iterations: Annotated[int, Bounds(0, 50)] = 0
@@ -323,7 +324,7 @@ class RefineConfig:
     weight: Annotated[int, Bounds(1, 100)] = 5
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4
-    time_margin_s: Annotated[float | None, Bounds(0, 5, unit="s")] = None
+    certified: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         check_bounds(self, "refine")
@@ -632,6 +633,7 @@ class TrainConfig:
                   "searches the single-car scene open loop: needs no traffic")  # fmt: skip
             check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
                   f"needs random scenarios (env.scenario is {self.env.scenario!r})")  # fmt: skip
+            self.refine_env  # noqa: B018 (validates refine.certified, naming a bad key or value)
             for where, env in (("env", self.train_env), ("deploy_switching", self.deployed_env)):
                 check(env.switching == "certified", "refine", "iterations",
                       self.refine.iterations, "searches open loop under the certified filter "
@@ -644,6 +646,16 @@ class TrainConfig:
             return self.env
         merged = _merged(to_dict(self.env), self.train_only, "train_only")
         return from_dict(LeftTurnConfig, merged, where="train_only")
+
+    @property
+    def refine_env(self) -> LeftTurnConfig:
+        """The environment the refinement searches: :attr:`train_env` with
+        ``refine.certified`` merged into its filter's settings."""
+        if not self.refine.certified:
+            return self.train_env
+        merged = _merged(to_dict(self.train_env), {"certified": self.refine.certified},
+                         "refine")  # fmt: skip
+        return from_dict(LeftTurnConfig, merged, where="refine")
 
     @property
     def batch_size(self) -> int:
@@ -903,6 +915,16 @@ class EnvTrainConfig:
                 budget = self.constraints[name].budget
                 check(budget < 1, f"constraints.{name}", "budget", budget,
                       "is a share: must be < 1")  # fmt: skip
+
+    @property
+    def refine_env(self) -> LeftTurnConfig:
+        """The environment the refinement searches: :attr:`train_env` with
+        ``refine.certified`` merged into its filter's settings."""
+        if not self.refine.certified:
+            return self.train_env
+        merged = _merged(to_dict(self.train_env), {"certified": self.refine.certified},
+                         "refine")  # fmt: skip
+        return from_dict(LeftTurnConfig, merged, where="refine")
 
     @property
     def batch_size(self) -> int:
