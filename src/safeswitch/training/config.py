@@ -917,16 +917,6 @@ class EnvTrainConfig:
                       "is a share: must be < 1")  # fmt: skip
 
     @property
-    def refine_env(self) -> LeftTurnConfig:
-        """The environment the refinement searches: :attr:`train_env` with
-        ``refine.certified`` merged into its filter's settings."""
-        if not self.refine.certified:
-            return self.train_env
-        merged = _merged(to_dict(self.train_env), {"certified": self.refine.certified},
-                         "refine")  # fmt: skip
-        return from_dict(LeftTurnConfig, merged, where="refine")
-
-    @property
     def batch_size(self) -> int:
         return self.ppo.n_steps * self.n_envs // self.ppo.n_minibatches
 
