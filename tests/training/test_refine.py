@@ -171,20 +171,27 @@ def test_a_mean_beyond_the_bound_its_label_sits_on_is_no_error():
 
 
 def test_the_search_may_run_under_a_stricter_filter_than_the_deployed_one():
-    config = small_config(certified={"time_margin_s": 0.3, "progress_factor": 1.15})
+    config = small_config(
+        env={
+            "certified": {"time_margin_s": 0.3, "progress_factor": 1.15},
+            "rewards": {"comfort_accel_lat": 2.7},
+        }
+    )
     searched = search_task(config).config.certified
     assert (searched.time_margin_s, searched.progress_factor) == (0.3, 1.15)
     assert searched.zone_margin_m == 0.9  # the recipe's, unchanged
     deployed = ValidationSet(config).task.config.certified
     assert (deployed.time_margin_s, deployed.progress_factor) == (0.1, 1.05)
+    assert search_task(config).config.rewards.comfort_accel_lat == 2.7
+    assert ValidationSet(config).task.config.rewards.comfort_accel_lat == 3.0
     assert search_task(small_config()).config.certified == deployed
 
 
 def test_a_bad_setting_of_the_searchs_filter_is_refused_by_name():
     base = to_dict(load_config("certified"))
-    base["refine"] = {"iterations": 1, "certified": {"time_margin": 0.4}}
+    base["refine"] = {"iterations": 1, "env": {"certified": {"time_margin": 0.4}}}
     with pytest.raises(ConfigError, match="time_margin"):
         from_dict(TrainConfig, base)
-    base["refine"] = {"iterations": 1, "certified": {"progress_factor": 3.0}}
+    base["refine"] = {"iterations": 1, "env": {"certified": {"progress_factor": 3.0}}}
     with pytest.raises(ConfigError, match=r"progress_factor.*3\.0"):
         from_dict(TrainConfig, base)

@@ -305,11 +305,13 @@ class RefineConfig:
         weight: How many times an improved scene's samples count in the fit.
         epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
         learning_rate: The fit's step size.
-        certified: Settings of ``env.certified`` changed for the search alone (``null``:
-            none), e.g. ``{time_margin_s: 0.4}`` or ``{progress_factor: 1.15}``: a label clean
-            under a stricter filter leaves the fitted policy, which tracks it only
-            approximately, room before the deployed filter acts. Deployment and validation
-            keep the env's.
+        env: Changes of the training ``env`` for the search alone (a mapping merged key by
+            key, as ``train_only`` is; ``null``: none), e.g. ``{certified: {progress_factor:
+            1.15}}`` (a stricter filter) or ``{rewards: {comfort_accel_lat: 2.7}}`` (stricter
+            comfort limits for what counts as a dirty tick): a label clean under stricter rules
+            leaves the fitted policy, which tracks it only approximately, room before the
+            deployed filter acts or a comfort limit breaks. Deployment and validation keep
+            the env's.
     """
 
     iterations: Annotated[int, Bounds(0, 50)] = 0
@@ -324,7 +326,7 @@ class RefineConfig:
     weight: Annotated[int, Bounds(1, 100)] = 5
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4
-    certified: dict[str, Any] | None = None
+    env: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         check_bounds(self, "refine")
@@ -633,7 +635,7 @@ class TrainConfig:
                   "searches the single-car scene open loop: needs no traffic")  # fmt: skip
             check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
                   f"needs random scenarios (env.scenario is {self.env.scenario!r})")  # fmt: skip
-            self.refine_env  # noqa: B018 (validates refine.certified, naming a bad key or value)
+            self.refine_env  # noqa: B018 (validates refine.env, naming a bad key or value)
             for where, env in (("env", self.train_env), ("deploy_switching", self.deployed_env)):
                 check(env.switching == "certified", "refine", "iterations",
                       self.refine.iterations, "searches open loop under the certified filter "
@@ -649,13 +651,12 @@ class TrainConfig:
 
     @property
     def refine_env(self) -> LeftTurnConfig:
-        """The environment the refinement searches: :attr:`train_env` with
-        ``refine.certified`` merged into its filter's settings."""
-        if not self.refine.certified:
+        """The environment the refinement searches: :attr:`train_env` with ``refine.env``
+        merged in."""
+        if not self.refine.env:
             return self.train_env
-        merged = _merged(to_dict(self.train_env), {"certified": self.refine.certified},
-                         "refine")  # fmt: skip
-        return from_dict(LeftTurnConfig, merged, where="refine")
+        merged = _merged(to_dict(self.train_env), self.refine.env, "refine.env")
+        return from_dict(LeftTurnConfig, merged, where="refine.env")
 
     @property
     def batch_size(self) -> int:

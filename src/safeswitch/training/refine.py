@@ -9,8 +9,8 @@ start from them. Each iteration (the idea is expert iteration / guided policy se
 sampling optimiser):
 
 1. the policy drives ``refine.scenes`` fresh training scenarios (the run's seed, environment
-   ids no training environment uses) under the run's logic (its filter made stricter by
-   ``refine.certified`` where set: labels clean under a stricter filter);
+   ids no training environment uses) under the run's logic (with ``refine.env``'s stricter
+   rules where set: labels clean under a stricter filter or comfort limit);
 2. where it fails — never clears, or breaks a comfort limit, passes the speed limit or needs
    the safety action on some tick — the cross-entropy search
    (:func:`~safeswitch.evaluation.search.search_sequences`) starts from its actions; where it
@@ -28,8 +28,8 @@ recipe's own ``constraints``, ranked as ``validation.criterion: constraints_then
 ranks them), then the highest efficiency against the oracle (a scenario never cleared counts
 0). A label is clean, but a policy fitted to labels that drive along the filter's edge touches
 the filter near it (in our runs in 5–9 % of the episodes, a median of 2–3 ticks each:
-docs/learning_experiments.md); ``refine.certified`` searches under a stricter filter for a
-margin from that edge.
+docs/learning_experiments.md); ``refine.env`` searches under a stricter filter (or comfort
+limits) for a margin from that edge.
 
 The search needs a logic under which no action sequence can collide: ``certified``.
 """
@@ -176,8 +176,8 @@ def _drivers(horizon_s: float, decisions: int) -> NDArray[np.float64] | None:
 
 
 def search_task(config: TrainConfig) -> LeftTurnTask:
-    """The task the stage drives and searches: the training environment, its filter's
-    settings changed by ``refine.certified``."""
+    """The task the stage drives and searches: the training environment with ``refine.env``
+    (stricter rules for the search) merged in."""
     return LeftTurnTask(config.refine_env)
 
 
