@@ -141,6 +141,7 @@ def test_the_pipeline_evaluates_the_refined_policy(tmp_path):
         ({"env": {"switching": "paper"}}, "env has 'paper'"),
         ({"deploy_switching": "paper"}, "deploy_switching has 'paper'"),
         ({"env": {"scenario": "cut"}}, "needs random scenarios"),
+        ({"refine": {"iterations": 1, "env": {"switching": "paper"}}}, "refine.env has 'paper'"),
     ],
 )
 def test_refinement_is_refused_where_its_search_cannot_run(change, message):

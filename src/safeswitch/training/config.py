@@ -635,8 +635,9 @@ class TrainConfig:
                   "searches the single-car scene open loop: needs no traffic")  # fmt: skip
             check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
                   f"needs random scenarios (env.scenario is {self.env.scenario!r})")  # fmt: skip
-            self.refine_env  # noqa: B018 (validates refine.env, naming a bad key or value)
-            for where, env in (("env", self.train_env), ("deploy_switching", self.deployed_env)):
+            searched = self.refine_env  # validates refine.env, naming a bad key or value
+            for where, env in (("env", self.train_env), ("deploy_switching", self.deployed_env),
+                               ("refine.env", searched)):  # fmt: skip
                 check(env.switching == "certified", "refine", "iterations",
                       self.refine.iterations, "searches open loop under the certified filter "
                       f"(no sequence can collide): {where} has {env.switching!r}")  # fmt: skip
