@@ -203,9 +203,10 @@ def _careful(
     if args.model:
         from safeswitch.training.policies import load_policy
 
-        start = policy_actions(task, scenarios, load_policy(args.model).as_policy())
+        start, own_clear, own_dirty = policy_actions(
+            task, scenarios, load_policy(args.model).as_policy()
+        )
         seeds = np.repeat(seeds, start.shape[1] // segments, axis=1)
-        own_clear, _, own_dirty = drive_open_loop(task, scenarios, start)
         own = {
             "cleared": int(np.sum(~np.isnan(own_clear))),
             "cleared_cleanly": int(np.sum(~np.isnan(own_clear) & (own_dirty == 0))),

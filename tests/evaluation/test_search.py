@@ -39,12 +39,15 @@ def test_a_policys_actions_replayed_open_loop_drive_its_episodes(scene):
     task, scenarios = scene
     act = load_policy("certified").as_policy()
     closed = rollout(task, scenarios, act)
-    actions = policy_actions(task, scenarios, act)
+    actions, own_clear, own_dirty = policy_actions(task, scenarios, act)
     clear, _, dirty = drive_open_loop(task, scenarios, actions)
     np.testing.assert_array_equal(clear, np.asarray(closed.time_to_clear, dtype=float))
     np.testing.assert_array_equal(
         dirty, closed.comfort_violation_steps + closed.speeding_steps + closed.safety_steps
     )
+    # what it reports of its own episodes is what the replay drives
+    np.testing.assert_array_equal(own_clear, clear)
+    np.testing.assert_array_equal(own_dirty, dirty)
 
 
 @pytest.mark.parametrize("knot", [1, 5])

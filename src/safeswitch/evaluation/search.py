@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.evaluation.rollout import Policy, rollout
+from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
 
@@ -54,9 +54,19 @@ def drive_open_loop(
         last[:] = [state.world.progress[:, 0].copy()]
 
     result = rollout(task, scenarios, policy, on_tick)
+    clear, dirty = _clear_and_dirty(result)
+    return clear, last[0], dirty
+
+
+def _clear_and_dirty(result: RolloutResult) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Each episode's time to clear [s] (NaN: never) and dirty ticks.
+
+    Raises:
+        AssertionError: an episode collided (under ``certified`` the filter would be broken).
+    """
     assert not result.collision.any(), "a collision in an open-loop search episode"
     dirty = result.comfort_violation_steps + result.speeding_steps + result.safety_steps
-    return np.asarray(result.time_to_clear, dtype=float), last[0], np.asarray(dirty)
+    return np.asarray(result.time_to_clear, dtype=float), np.asarray(dirty)
 
 
 def search_sequences(
@@ -159,10 +169,13 @@ def smooth_noise(rng: np.random.Generator, shape: tuple[int, int, int], knot: in
     return np.asarray(values[..., left] * (1 - w) + values[..., left + 1] * w)
 
 
-def policy_actions(task: LeftTurnTask, scenarios: Scenarios, act: Policy) -> FloatArray:
+def policy_actions(
+    task: LeftTurnTask, scenarios: Scenarios, act: Policy
+) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
     """A policy's actions [n, decisions] on ``scenarios`` under the task's logic (``act``: a
-    rollout policy, e.g. ``load_policy(name).as_policy()``): replayed open loop, they drive
-    exactly its episodes."""
+    rollout policy, e.g. ``load_policy(name).as_policy()``) — replayed open loop, they drive
+    exactly its episodes — with each episode's time to clear [s] (NaN: never) and dirty ticks,
+    as :func:`drive_open_loop` reports them."""
     interval = task.config.episode.decision_interval
     actions = np.zeros((len(scenarios.north_speed), task.config.episode.horizon_ticks // interval))
 
@@ -171,8 +184,7 @@ def policy_actions(task: LeftTurnTask, scenarios: Scenarios, act: Policy) -> Flo
         actions[:, tick // interval] = a
         return a
 
-    rollout(task, scenarios, policy)
-    return actions
+    return (actions, *_clear_and_dirty(rollout(task, scenarios, policy)))
 
 
 def rank_score(clear: FloatArray, progress: FloatArray, horizon: float) -> FloatArray:

@@ -52,7 +52,6 @@ from numpy.typing import NDArray
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.evaluation.search import (
     SEGMENT_S,
-    drive_open_loop,
     family_of_drivers,
     policy_actions,
     search_sequences,
@@ -97,8 +96,7 @@ def refine_iteration(
     n = config.scenes
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
-    actions = policy_actions(task, scenes, policy.as_policy())
-    clear, _, dirty = drive_open_loop(task, scenes, actions)
+    actions, clear, dirty = policy_actions(task, scenes, policy.as_policy())
     drivers = _drivers(episode.horizon_s, decisions)
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
     f_clear, f_dirty, f_seqs = search_sequences(
@@ -211,34 +209,35 @@ def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
     validation = ValidationSet(config)
     horizon = validation.task.config.episode.horizon_s
     rows: list[dict[str, Any]] = []
-    states: list[dict[str, Any]] = []
+    best, best_state = 0, None  # the best iteration so far and its weights (None: PPO's)
 
     def validate(row: dict[str, Any]) -> None:
+        nonlocal best, best_state
         summary = validation.summary(policy)
         row.update({k: summary.get(k) for k in VALIDATED if k in summary})
         row["clear_time_s"] = constraint_measures(summary, horizon)["clear_time"]
         row["key"] = selection_key(config, summary)
         row["wall_time_s"] = round(time.perf_counter() - started, 1)
         rows.append(row)
-        states.append(copy.deepcopy(policy.model.policy.state_dict()))
+        if row["iteration"] and row["key"] > rows[best]["key"]:
+            best, best_state = row["iteration"], copy.deepcopy(policy.model.policy.state_dict())
 
     validate({"iteration": 0})
     for it in range(1, r.iterations + 1):
         validate({"iteration": it, **refine_iteration(task, policy, r, config.seed, it)})
-    best = max(range(len(rows)), key=lambda i: rows[i]["key"])
-    for i, row in enumerate(rows):
-        row["selected"] = int(i == best)
+    for row in rows:
+        row["selected"] = int(row["iteration"] == best)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=REFINE_FIELDS, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
-    if best > 0:
+    if best_state is not None:
         ppo = run / "ppo"
         ppo.mkdir(exist_ok=True)
         for name in ("model.zip", "vecnormalize.pkl"):
             shutil.copyfile(run / name, ppo / f".{name}.tmp")
             os.replace(ppo / f".{name}.tmp", ppo / name)
-        policy.model.policy.load_state_dict(states[best])
+        policy.model.policy.load_state_dict(best_state)
         write_policy_files(run, policy.model, policy.normalizer)
     write_atomic(run / "refine.csv", buffer.getvalue())
     chosen = rows[best]

@@ -42,6 +42,7 @@ from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.io import replacing, write_snapshot
 from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import TrainedPolicy
@@ -192,7 +193,6 @@ class Validator(BestPolicy):
         super().__init__(config, run)
         v = config.validation
         self.validation_set = ValidationSet(config)
-        self.task, self.scenarios = self.validation_set.task, self.validation_set.scenarios
         env = self.task.config
         self.stress_task, self.stress_scenarios = None, None
         if v.stress is not None:
@@ -201,6 +201,16 @@ class Validator(BestPolicy):
                 None, dataclasses.replace(env, scenarios=stress.scenarios)
             )
             self.stress_scenarios = self.stress_task.scenario_set(stress.seed, stress.episodes)
+
+    @property
+    def task(self) -> LeftTurnTask:
+        """The validation's task (its logic and horizon)."""
+        return self.validation_set.task
+
+    @property
+    def scenarios(self) -> Scenarios:
+        """The validation scenarios."""
+        return self.validation_set.scenarios
 
     def refine(self, summary: dict[str, Any], best: list[float] | None) -> None:
         if self.stress_task is None:
