@@ -68,13 +68,18 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
 
 
 def _refined(record: object) -> dict[str, object]:
-    """A run's refinement stage in its row: its wall time (beside PPO's) and the iteration
-    it selected (nothing for a run without the stage)."""
+    """A run's refinement stage in its row: its wall time (beside PPO's), the iteration it
+    selected, which policy the run kept (``ppo``, ``search``, ``finetune``) and the step the
+    fine-tune phase selected (nothing for a run without the stage)."""
     if not isinstance(record, dict):
         return {}
     return {
         "refine_wall_time_s": record["wall_time_s"],
         "refine_selected_iteration": record["selected_iteration"],
+        "refine_kept": record["kept"],
+        "refine_finetune_selected_timesteps": (record.get("finetune") or {}).get(
+            "selected_timesteps"
+        ),
     }
 
 

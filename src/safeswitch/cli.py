@@ -246,13 +246,19 @@ def _train(args: argparse.Namespace) -> int:
     )
     refined = metrics.get("refined")
     if refined:
-        chosen = refined["selected_iteration"]
-        print(
-            f"refined in {refined['wall_time_s']:.0f} s: "
-            + (f"iteration {chosen} of {refined['iterations']} selected"
-               if chosen else f"none of {refined['iterations']} iterations beat PPO's policy")
-            + " (refine.csv)"
-        )  # fmt: skip
+        chosen, of = refined["selected_iteration"], refined["iterations"]
+        tuned = refined.get("finetune")
+        if tuned is not None:
+            what = (
+                f"iteration {chosen} of {of} fine-tuned by PPO "
+                f"(selected at {tuned['selected_timesteps']:,} steps), "
+                + ("kept" if refined["kept"] == "finetune" else "not better than PPO's")
+            )
+        elif chosen:
+            what = f"iteration {chosen} of {of} selected"
+        else:
+            what = f"none of {of} iterations beat PPO's policy"
+        print(f"refined in {refined['wall_time_s']:.0f} s: {what} (refine.csv)")
     if e.get("episodes"):
         from safeswitch.evaluation.verdict import headline
 

@@ -4,16 +4,19 @@ makes that the run's policy with PPO's kept beside it, leaves PPO's policy in pl
 interrupted, and is refused where its search cannot run."""
 
 import csv
+import json
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.training import pipeline, train
 from safeswitch.training import refine as refine_module
-from safeswitch.training import train
 from safeswitch.training.config import RefineConfig, TrainConfig, load_config
 from safeswitch.training.policies import load_policy, resolve_model_dir, run_config_path
 from safeswitch.training.refine import refine_run, search_task
@@ -196,3 +199,122 @@ def test_a_bad_setting_of_the_searchs_filter_is_refused_by_name():
     base["refine"] = {"iterations": 1, "env": {"certified": {"progress_factor": 3.0}}}
     with pytest.raises(ConfigError, match=r"progress_factor.*3\.0"):
         from_dict(TrainConfig, base)
+
+
+FINETUNE = {
+    "timesteps": 4096, "n_envs": 16,
+    "policy": {"log_std_init": -2.0, "log_std_final": -2.0, "actor_learning_rate": 1e-4},
+    "constraints": {"comfort": {"start": 0}, "safety": {"start": 0}, "uncleared": {"start": 0}},
+    "validation": {"start": 2048, "every": 2048},
+}  # fmt: skip
+
+
+def full_key(config, row):
+    """The run's criterion on a ``refine.csv`` row: no collision, the least excess over the
+    comfort and safety budgets (the recipe limits no speeding), then efficiency."""
+    comfort = config.constraints.comfort.selection_budget
+    safety = config.constraints.safety.selection_budget
+    excess = max(0.0, float(row["comfort_violation_fraction"]) / comfort - 1.0)
+    excess += max(0.0, int(row["safety_activation_episodes"]) / 200 / safety - 1.0)
+    return (-int(row["collisions"]), -excess, float(row["mean_efficiency"]))
+
+
+@pytest.fixture(scope="module")
+def finetuned(tmp_path_factory):
+    run = shipped_run(tmp_path_factory.mktemp("finetune") / "run")
+    original = (run / "model.zip").read_bytes()
+    config = small_config(iterations=2, finetune=FINETUNE)
+    return run, config, refine_run(run, config), original
+
+
+def test_the_fine_tune_phase_trains_the_fastest_searched_iteration_under_the_constraints(
+    finetuned,
+):
+    run, config, record, _ = finetuned
+    rows = rows_of(run)
+    assert [r["stage"] for r in rows] == ["ppo", "search", "search", "finetune"]
+    searched = [r for r in rows if r["stage"] == "search" and r["collisions"] == "0"]
+    fastest = max(searched, key=lambda r: float(r["mean_efficiency"]))
+    assert record["selected_iteration"] == int(fastest["iteration"])  # budgets aside
+    phase = run / "refine" / "finetune"
+    started = json.loads((phase / "warm_start.json").read_text(encoding="utf-8"))
+    assert Path(started["policy"]) == run / "refine" / "searched"
+    tuned = load_config(phase / "config.yaml")
+    assert tuned.timesteps == 4096 and tuned.policy.log_std_init == -2.0
+    assert tuned.constraints.safety.start == 0 and tuned.constraints.safety.budget == 0.02
+    assert tuned.refine.iterations == 0 and tuned.eval_episodes == 0
+    assert tuned.seed == config.seed and tuned.validation.episodes == 200
+    assert record["finetune"]["timesteps"] == 4096
+
+
+def test_the_run_keeps_the_fine_tuned_policy_only_if_it_ranks_at_least_as_high_as_ppos(
+    finetuned,
+):
+    run, config, record, original = finetuned
+    rows = rows_of(run)
+    ppo, tuned = rows[0], rows[-1]
+    kept = "finetune" if full_key(config, tuned) >= full_key(config, ppo) else "ppo"
+    assert record["kept"] == kept
+    assert [r["stage"] for r in rows if r["selected"] == "1"] == [kept]
+    if kept == "finetune":
+        phase = run / "refine" / "finetune"
+        assert (run / "model.zip").read_bytes() == (phase / "model.zip").read_bytes()
+        assert (run / "ppo" / "model.zip").read_bytes() == original
+    else:
+        assert (run / "model.zip").read_bytes() == original
+    summary = ValidationSet(config).summary(load_policy(run))
+    assert summary["mean_efficiency"] == pytest.approx(record["validation"]["mean_efficiency"])
+
+
+class InterruptAt(BaseCallback):
+    """Ctrl-C once PPO has made ``steps`` steps."""
+
+    def __init__(self, steps):
+        super().__init__()
+        self.steps = steps
+
+    def _on_step(self):
+        if self.num_timesteps >= self.steps:
+            raise KeyboardInterrupt
+        return True
+
+
+def test_an_interrupted_fine_tune_phase_continues_from_its_checkpoint(
+    tmp_path, monkeypatch, capsys
+):
+    run = shipped_run(tmp_path / "run")
+    original = (run / "model.zip").read_bytes()
+    config = small_config(iterations=1, finetune=FINETUNE)
+    real = pipeline.train
+    monkeypatch.setattr(
+        pipeline, "train", lambda *a, **k: real(*a, **k, callbacks=[InterruptAt(2048)])
+    )
+    with pytest.raises(KeyboardInterrupt):
+        refine_run(run, config)
+    assert f"safeswitch train --resume --out {run}" in capsys.readouterr().err
+    assert (run / "model.zip").read_bytes() == original  # PPO's still the run's
+    phase = run / "refine" / "finetune"
+    interrupted = list((phase / "checkpoints").iterdir())
+    assert interrupted
+    monkeypatch.setattr(pipeline, "train", real)
+    record = refine_run(run, config)
+    assert record["finetune"]["timesteps"] == 4096
+    with open(phase / "progress.csv", newline="", encoding="utf-8") as handle:
+        steps = [int(row["timesteps"]) for row in csv.DictReader(handle)]
+    assert steps == sorted(steps) and steps[0] <= 2048 and steps[-1] == 4096  # not from 0 again
+
+
+def test_fine_tune_settings_are_checked_by_name():
+    base = to_dict(load_config("certified"))
+    cases = [
+        ({"iterations": 0, "finetune": {"timesteps": 10}}, r"refine\.finetune.*needs iterations"),
+        ({"iterations": 1, "finetune": {"policy": {}}}, r"refine\.finetune.*names timesteps"),
+        ({"iterations": 1, "finetune": {"timesteps": 10, "warm_start": {"policy": "x"}}},
+         r"refine\.finetune\.warm_start.*set by the stage"),
+        ({"iterations": 1, "finetune": {"timesteps": 10, "polcy": {}}}, r"refine\.finetune.*polcy"),
+        ({"iterations": 1, "finetune": {"timesteps": -5}}, r"refine\.finetune.*timesteps.*-5"),
+    ]  # fmt: skip
+    for refine, message in cases:
+        base["refine"] = refine
+        with pytest.raises(ConfigError, match=message):
+            from_dict(TrainConfig, base)

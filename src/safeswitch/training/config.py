@@ -279,6 +279,10 @@ class WarmStartConfig:
               f"must be one of {TEACHERS}")  # fmt: skip
 
 
+#: Keys of the fine-tune phase's configuration the refinement stage sets itself.
+FINETUNE_FIXED = ("refine", "warm_start", "eval_episodes")
+
+
 @dataclass(frozen=True)
 class RefineConfig:
     """Search-guided refinement after PPO (ours; off by default; the single-car left turn;
@@ -312,6 +316,17 @@ class RefineConfig:
             leaves the fitted policy, which tracks it only approximately, room before the
             deployed filter acts or a comfort limit breaks. Deployment and validation keep
             the env's.
+        finetune: A constrained PPO phase after the search (ours; ``null``: none): a mapping
+            merged into the run's configuration for it, key by key (as ``refine.env`` is into
+            ``env``), naming at least ``timesteps``, e.g. a small fixed exploration noise, a
+            smaller actor step, the constraints on from the first step and validation every
+            100,000 steps. It starts from the search's fastest iteration with no collision
+            (``warm_start.policy``; the budgets are left to the phase's constraints), trains in
+            ``refine/finetune/`` with the run's constraints, validation and selection, and its
+            selected policy becomes the run's if the run's criterion ranks it at least as high
+            as PPO's own. A policy fitted to search labels touches the filter near their edge;
+            the safety constraint's multiplier pulls it back within its budget at a small cost
+            in time (docs/learning_experiments.md).
     """
 
     iterations: Annotated[int, Bounds(0, 50)] = 0
@@ -327,9 +342,19 @@ class RefineConfig:
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4
     env: dict[str, Any] | None = None
+    finetune: dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         check_bounds(self, "refine")
+        if self.finetune is not None:
+            check(self.iterations > 0, "refine", "finetune", "set",
+                  "fine-tunes the search's policy: needs iterations > 0")  # fmt: skip
+            check(isinstance(self.finetune, dict) and "timesteps" in self.finetune, "refine",
+                  "finetune", self.finetune, "must be a mapping that names timesteps")  # fmt: skip
+            for key in FINETUNE_FIXED:
+                check(key not in self.finetune, "refine.finetune", key, self.finetune.get(key),
+                      "is set by the stage: the phase starts from the searched policy",
+                      )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -636,6 +661,8 @@ class TrainConfig:
             check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
                   f"needs random scenarios (env.scenario is {self.env.scenario!r})")  # fmt: skip
             searched = self.refine_env  # validates refine.env, naming a bad key or value
+            if self.refine.finetune is not None:
+                self.finetune_config("refined")  # validates refine.finetune likewise
             for where, env in (("env", self.train_env), ("deploy_switching", self.deployed_env),
                                ("refine.env", searched)):  # fmt: skip
                 check(env.switching == "certified", "refine", "iterations",
@@ -658,6 +685,24 @@ class TrainConfig:
             return self.train_env
         merged = _merged(to_dict(self.train_env), self.refine.env, "refine.env")
         return from_dict(LeftTurnConfig, merged, where="refine.env")
+
+    def finetune_config(self, start: str) -> TrainConfig:
+        """The configuration of the refinement's fine-tune phase (``refine.finetune`` merged
+        into this one), starting from the policy in ``start``; no refinement of its own, no
+        evaluation (the run evaluates what it keeps)."""
+        assert self.refine.finetune is not None
+        merged = _merged(to_dict(self), self.refine.finetune, "refine.finetune")
+        merged.update(
+            refine=to_dict(RefineConfig()),
+            warm_start={**to_dict(WarmStartConfig()), "policy": start},
+            eval_episodes=0,
+        )
+        try:
+            return from_dict(TrainConfig, merged, where="refine.finetune")
+        except ConfigError as error:  # a bound of the phase's own configuration
+            if "refine.finetune" in str(error):
+                raise
+            raise ConfigError(f"refine.finetune: {error}") from error
 
     @property
     def batch_size(self) -> int:

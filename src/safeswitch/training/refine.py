@@ -31,6 +31,12 @@ the filter near it (in our runs in 5–9 % of the episodes, a median of 2–3 ti
 docs/learning_experiments.md); ``refine.env`` searches under a stricter filter (or comfort
 limits) for a margin from that edge.
 
+``refine.finetune`` adds a constrained PPO phase: the search's fastest iteration with no
+collision (budgets aside) is fine-tuned by PPO under the run's constraints, validation and
+selection, a run of its own in ``run/refine/finetune/``; the run keeps its selected policy if
+the criterion above ranks it at least as high as PPO's own. The safety constraint's multiplier
+pulls the filter back within its budget, which the fitted policy alone misses.
+
 The search needs a logic under which no action sequence can collide: ``certified``.
 """
 
@@ -41,6 +47,7 @@ import csv
 import io
 import os
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -79,11 +86,16 @@ VALIDATED = tuple(
     f for f in VALIDATION_FIELDS if f not in ("timesteps", "stress_collisions", "best")
 )
 
-#: Columns of ``refine.csv``: the iteration's work, its validation, whether it was selected.
+#: Columns of ``refine.csv``: the iteration's stage (``ppo``, ``search``, ``finetune``) and work,
+#: its validation, the fine-tune phase's steps and the step its selection chose, whether the
+#: run keeps it.
 REFINE_FIELDS = (
-    "iteration", "failing", "fixed", "sped_up", "samples", "mse_before", "mse", "wall_time_s",
-    *VALIDATED, "selected",
+    "iteration", "stage", "failing", "fixed", "sped_up", "samples", "mse_before", "mse",
+    "wall_time_s", *VALIDATED, "timesteps", "selected_timesteps", "selected",
 )  # fmt: skip
+
+#: What ``metrics.json`` keeps of the fine-tune phase (``refine.finetune``).
+FINETUNED = ("timesteps", "selected_timesteps", "finetune_wall_time_s")
 
 
 def refine_iteration(
@@ -179,12 +191,14 @@ def search_task(config: TrainConfig) -> LeftTurnTask:
     return LeftTurnTask(config.refine_env)
 
 
-def selection_key(config: TrainConfig, summary: dict[str, Any]) -> tuple[float, ...]:
+def selection_key(
+    config: TrainConfig, summary: dict[str, Any], budgets: bool = True
+) -> tuple[float, ...]:
     """What the stage maximises over its iterations: no collision, then the least summed
     excess of the comfort, speeding and safety constraints over their selection budgets (as
-    ``constraints_then_return`` ranks them; none without constraints), then the efficiency
-    against the oracle."""
-    excess = constraint_excess(config, summary, config.env.episode.horizon_s)
+    ``constraints_then_return`` ranks them; none without constraints or ``budgets`` off),
+    then the efficiency against the oracle."""
+    excess = constraint_excess(config, summary, config.env.episode.horizon_s) if budgets else {}
     efficiency = summary.get("mean_efficiency")
     return (
         -float(summary["collisions"]),
@@ -195,11 +209,12 @@ def selection_key(config: TrainConfig, summary: dict[str, Any]) -> tuple[float, 
 
 def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
     """The stage on a finished run's policy (``run/model.zip``): ``refine.iterations``
-    iterations, each validated; the selected one becomes the run's policy (PPO's own moves to
-    ``run/ppo/``); ``refine.csv`` records every iteration. Returns the record for
-    ``metrics.json`` (``None``: no refinement configured). Nothing is written until the
-    iterations are done, so an interrupted stage leaves PPO's policy in place (``--resume``
-    runs the stage again)."""
+    iterations, each validated, then (``refine.finetune``) the constrained PPO phase on the
+    fastest; the policy selected becomes the run's (PPO's own moves to ``run/ppo/``);
+    ``refine.csv`` records every iteration and the phase. Returns the record for
+    ``metrics.json`` (``None``: no refinement configured). The run's policy is replaced only
+    once all is done, so an interrupted stage leaves PPO's policy in place (``--resume`` runs
+    the stage again, and continues an interrupted fine-tune phase from its checkpoint)."""
     r = config.refine
     if not r.iterations:
         return None
@@ -208,42 +223,86 @@ def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
     task = search_task(config)
     validation = ValidationSet(config)
     horizon = validation.task.config.episode.horizon_s
+    # With a fine-tune phase the search's iterations compete on efficiency alone: the phase's
+    # constraints, not the choice of its start, bring the budgets back.
+    budgets = r.finetune is None
     rows: list[dict[str, Any]] = []
     best, best_state = 0, None  # the best iteration so far and its weights (None: PPO's)
 
-    def validate(row: dict[str, Any]) -> None:
-        nonlocal best, best_state
-        summary = validation.summary(policy)
+    def validate(row: dict[str, Any], validated: TrainedPolicy) -> None:
+        summary = validation.summary(validated)
         row.update({k: summary.get(k) for k in VALIDATED if k in summary})
         row["clear_time_s"] = constraint_measures(summary, horizon)["clear_time"]
-        row["key"] = selection_key(config, summary)
+        row["key"] = selection_key(config, summary, budgets)
+        row["final_key"] = selection_key(config, summary)
         row["wall_time_s"] = round(time.perf_counter() - started, 1)
         rows.append(row)
-        if row["iteration"] and row["key"] > rows[best]["key"]:
-            best, best_state = row["iteration"], copy.deepcopy(policy.model.policy.state_dict())
 
-    validate({"iteration": 0})
+    validate({"iteration": 0, "stage": "ppo"}, policy)
     for it in range(1, r.iterations + 1):
-        validate({"iteration": it, **refine_iteration(task, policy, r, config.seed, it)})
-    for row in rows:
-        row["selected"] = int(row["iteration"] == best)
+        done = refine_iteration(task, policy, r, config.seed, it)
+        validate({"iteration": it, "stage": "search", **done}, policy)
+        if rows[-1]["key"] > rows[best]["key"]:
+            best, best_state = it, copy.deepcopy(policy.model.policy.state_dict())
+    if best_state is not None:
+        policy.model.policy.load_state_dict(best_state)
+    kept, tuned = best, None
+    if r.finetune is not None and best_state is not None:
+        searched = run / "refine" / "searched"
+        searched.mkdir(parents=True, exist_ok=True)
+        write_policy_files(searched, policy.model, policy.normalizer)
+        tuned, trained = finetune(run, config, searched)
+        validate({"iteration": r.iterations + 1, "stage": "finetune", **trained}, tuned)
+        kept = len(rows) - 1 if rows[-1]["final_key"] >= rows[0]["final_key"] else 0
+    for index, row in enumerate(rows):
+        row["selected"] = int(index == kept)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=REFINE_FIELDS, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
-    if best_state is not None:
+    if kept:
         ppo = run / "ppo"
         ppo.mkdir(exist_ok=True)
         for name in ("model.zip", "vecnormalize.pkl"):
             shutil.copyfile(run / name, ppo / f".{name}.tmp")
             os.replace(ppo / f".{name}.tmp", ppo / name)
-        policy.model.policy.load_state_dict(best_state)
-        write_policy_files(run, policy.model, policy.normalizer)
+        chosen = policy if tuned is None else tuned
+        write_policy_files(run, chosen.model, chosen.normalizer)
     write_atomic(run / "refine.csv", buffer.getvalue())
-    chosen = rows[best]
+    stage = rows[kept]["stage"]
     return {
         "iterations": r.iterations,
         "selected_iteration": best,
+        "kept": stage,
+        **({"finetune": {k: rows[-1][k] for k in FINETUNED}} if tuned is not None else {}),
         "wall_time_s": round(time.perf_counter() - started, 1),
-        "validation": {k: chosen.get(k) for k in VALIDATED},
+        "validation": {k: rows[kept].get(k) for k in VALIDATED},
+    }
+
+
+def finetune(run: Path, config: TrainConfig, start: Path) -> tuple[TrainedPolicy, dict[str, Any]]:
+    """The fine-tune phase (``refine.finetune``) from the policy in ``start``, a run of its own
+    in ``run/refine/finetune/`` (continued from its checkpoint if an earlier one was
+    interrupted); returns its selected policy and what it did."""
+    from safeswitch.training.pipeline import train
+    from safeswitch.training.run import complete_checkpoints
+
+    out = run / "refine" / "finetune"
+    resume = out.is_dir() and bool(complete_checkpoints(out))
+    if out.is_dir() and not resume:
+        shutil.rmtree(out)  # begun and never checkpointed: nothing to continue
+    try:
+        metrics = train(config.finetune_config(str(start)), out, resume=resume)
+    except KeyboardInterrupt:
+        print(
+            f"the refinement's fine-tune phase was interrupted; continue the run with: "
+            f"safeswitch train --resume --out {run}",
+            file=sys.stderr,
+        )
+        raise
+    selected = metrics["selected"] or {}  # none: its last policy
+    return load_policy(out), {
+        "timesteps": metrics["timesteps"],
+        "selected_timesteps": selected.get("best_timesteps") or metrics["timesteps"],
+        "finetune_wall_time_s": metrics["wall_time_s"],
     }
