@@ -296,8 +296,11 @@ def test_an_interrupted_fine_tune_phase_continues_from_its_checkpoint(
     phase = run / "refine" / "finetune"
     interrupted = list((phase / "checkpoints").iterdir())
     assert interrupted
+    searched = load_policy(run / "refine" / "searched").model.policy.state_dict()
     monkeypatch.setattr(pipeline, "train", real)
     record = refine_run(run, config)
+    again = load_policy(run / "refine" / "searched").model.policy.state_dict()
+    assert all(torch.equal(searched[k], again[k]) for k in searched)  # the seeded search
     assert record["finetune"]["timesteps"] == 4096
     with open(phase / "progress.csv", newline="", encoding="utf-8") as handle:
         steps = [int(row["timesteps"]) for row in csv.DictReader(handle)]
