@@ -325,8 +325,9 @@ class RefineConfig:
             ``refine/finetune/`` with the run's constraints, validation and selection, and its
             selected policy becomes the run's if the run's criterion ranks it at least as high
             as PPO's own. A policy fitted to search labels touches the filter near their edge;
-            the safety constraint's multiplier pulls it back within its budget at a small cost
-            in time (docs/learning_experiments.md).
+            the safety constraint's multiplier pulls it back toward its budget at a small cost
+            in time (within it on one of three seeds of the ``certified`` recipe:
+            docs/learning_experiments.md).
     """
 
     iterations: Annotated[int, Bounds(0, 50)] = 0

@@ -35,7 +35,8 @@ limits) for a margin from that edge.
 collision (budgets aside) is fine-tuned by PPO under the run's constraints, validation and
 selection, a run of its own in ``run/refine/finetune/``; the run keeps its selected policy if
 the criterion above ranks it at least as high as PPO's own. The safety constraint's multiplier
-pulls the filter back within its budget, which the fitted policy alone misses.
+pulls the filter back toward the budget the fitted policy alone misses (within it on one of
+three seeds of the ``certified`` recipe).
 
 The search needs a logic under which no action sequence can collide: ``certified``.
 """
