@@ -76,6 +76,18 @@ def write_snapshot(folder: str | Path, model: Any, normalizer: Any, state: dict[
     return folder
 
 
+def complete_checkpoints(run: Path) -> list[Path]:
+    """The run's checkpoints (``run/checkpoints/step_N``, :func:`write_snapshot`'s) that
+    were written whole, oldest first."""
+    folder = run / "checkpoints"
+    if not folder.is_dir():
+        return []
+    done = [
+        p for p in folder.iterdir() if p.name.startswith("step_") and (p / "state.json").is_file()
+    ]
+    return sorted(done, key=lambda p: int(p.name.split("_")[1]))
+
+
 def to_json(value: Any) -> str:
     """Strict JSON (RFC 8259) with a final newline: NaN and infinities become ``null`` (Python's
     ``json`` would write ``NaN``, which ``jq`` and strict parsers reject), numpy scalars and

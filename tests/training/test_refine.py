@@ -15,8 +15,8 @@ import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.core.config import ConfigError, from_dict, to_dict
-from safeswitch.training import pipeline, train
 from safeswitch.training import refine as refine_module
+from safeswitch.training import train
 from safeswitch.training.config import RefineConfig, TrainConfig, load_config
 from safeswitch.training.policies import load_policy, resolve_model_dir, run_config_path
 from safeswitch.training.refine import refine_run, search_task
@@ -224,7 +224,7 @@ def finetuned(tmp_path_factory):
     run = shipped_run(tmp_path_factory.mktemp("finetune") / "run")
     original = (run / "model.zip").read_bytes()
     config = small_config(iterations=2, finetune=FINETUNE)
-    return run, config, refine_run(run, config), original
+    return run, config, refine_run(run, config, train), original
 
 
 def test_the_fine_tune_phase_trains_the_fastest_searched_iteration_under_the_constraints(
@@ -279,32 +279,39 @@ class InterruptAt(BaseCallback):
         return True
 
 
-def test_an_interrupted_fine_tune_phase_continues_from_its_checkpoint(
-    tmp_path, monkeypatch, capsys
-):
+def test_an_interrupted_fine_tune_phase_continues_from_its_checkpoint(tmp_path, capsys):
     run = shipped_run(tmp_path / "run")
     original = (run / "model.zip").read_bytes()
     config = small_config(iterations=1, finetune=FINETUNE)
-    real = pipeline.train
-    monkeypatch.setattr(
-        pipeline, "train", lambda *a, **k: real(*a, **k, callbacks=[InterruptAt(2048)])
-    )
     with pytest.raises(KeyboardInterrupt):
-        refine_run(run, config)
+        refine_run(run, config, lambda *a, **k: train(*a, **k, callbacks=[InterruptAt(2048)]))
     assert f"safeswitch train --resume --out {run}" in capsys.readouterr().err
     assert (run / "model.zip").read_bytes() == original  # PPO's still the run's
     phase = run / "refine" / "finetune"
     interrupted = list((phase / "checkpoints").iterdir())
     assert interrupted
     searched = load_policy(run / "refine" / "searched").model.policy.state_dict()
-    monkeypatch.setattr(pipeline, "train", real)
-    record = refine_run(run, config)
+    record = refine_run(run, config, train)
     again = load_policy(run / "refine" / "searched").model.policy.state_dict()
     assert all(torch.equal(searched[k], again[k]) for k in searched)  # the seeded search
     assert record["finetune"]["timesteps"] == 4096
     with open(phase / "progress.csv", newline="", encoding="utf-8") as handle:
         steps = [int(row["timesteps"]) for row in csv.DictReader(handle)]
     assert steps == sorted(steps) and steps[0] <= 2048 and steps[-1] == 4096  # not from 0 again
+    # interrupted after the phase finished: --resume puts PPO's policy back and runs the
+    # stage again; the phase is not trained again
+    for name in ("model.zip", "vecnormalize.pkl"):
+        if (run / "ppo").is_dir():
+            shutil.copyfile(run / "ppo" / name, run / name)
+    assert (run / "model.zip").read_bytes() == original
+    progress = (phase / "progress.csv").read_bytes()
+    assert refine_run(run, config, train)["finetune"] == record["finetune"]
+    assert (phase / "progress.csv").read_bytes() == progress
+
+
+def test_the_fine_tune_phase_needs_the_pipelines_train(tmp_path):
+    with pytest.raises(ValueError, match="needs the pipeline's train"):
+        refine_run(tmp_path, small_config(iterations=1, finetune=FINETUNE))
 
 
 def test_fine_tune_settings_are_checked_by_name():

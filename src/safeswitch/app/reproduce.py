@@ -116,7 +116,7 @@ def train_policies(
     """Train the six policies with their shipped configurations, into
     ``out/runs/``; a finished run is reused and an interrupted one resumed."""
     from safeswitch.app.train import train_and_plot
-    from safeswitch.training.run import complete_checkpoints
+    from safeswitch.io import complete_checkpoints
 
     learned = [e for e in ENTRIES if e.policy is not None]
     runs = {}

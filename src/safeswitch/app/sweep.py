@@ -96,7 +96,7 @@ def train_run(config: TrainConfig, folder: str) -> dict[str, Any]:
     import torch
 
     from safeswitch.app.train import train_and_plot
-    from safeswitch.training.run import complete_checkpoints
+    from safeswitch.io import complete_checkpoints
 
     torch.set_num_threads(config.torch_threads)
     run = Path(folder)

@@ -136,7 +136,7 @@ def train(
     if validator is not None and validator.state["best_timesteps"] is not None:
         select_best(run)
         selected = {"validation_seed": config.validation.seed, **validator.state}
-    refined = plant.refine(run)
+    refined = plant.refine(run, train)
     started = time.perf_counter()
     evaluation = plant.evaluate(run) if config.eval_episodes else {}
     metrics: dict[str, Any] = {

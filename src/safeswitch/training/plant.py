@@ -59,9 +59,10 @@ class Plant:
         """The validator (``None`` without ``validation.every``)."""
         return None
 
-    def refine(self, run: Path) -> dict[str, Any] | None:
+    def refine(self, run: Path, train: Callable[..., dict[str, Any]]) -> dict[str, Any] | None:
         """A stage after PPO that may replace the run's policy (the left turn's search-guided
-        refinement); returns its record for ``metrics.json`` (``None``: none here)."""
+        refinement); returns its record for ``metrics.json`` (``None``: none here). ``train``
+        is the pipeline's own, for a stage that trains a phase of its own."""
         return None
 
     def evaluate(self, run: Path) -> dict[str, Any]:

@@ -46,10 +46,12 @@ from __future__ import annotations
 import copy
 import csv
 import io
+import json
 import os
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +66,7 @@ from safeswitch.evaluation.search import (
     policy_actions,
     search_sequences,
 )
-from safeswitch.io import write_atomic, write_policy_files
+from safeswitch.io import complete_checkpoints, write_atomic, write_policy_files
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.training.config import RefineConfig, TrainConfig
@@ -208,17 +210,27 @@ def selection_key(
     )
 
 
-def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
+#: The pipeline's :func:`~safeswitch.training.pipeline.train` (passed in: the pipeline calls this
+#: stage).
+Trainer = Callable[..., dict[str, Any]]
+
+
+def refine_run(
+    run: Path, config: TrainConfig, train: Trainer | None = None
+) -> dict[str, Any] | None:
     """The stage on a finished run's policy (``run/model.zip``): ``refine.iterations``
     iterations, each validated, then (``refine.finetune``) the constrained PPO phase on the
     fastest; the policy selected becomes the run's (PPO's own moves to ``run/ppo/``);
     ``refine.csv`` records every iteration and the phase. Returns the record for
-    ``metrics.json`` (``None``: no refinement configured). The run's policy is replaced only
+    ``metrics.json`` (``None``: no refinement configured). ``train``: the pipeline's, which
+    the fine-tune phase needs. The run's policy is replaced only
     once all is done, so an interrupted stage leaves PPO's policy in place (``--resume`` runs
     the stage again, and continues an interrupted fine-tune phase from its checkpoint)."""
     r = config.refine
     if not r.iterations:
         return None
+    if r.finetune is not None and train is None:
+        raise ValueError("refine.finetune trains a phase: refine_run needs the pipeline's train")
     started = time.perf_counter()
     policy = load_policy(run)
     task = search_task(config)
@@ -252,7 +264,8 @@ def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
         searched = run / "refine" / "searched"
         searched.mkdir(parents=True, exist_ok=True)
         write_policy_files(searched, policy.model, policy.normalizer)
-        tuned, trained = finetune(run, config, searched)
+        assert train is not None
+        tuned, trained = finetune(run, config, searched, train)
         validate({"iteration": r.iterations + 1, "stage": "finetune", **trained}, tuned)
         kept = len(rows) - 1 if rows[-1]["final_key"] >= rows[0]["final_key"] else 0
     for index, row in enumerate(rows):
@@ -281,15 +294,17 @@ def refine_run(run: Path, config: TrainConfig) -> dict[str, Any] | None:
     }
 
 
-def finetune(run: Path, config: TrainConfig, start: Path) -> tuple[TrainedPolicy, dict[str, Any]]:
+def finetune(
+    run: Path, config: TrainConfig, start: Path, train: Trainer
+) -> tuple[TrainedPolicy, dict[str, Any]]:
     """The fine-tune phase (``refine.finetune``) from the policy in ``start``, a run of its own
-    in ``run/refine/finetune/`` (continued from its checkpoint if an earlier one was
-    interrupted); returns its selected policy and what it did."""
-    from safeswitch.training.pipeline import train
-    from safeswitch.training.run import complete_checkpoints
-
+    in ``run/refine/finetune/`` trained by ``train`` (continued from its checkpoint if an
+    earlier one was interrupted); returns its selected policy and what it did."""
     out = run / "refine" / "finetune"
-    resume = out.is_dir() and bool(complete_checkpoints(out))
+    if (out / "metrics.json").is_file():  # done before the stage was interrupted
+        metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+        return load_policy(out), _finetuned(metrics)
+    resume = bool(complete_checkpoints(out))
     if out.is_dir() and not resume:
         shutil.rmtree(out)  # begun and never checkpointed: nothing to continue
     try:
@@ -301,8 +316,13 @@ def finetune(run: Path, config: TrainConfig, start: Path) -> tuple[TrainedPolicy
             file=sys.stderr,
         )
         raise
+    return load_policy(out), _finetuned(metrics)
+
+
+def _finetuned(metrics: dict[str, Any]) -> dict[str, Any]:
+    """What the stage keeps of the fine-tune phase's ``metrics.json``."""
     selected = metrics["selected"] or {}  # none: its last policy
-    return load_policy(out), {
+    return {
         "timesteps": metrics["timesteps"],
         "selected_timesteps": selected.get("best_timesteps") or metrics["timesteps"],
         "finetune_wall_time_s": metrics["wall_time_s"],

@@ -34,7 +34,7 @@ from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
-from safeswitch.io import write_atomic, write_snapshot
+from safeswitch.io import complete_checkpoints, write_atomic, write_snapshot
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training.activations import NumpyTanh
@@ -202,17 +202,6 @@ def build_model(
 #: A file in a checkpoint saved on an interrupt: such a checkpoint is never pruned (the
 #: interrupt's message named it, and a user may evaluate it after resuming).
 INTERRUPTED = "interrupted"
-
-
-def complete_checkpoints(run: Path) -> list[Path]:
-    """The run's checkpoints that were written whole, oldest first."""
-    folder = run / "checkpoints"
-    if not folder.is_dir():
-        return []
-    done = [
-        p for p in folder.iterdir() if p.name.startswith("step_") and (p / "state.json").is_file()
-    ]
-    return sorted(done, key=lambda p: int(p.name.split("_")[1]))
 
 
 def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[str, Any]) -> Path:
@@ -416,10 +405,10 @@ class LeftTurnPlant(Plant):
     def validator(self, run: Path) -> Validator | None:
         return Validator(self.config, run) if self.config.validation.every else None
 
-    def refine(self, run: Path) -> dict[str, Any] | None:
+    def refine(self, run: Path, train: Callable[..., dict[str, Any]]) -> dict[str, Any] | None:
         from safeswitch.training.refine import refine_run
 
-        return refine_run(run, self.config)
+        return refine_run(run, self.config, train)
 
     def evaluate(self, run: Path) -> dict[str, Any]:
         c = self.config
