@@ -279,6 +279,7 @@ class InterruptAt(BaseCallback):
         return True
 
 
+@pytest.mark.slow
 def test_an_interrupted_fine_tune_phase_continues_from_its_checkpoint(tmp_path, capsys):
     run = shipped_run(tmp_path / "run")
     original = (run / "model.zip").read_bytes()
