@@ -25,6 +25,7 @@ intervention), ``info["costs"]`` (its named costs) and the declared failure.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -136,7 +137,7 @@ def train(
     if validator is not None and validator.state["best_timesteps"] is not None:
         select_best(run)
         selected = {"validation_seed": config.validation.seed, **validator.state}
-    refined = plant.refine(run, train)
+    refined = plant.refine(run, functools.partial(train, progress_bar=progress_bar))
     started = time.perf_counter()
     evaluation = plant.evaluate(run) if config.eval_episodes else {}
     metrics: dict[str, Any] = {
