@@ -329,3 +329,30 @@ def test_fine_tune_settings_are_checked_by_name():
         base["refine"] = refine
         with pytest.raises(ConfigError, match=message):
             from_dict(TrainConfig, base)
+
+
+@pytest.mark.slow
+def test_safeswitch_train_runs_the_phase_and_says_which_policy_it_kept(tmp_path, capsys):
+    from safeswitch.cli import main
+
+    run = tmp_path / "run"
+    settings = [
+        "timesteps=2048", "n_envs=16", "eval_episodes=50", "warm_start.policy=certified",
+        "validation={start: 1024, every: 1024, episodes: 200}",
+        "refine={iterations: 2, scenes: 60, population: 16, rounds: 3, speed_scenes: 40, "
+        "speed_population: 8, speed_rounds: 3, finetune: {timesteps: 2048, n_envs: 16, "
+        "validation: {start: 1024, every: 1024}}}",
+    ]  # fmt: skip
+    args = ["train", "--config", "certified", "--out", str(run), "--no-progress"]
+    assert main([*args, *(x for s in settings for x in ("--set", s))]) == 0
+    out = capsys.readouterr().out
+    refined = json.loads((run / "metrics.json").read_text(encoding="utf-8"))["refined"]
+    assert refined["selected_iteration"] > 0  # the search beat PPO's policy: the phase ran
+    assert (run / "refine" / "finetune" / "metrics.json").is_file()
+    tuned = refined["finetune"]["selected_timesteps"]
+    kept = "kept" if refined["kept"] == "finetune" else "not better than PPO's"
+    line = (
+        f"iteration {refined['selected_iteration']} of 2 fine-tuned by PPO (selected at "
+        f"{tuned:,} steps), {kept} (refine.csv)"
+    )
+    assert line in out
