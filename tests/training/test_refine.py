@@ -49,6 +49,17 @@ def small_config(**refine):
     )
 
 
+def full_key(config, row):
+    """The run's criterion on a ``refine.csv`` row: no collision, the least excess over the
+    comfort and safety budgets (the recipe limits no speeding), then efficiency."""
+    comfort = config.constraints.comfort.selection_budget
+    safety = config.constraints.safety.selection_budget
+    episodes = config.validation.episodes
+    excess = max(0.0, float(row["comfort_violation_fraction"]) / comfort - 1.0)
+    excess += max(0.0, int(row["safety_activation_episodes"]) / episodes / safety - 1.0)
+    return (-int(row["collisions"]), -excess, float(row["mean_efficiency"]))
+
+
 def rows_of(run):
     with open(run / "refine.csv", newline="", encoding="utf-8") as handle:
         return list(csv.DictReader(handle))
@@ -77,16 +88,7 @@ def test_the_stage_keeps_the_iteration_its_criterion_ranks_first(refined):
     assert [int(r["selected"]) for r in rows].count(1) == 1
     chosen = next(int(r["iteration"]) for r in rows if r["selected"] == "1")
     assert record["selected_iteration"] == chosen
-    comfort = config.constraints.comfort.selection_budget
-    safety = config.constraints.safety.selection_budget
-    episodes = config.validation.episodes
-
-    def key(r):  # the recipe limits comfort and the filter's episodes, not speeding
-        excess = max(0.0, float(r["comfort_violation_fraction"]) / comfort - 1.0)
-        excess += max(0.0, int(r["safety_activation_episodes"]) / episodes / safety - 1.0)
-        return (-int(r["collisions"]), -excess, float(r["mean_efficiency"]))
-
-    assert key(rows[chosen]) == max(key(r) for r in rows)
+    assert full_key(config, rows[chosen]) == max(full_key(config, r) for r in rows)
 
 
 def test_the_selected_iteration_is_the_runs_policy_and_ppos_is_kept(refined):
@@ -207,16 +209,6 @@ FINETUNE = {
     "constraints": {"comfort": {"start": 0}, "safety": {"start": 0}, "uncleared": {"start": 0}},
     "validation": {"start": 2048, "every": 2048},
 }  # fmt: skip
-
-
-def full_key(config, row):
-    """The run's criterion on a ``refine.csv`` row: no collision, the least excess over the
-    comfort and safety budgets (the recipe limits no speeding), then efficiency."""
-    comfort = config.constraints.comfort.selection_budget
-    safety = config.constraints.safety.selection_budget
-    excess = max(0.0, float(row["comfort_violation_fraction"]) / comfort - 1.0)
-    excess += max(0.0, int(row["safety_activation_episodes"]) / 200 / safety - 1.0)
-    return (-int(row["collisions"]), -excess, float(row["mean_efficiency"]))
 
 
 @pytest.fixture(scope="module")
