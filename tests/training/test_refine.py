@@ -15,6 +15,7 @@ import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 from safeswitch.training import refine as refine_module
 from safeswitch.training import train
 from safeswitch.training.config import RefineConfig, TrainConfig, load_config
@@ -30,10 +31,10 @@ SMALL_REFINE = RefineConfig(
 )  # fmt: skip
 
 
-def shipped_run(folder):
-    """The shipped ``certified`` policy as a finished run in ``folder``."""
+def shipped_run(folder, name="certified"):
+    """The shipped policy ``name`` as a finished run in ``folder``."""
     folder.mkdir(parents=True)
-    source = resolve_model_dir("certified")
+    source = resolve_model_dir(name)
     for name in ("model.zip", "vecnormalize.pkl"):
         shutil.copyfile(source / name, folder / name)
     shutil.copyfile(run_config_path(source), folder / "config.yaml")
@@ -142,7 +143,6 @@ def test_the_pipeline_evaluates_the_refined_policy(tmp_path):
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"traffic": "light"}, "needs no traffic"),
         ({"env": {"switching": "paper"}}, "env has 'paper'"),
         ({"deploy_switching": "paper"}, "deploy_switching has 'paper'"),
         ({"env": {"scenario": "cut"}}, "needs random scenarios"),
@@ -159,6 +159,30 @@ def test_refinement_is_refused_where_its_search_cannot_run(change, message):
             base[key] = value
     with pytest.raises(ConfigError, match=rf"refine\.iterations .*{message}.*got 1"):
         from_dict(TrainConfig, base)
+
+
+@pytest.mark.slow
+def test_in_traffic_the_stage_searches_the_traffic_scene_and_fits_its_labels(tmp_path):
+    # the scene with traffic from every leg is deterministic given its start too: the search
+    # runs there, and the fitted policy is validated on the run's traffic scenes
+    run = shipped_run(tmp_path / "run", "traffic-certified")
+    config = load_config("traffic_certified")
+    config = replace(
+        config,
+        refine=replace(SMALL_REFINE, iterations=1, scenes=30, speed_scenes=10),
+        validation=replace(config.validation, episodes=60),
+    )
+    task = search_task(config)
+    assert isinstance(task, LeftTurnTrafficTask)
+    assert task.traffic == ValidationSet(config).task.traffic
+    record = refine_run(run, config)
+    first = rows_of(run)[1]
+    assert int(first["failing"]) > 0 and int(first["fixed"]) + int(first["sped_up"]) > 0
+    assert float(first["mse"]) < float(first["mse_before"])
+    chosen = record["selected_iteration"]
+    summary = ValidationSet(config).summary(load_policy(run))
+    assert summary["cleared_episodes"] == record["validation"]["cleared_episodes"]
+    assert (chosen == 0) == (not (run / "ppo").exists())
 
 
 def test_refinement_settings_are_checked_by_name():

@@ -1,7 +1,8 @@
-"""Open-loop trajectory search on the single-car left turn: which sequence of learned actions
-clears a scene soonest, and cleanly, under the task's switching logic.
+"""Open-loop trajectory search on the left turn, alone or in traffic: which sequence of learned
+actions clears a scene soonest, and cleanly, under the task's switching logic.
 
-The scene is deterministic given its start (the north car holds its speed), so a policy's
+The scene is deterministic given its start (the north car holds its speed; in traffic the other
+vehicles follow their rules), so a policy's
 actions replayed open loop drive exactly its episode (:func:`policy_actions`,
 :func:`drive_open_loop`), and a search can start from them. :func:`search_sequences` is the
 cross-entropy method per scene; ranked clear first, then by the *dirty* ticks — a comfort

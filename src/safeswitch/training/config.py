@@ -285,8 +285,8 @@ FINETUNE_FIXED = ("refine", "warm_start", "eval_episodes")
 
 @dataclass(frozen=True)
 class RefineConfig:
-    """Search-guided refinement after PPO (ours; off by default; the single-car left turn;
-    see :mod:`safeswitch.training.refine`). Each iteration drives ``scenes`` fresh training
+    """Search-guided refinement after PPO (ours; off by default; the left turn, alone or in
+    traffic; see :mod:`safeswitch.training.refine`). Each iteration drives ``scenes`` fresh training
     scenarios with the run's policy, searches better action sequences where it fails or
     could clear sooner (the cross-entropy method of :mod:`safeswitch.evaluation.search`,
     started from the policy's own actions) and fits the actor to them; every iteration is
@@ -657,8 +657,6 @@ class TrainConfig:
             check(self.traffic is None, "validation", "stress", "set",
                   "is for the paper's scene (a traffic scene draws its own scenarios)")  # fmt: skip
         if self.refine.iterations:
-            check(self.traffic is None, "refine", "iterations", self.refine.iterations,
-                  "searches the single-car scene open loop: needs no traffic")  # fmt: skip
             check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
                   f"needs random scenarios (env.scenario is {self.env.scenario!r})")  # fmt: skip
             searched = self.refine_env  # validates refine.env, naming a bad key or value

@@ -1,12 +1,12 @@
-"""Search-guided refinement of a trained left-turn policy: the pipeline's last stage
-(``refine:``; ours, off by default).
+"""Search-guided refinement of a trained left-turn policy, alone or in traffic: the pipeline's
+last stage (``refine:``; ours, off by default).
 
 PPO under constraints leaves time on the table: a careful driver that knows each scene clears
 sooner than the policy in most scenes (``benchmarks/certified_ceiling.py --careful``). The
-single-car scene is deterministic given its start (the north car holds its speed), so the
-policy's own actions replayed open loop drive exactly its episode, and a trajectory search can
-start from them. Each iteration (the idea is expert iteration / guided policy search with a
-sampling optimiser):
+scene is deterministic given its start (the north car holds its speed; in traffic the other
+vehicles follow their rules), so the policy's own actions replayed open loop drive exactly its
+episode, and a trajectory search can start from them. Each iteration (the idea is expert
+iteration / guided policy search with a sampling optimiser):
 
 1. the policy drives ``refine.scenes`` fresh training scenarios (the run's seed, environment
    ids no training environment uses) under the run's logic (with ``refine.env``'s stricter
@@ -67,6 +67,7 @@ from safeswitch.evaluation.search import (
     search_sequences,
 )
 from safeswitch.io import complete_checkpoints, write_atomic, write_policy_files
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.training.config import RefineConfig, TrainConfig
@@ -190,8 +191,8 @@ def _drivers(horizon_s: float, decisions: int) -> NDArray[np.float64] | None:
 
 def search_task(config: TrainConfig) -> LeftTurnTask:
     """The task the stage drives and searches: the training environment with ``refine.env``
-    (stricter rules for the search) merged in."""
-    return LeftTurnTask(config.refine_env)
+    (stricter rules for the search) merged in, in the run's traffic if it has any."""
+    return build_task(None, config.refine_env, traffic=config.traffic_settings)
 
 
 def selection_key(
