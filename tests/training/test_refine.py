@@ -15,6 +15,7 @@ import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.core.config import ConfigError, from_dict, to_dict
+from safeswitch.evaluation.search import SEGMENT_S, family_of_drivers
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 from safeswitch.training import refine as refine_module
 from safeswitch.training import train
@@ -183,6 +184,19 @@ def test_in_traffic_the_stage_searches_the_traffic_scene_and_fits_its_labels(tmp
     summary = ValidationSet(config).summary(load_policy(run))
     assert summary["cleared_episodes"] == record["validation"]["cleared_episodes"]
     assert (chosen == 0) == (not (run / "ppo").exists())
+
+
+@pytest.mark.parametrize("interval", [5, 15])
+def test_the_structured_drivers_seed_the_search_at_any_decision_interval(interval):
+    # each decision takes the driver's action of the half-second segment it starts in: at 0.1 s
+    # five decisions per segment, at 0.3 s (traffic's hold) the segments do not divide
+    episode = replace(load_config("certified").env.episode, decision_interval=interval)
+    decisions = episode.horizon_ticks // interval
+    drivers = refine_module._drivers(episode, decisions)
+    family = family_of_drivers(round(episode.horizon_s / SEGMENT_S))
+    assert drivers.shape == (len(family), decisions)
+    starts = np.arange(decisions) * interval * episode.dt  # [s]
+    np.testing.assert_array_equal(drivers, family[:, (starts / SEGMENT_S + 1e-9).astype(int)])
 
 
 def test_refinement_settings_are_checked_by_name():

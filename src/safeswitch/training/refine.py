@@ -67,6 +67,7 @@ from safeswitch.evaluation.search import (
     search_sequences,
 )
 from safeswitch.io import complete_checkpoints, write_atomic, write_policy_files
+from safeswitch.leftturn.config import EpisodeConfig
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
@@ -113,7 +114,7 @@ def refine_iteration(
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
     actions, clear, dirty = policy_actions(task, scenes, policy.as_policy())
-    drivers = _drivers(episode.horizon_s, decisions)
+    drivers = _drivers(episode, decisions)
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
     f_clear, f_dirty, f_seqs = search_sequences(
         task, scenes.take(failing), actions[failing], population=config.population,
@@ -180,13 +181,13 @@ def observed(
     return obs, alive
 
 
-def _drivers(horizon_s: float, decisions: int) -> NDArray[np.float64] | None:
-    """The structured drivers at one action per decision (``None`` where the decisions do
-    not divide into half-second segments)."""
-    segments = round(horizon_s / SEGMENT_S)
-    if segments < 1 or decisions % segments:
-        return None
-    return np.repeat(family_of_drivers(segments), decisions // segments, axis=1)
+def _drivers(episode: EpisodeConfig, decisions: int) -> NDArray[np.float64]:
+    """The structured drivers at one action per decision: each decision takes the driver's
+    action of the half-second segment it starts in (any decision interval)."""
+    segment_ticks = max(1, round(SEGMENT_S / episode.dt))
+    segments = -(-episode.horizon_ticks // segment_ticks)
+    columns = np.arange(decisions) * episode.decision_interval // segment_ticks
+    return family_of_drivers(segments)[:, columns]
 
 
 def search_task(config: TrainConfig) -> LeftTurnTask:
