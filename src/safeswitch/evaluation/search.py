@@ -2,13 +2,13 @@
 actions clears a scene soonest, and cleanly, under the task's switching logic.
 
 The scene is deterministic given its start (the north car holds its speed; in traffic the other
-vehicles follow their rules), so a policy's
-actions replayed open loop drive exactly its episode (:func:`policy_actions`,
-:func:`drive_open_loop`), and a search can start from them. :func:`search_sequences` is the
-cross-entropy method per scene; ranked clear first, then by the *dirty* ticks — a comfort
-limit broken, the speed limit passed, the filter acting — then soonest. It serves the
-ceiling benchmark (``benchmarks/certified_ceiling.py``: what any policy could clear) and the
-training pipeline's search-guided refinement (:mod:`safeswitch.training.refine`).
+vehicles follow their rules), so a policy's actions replayed open loop drive exactly its
+episode (:func:`policy_actions`, :func:`drive_open_loop`), and a search can start from them.
+:func:`search_sequences` is the cross-entropy method per scene; ranked clear first, then by the
+*dirty* ticks — a comfort limit broken, the speed limit passed, the filter acting — then
+soonest. It serves the ceiling benchmark (``benchmarks/certified_ceiling.py``: what any policy
+could clear) and the training pipeline's search-guided refinement
+(:mod:`safeswitch.training.refine`).
 """
 
 from __future__ import annotations
