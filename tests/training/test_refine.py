@@ -32,10 +32,10 @@ SMALL_REFINE = RefineConfig(
 )  # fmt: skip
 
 
-def shipped_run(folder, name="certified"):
-    """The shipped policy ``name`` as a finished run in ``folder``."""
+def shipped_run(folder, policy="certified"):
+    """The shipped policy ``policy`` as a finished run in ``folder``."""
     folder.mkdir(parents=True)
-    source = resolve_model_dir(name)
+    source = resolve_model_dir(policy)
     for name in ("model.zip", "vecnormalize.pkl"):
         shutil.copyfile(source / name, folder / name)
     shutil.copyfile(run_config_path(source), folder / "config.yaml")
@@ -192,7 +192,7 @@ def test_the_structured_drivers_seed_the_search_at_any_decision_interval(interva
     # five decisions per segment, at 0.3 s (traffic's hold) the segments do not divide
     episode = replace(load_config("certified").env.episode, decision_interval=interval)
     decisions = episode.horizon_ticks // interval
-    drivers = refine_module._drivers(episode, decisions)
+    drivers = refine_module._drivers(episode)
     family = family_of_drivers(round(episode.horizon_s / SEGMENT_S))
     assert drivers.shape == (len(family), decisions)
     starts = np.arange(decisions) * interval * episode.dt  # [s]

@@ -109,12 +109,11 @@ def refine_iteration(
     """One iteration of the module docstring's steps 1–4 on ``policy`` (its actor changed in
     place), on the scenes of ``seed`` and ``iteration``; returns what it did."""
     episode = task.config.episode
-    decisions = episode.horizon_ticks // episode.decision_interval
     n = config.scenes
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
     actions, clear, dirty = policy_actions(task, scenes, policy.as_policy())
-    drivers = _drivers(episode, decisions)
+    drivers = _drivers(episode)
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
     f_clear, f_dirty, f_seqs = search_sequences(
         task, scenes.take(failing), actions[failing], population=config.population,
@@ -181,11 +180,12 @@ def observed(
     return obs, alive
 
 
-def _drivers(episode: EpisodeConfig, decisions: int) -> NDArray[np.float64]:
-    """The structured drivers at one action per decision: each decision takes the driver's
-    action of the half-second segment it starts in (any decision interval)."""
+def _drivers(episode: EpisodeConfig) -> NDArray[np.float64]:
+    """The structured drivers at one action per decision of ``episode``: each decision takes
+    the driver's action of the half-second segment it starts in (any decision interval)."""
     segment_ticks = max(1, round(SEGMENT_S / episode.dt))
     segments = -(-episode.horizon_ticks // segment_ticks)
+    decisions = episode.horizon_ticks // episode.decision_interval
     columns = np.arange(decisions) * episode.decision_interval // segment_ticks
     return family_of_drivers(segments)[:, columns]
 
