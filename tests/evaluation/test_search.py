@@ -68,6 +68,32 @@ def test_the_search_ranks_no_scene_below_its_start(scene, knot):
     np.testing.assert_array_equal(dirty_again, dirty)
 
 
+def test_a_margin_counts_the_dirty_ticks_of_the_pushed_sequences_too(scene):
+    task, scenarios = scene
+    start, _, own_dirty = policy_actions(task, scenarios, load_policy("certified").as_policy())
+    assert (own_dirty == 0).sum() >= 20  # the policy's own episodes are clean
+
+    def pushed(seqs, margin):
+        return sum(
+            drive_open_loop(task, scenarios, np.clip(seqs + shift, -1.0, 1.0))[2]
+            for shift in (0.0, margin, -margin)
+        )
+
+    plain = search_sequences(task, scenarios, start, population=24, rounds=3, seed=3, knot=5)
+    clear, dirty, seqs = search_sequences(
+        task, scenarios, start, population=24, rounds=3, seed=3, knot=5, margin=0.1
+    )
+    # it reports the three episodes' dirty ticks, and its own time to clear
+    np.testing.assert_array_equal(dirty, pushed(seqs, 0.1))
+    np.testing.assert_array_equal(clear, drive_open_loop(task, scenarios, seqs)[0])
+    # the plain search's labels are clean but not with their neighbours; the margin's
+    # ranking finds sequences clean with them in more scenes
+    assert (plain[1] == 0).sum() >= 20
+    assert (pushed(plain[2], 0.1) == 0).sum() < (dirty == 0).sum()
+    with pytest.raises(ValueError, match="margin must be in"):
+        search_sequences(task, scenarios, start, population=4, rounds=1, seed=0, margin=1.0)
+
+
 def test_a_search_needs_a_start_or_seeds(scene):
     task, scenarios = scene
     with pytest.raises(ValueError, match="a start or seeds"):

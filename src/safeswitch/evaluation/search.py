@@ -82,6 +82,7 @@ def search_sequences(
     start_std: float = 0.3,
     dirty_cost: float = 10.0,
     knot: int = 1,
+    margin: float = 0.0,
 ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
     """The cross-entropy method per scene (:data:`CHUNK` scenes at a time, :data:`ELITES`
     elites): each scene's sequences ranked clear first, then by ``dirty_cost`` [s] per dirty
@@ -104,16 +105,23 @@ def search_sequences(
         knot: Segments per knot of the perturbations: drawn every ``knot`` segments and
             interpolated linearly between (1: independent per segment). A smooth
             perturbation of a policy's smooth actions stays something a policy can fit.
+        margin: Each sequence is also driven with every action ``margin`` higher and
+            ``margin`` lower (clipped to [-1, 1]), and its dirty ticks are those of all three
+            episodes (0: the sequence's own): a sequence clean with its neighbours leaves a
+            policy fitted to it, which tracks it only approximately, room before the filter
+            or a comfort limit acts. Its time to clear is its own.
 
     Returns:
-        Each scene's best time to clear [s] (NaN: none), its dirty ticks and its sequence
-        [n, segments].
+        Each scene's best time to clear [s] (NaN: none), its dirty ticks (with ``margin``:
+        over the three episodes) and its sequence [n, segments].
     """
     n = len(scenarios.north_speed)
     horizon = task.config.episode.horizon_s
     shaped = start if start is not None else seeds
     if shaped is None:
         raise ValueError("search_sequences needs a start or seeds: they give the sequences' length")
+    if not 0.0 <= margin < 1.0:
+        raise ValueError(f"search_sequences: margin must be in [0, 1), got {margin!r}")
     segments = shaped.shape[1]
     rng = np.random.default_rng(seed)
     best_clear, best_dirty = np.full(n, np.nan), np.zeros(n, dtype=np.int64)
@@ -137,7 +145,10 @@ def search_sequences(
                     seqs[:, 0] = start[idx]
             else:
                 seqs[:, 0] = best
-            clear, progress, dirty = drive_open_loop(task, batch, seqs.reshape(-1, segments))
+            flat = seqs.reshape(-1, segments)
+            clear, progress, dirty = drive_open_loop(task, batch, flat)
+            for shift in (margin, -margin) if margin > 0 else ():
+                dirty = dirty + drive_open_loop(task, batch, np.clip(flat + shift, -1.0, 1.0))[2]
             score = rank_score(clear, progress, horizon) + 1000.0 * np.isnan(clear)
             score = score + dirty_cost * dirty
             score = score.reshape(idx.size, population)

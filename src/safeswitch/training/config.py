@@ -306,6 +306,9 @@ class RefineConfig:
         min_gain_s: How much sooner a clean clear must be to become a label [s].
         knot: Decisions per knot of the search's perturbations (interpolated between: a
             smooth change of the policy's actions, which the actor can fit).
+        margin: A label must stay clean with every action this much higher and lower too
+            (the search ranks each sequence by the dirty ticks of all three episodes; 0: its
+            own alone): room for a fitted policy, which tracks its labels only approximately.
         weight: How many times an improved scene's samples count in the fit.
         epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
         learning_rate: The fit's step size.
@@ -339,6 +342,7 @@ class RefineConfig:
     speed_rounds: Annotated[int, Bounds(1)] = 6
     min_gain_s: Annotated[float, Bounds(0, unit="s")] = 0.1
     knot: Annotated[int, Bounds(1)] = 5
+    margin: Annotated[float, Bounds(0, 1, high_open=True)] = 0.0
     weight: Annotated[int, Bounds(1, 100)] = 5
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4

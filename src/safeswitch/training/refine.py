@@ -118,6 +118,7 @@ def refine_iteration(
     f_clear, f_dirty, f_seqs = search_sequences(
         task, scenes.take(failing), actions[failing], population=config.population,
         rounds=config.rounds, seed=seed + iteration, seeds=drivers, knot=config.knot,
+        margin=config.margin,
     )  # fmt: skip
     fixed = ~np.isnan(f_clear) & (f_dirty == 0)
     labels, weight = actions.copy(), np.ones(n, dtype=np.int64)
@@ -129,6 +130,7 @@ def refine_iteration(
         s_clear, s_dirty, s_seqs = search_sequences(
             task, scenes.take(clean), actions[clean], population=config.speed_population,
             rounds=config.speed_rounds, seed=seed + iteration, seeds=drivers, knot=config.knot,
+            margin=config.margin,
         )  # fmt: skip
         faster = ~np.isnan(s_clear) & (s_dirty == 0) & (s_clear < clear[clean] - config.min_gain_s)
         labels[clean[faster]] = s_seqs[faster]
