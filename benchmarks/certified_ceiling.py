@@ -203,7 +203,7 @@ def _careful(
     if args.model:
         from safeswitch.training.policies import load_policy
 
-        start, own_clear, own_dirty = policy_actions(
+        start, own_clear, own_dirty, _ = policy_actions(
             task, scenarios, load_policy(args.model).as_policy()
         )
         seeds = np.repeat(seeds, start.shape[1] // segments, axis=1)

@@ -39,7 +39,7 @@ def test_a_policys_actions_replayed_open_loop_drive_its_episodes(scene):
     task, scenarios = scene
     act = load_policy("certified").as_policy()
     closed = rollout(task, scenarios, act)
-    actions, own_clear, own_dirty = policy_actions(task, scenarios, act)
+    actions, own_clear, own_dirty, first = policy_actions(task, scenarios, act)
     clear, _, dirty = drive_open_loop(task, scenarios, actions)
     np.testing.assert_array_equal(clear, np.asarray(closed.time_to_clear, dtype=float))
     np.testing.assert_array_equal(
@@ -48,6 +48,23 @@ def test_a_policys_actions_replayed_open_loop_drive_its_episodes(scene):
     # what it reports of its own episodes is what the replay drives
     np.testing.assert_array_equal(own_clear, clear)
     np.testing.assert_array_equal(own_dirty, dirty)
+    np.testing.assert_array_equal(first < 0, own_dirty == 0)
+
+
+def test_the_first_dirty_tick_is_where_the_dirty_ticks_begin(scene):
+    task, scenarios = scene
+    some = scenarios.take(np.arange(4))
+    _, _, dirty, first = policy_actions(task, some, lambda obs, state, tick: np.ones(4))
+    assert (dirty > 0).all() and (first >= 50).all()  # full throttle breaks a rule, not at once
+    # cut each episode short: before its first dirty tick it is clean, with it it is not
+    for i in range(4):
+        one = some.take(np.array([i]))
+        for ticks, expected_dirty in ((first[i], False), (first[i] + 1, True)):
+            short = replace(task.config.episode, horizon_s=ticks * task.config.episode.dt)
+            cut = LeftTurnTask(replace(task.config, episode=short))
+            assert cut.config.episode.horizon_ticks == ticks
+            _, _, dirty_cut = drive_open_loop(cut, one, np.ones((1, 1)))
+            assert bool(dirty_cut[0] > 0) == expected_dirty, (i, ticks)
 
 
 @pytest.mark.parametrize("knot", [1, 5])
@@ -70,7 +87,7 @@ def test_the_search_ranks_no_scene_below_its_start(scene, knot):
 
 def test_a_margin_counts_the_dirty_ticks_of_the_pushed_sequences_too(scene):
     task, scenarios = scene
-    start, _, own_dirty = policy_actions(task, scenarios, load_policy("certified").as_policy())
+    start, _, own_dirty, _ = policy_actions(task, scenarios, load_policy("certified").as_policy())
     assert (own_dirty == 0).sum() >= 20  # the policy's own episodes are clean
 
     def pushed(seqs, margin):
@@ -92,6 +109,25 @@ def test_a_margin_counts_the_dirty_ticks_of_the_pushed_sequences_too(scene):
     assert (pushed(plain[2], 0.1) == 0).sum() < (dirty == 0).sum()
     with pytest.raises(ValueError, match="margin must be in"):
         search_sequences(task, scenarios, start, population=4, rounds=1, seed=0, margin=1.0)
+
+
+def test_frozen_segments_keep_the_start_and_the_search_changes_the_rest(scene):
+    task, scenarios = scene
+    start = np.full((24, 24), -1.0)  # the throttle closed throughout: never clears
+    frozen = np.arange(24) % 12  # up to 5.5 s of closed throttle kept
+    clear, dirty, seqs = search_sequences(
+        task, scenarios, start, population=16, rounds=2, seed=5,
+        seeds=family_of_drivers(24), frozen=frozen,
+    )  # fmt: skip
+    for i, held in enumerate(frozen):
+        np.testing.assert_array_equal(seqs[i, :held], -1.0)
+    assert (~np.isnan(clear)).sum() >= 12  # what follows was searched: it clears
+    again, _, dirty_again = drive_open_loop(task, scenarios, seqs)
+    np.testing.assert_array_equal(again, clear)
+    np.testing.assert_array_equal(dirty_again, dirty)
+    with pytest.raises(ValueError, match="frozen needs a start"):
+        search_sequences(task, scenarios, None, population=4, rounds=1, seed=0,
+                         seeds=family_of_drivers(24), frozen=frozen)  # fmt: skip
 
 
 def test_a_search_needs_a_start_or_seeds(scene):

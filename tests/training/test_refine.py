@@ -204,6 +204,34 @@ def test_refinement_settings_are_checked_by_name():
         RefineConfig(scenes=0)
     with pytest.raises(ConfigError, match=r"refine\.knot.*got 0"):
         RefineConfig(knot=0)
+    with pytest.raises(ConfigError, match=r"refine\.lock_s.*got -1"):
+        RefineConfig(lock_s=-1.0)
+
+
+def test_a_lock_keeps_the_policys_own_decisions_before_its_first_dirty_tick(monkeypatch):
+    config = small_config(lock_s=1.0)
+    task, policy = search_task(config), load_policy("certified")
+    episode = task.config.episode
+    searched, real = [], refine_module.search_sequences
+
+    def recording(task, scenarios, start, **kwargs):
+        result = real(task, scenarios, start, **kwargs)
+        if kwargs.get("frozen") is not None:
+            searched.append((scenarios, start, kwargs["frozen"], result[2]))
+        return result
+
+    monkeypatch.setattr(refine_module, "search_sequences", recording)
+    monkeypatch.setattr(refine_module, "fit_actor", lambda *args, **kwargs: None)
+    done = refine_module.refine_iteration(task, policy, config.refine, seed=4, iteration=1)
+    assert len(searched) == 1 and done["failing"] > 0  # the failing scenes', not the speed-ups'
+    scenarios, start, frozen, labels = searched[0]
+    _, _, _, first = refine_module.policy_actions(task, scenarios, policy.as_policy())
+    lock = round(1.0 / episode.dt)
+    expected = np.where(first >= 0, np.maximum(0, (first - lock) // episode.decision_interval), 0)
+    np.testing.assert_array_equal(frozen, expected)
+    assert (frozen > 0).any()
+    for i, held in enumerate(frozen):
+        np.testing.assert_array_equal(labels[i, :held], start[i, :held])
 
 
 def test_a_mean_beyond_the_bound_its_label_sits_on_is_no_error():

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from safeswitch.evaluation.rollout import Policy, RolloutResult, rollout
 from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.statistics import comfort_exceeded, speeding
 from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
 
 #: One open-loop action per half second in the structured drivers of :func:`family_of_drivers`.
@@ -83,6 +84,7 @@ def search_sequences(
     dirty_cost: float = 10.0,
     knot: int = 1,
     margin: float = 0.0,
+    frozen: NDArray[np.int64] | None = None,
 ) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
     """The cross-entropy method per scene (:data:`CHUNK` scenes at a time, :data:`ELITES`
     elites): each scene's sequences ranked clear first, then by ``dirty_cost`` [s] per dirty
@@ -110,6 +112,8 @@ def search_sequences(
             episodes (0: the sequence's own): a sequence clean with its neighbours leaves a
             policy fitted to it, which tracks it only approximately, room before the filter
             or a comfort limit acts. Its time to clear is its own.
+        frozen: Per scene, how many leading segments every sequence keeps at ``start``'s
+            values [n] (0: none frozen): the search changes only what follows.
 
     Returns:
         Each scene's best time to clear [s] (NaN: none), its dirty ticks (with ``margin``:
@@ -123,6 +127,11 @@ def search_sequences(
     if not 0.0 <= margin < 1.0:
         raise ValueError(f"search_sequences: margin must be in [0, 1), got {margin!r}")
     segments = shaped.shape[1]
+    if frozen is not None and (start is None or np.shape(frozen) != (n,)):
+        raise ValueError(
+            f"search_sequences: frozen needs a start and one count per scene ({n}), "
+            f"got shape {np.shape(frozen)}"
+        )
     rng = np.random.default_rng(seed)
     best_clear, best_dirty = np.full(n, np.nan), np.zeros(n, dtype=np.int64)
     best_score, best_seqs = np.full(n, np.inf), np.ones((n, segments))
@@ -145,6 +154,9 @@ def search_sequences(
                     seqs[:, 0] = start[idx]
             else:
                 seqs[:, 0] = best
+            if frozen is not None and start is not None:  # the structured drivers' too
+                held = np.arange(segments)[None, :] < frozen[idx][:, None]
+                seqs = np.where(held[:, None, :], start[idx][:, None, :], seqs)
             flat = seqs.reshape(-1, segments)
             clear, progress, dirty = drive_open_loop(task, batch, flat)
             for shift in (margin, -margin) if margin > 0 else ():
@@ -183,20 +195,30 @@ def smooth_noise(rng: np.random.Generator, shape: tuple[int, int, int], knot: in
 
 def policy_actions(
     task: LeftTurnTask, scenarios: Scenarios, act: Policy
-) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
+) -> tuple[FloatArray, FloatArray, NDArray[np.int64], NDArray[np.int64]]:
     """A policy's actions [n, decisions] on ``scenarios`` under the task's logic (``act``: a
     rollout policy, e.g. ``load_policy(name).as_policy()``) — replayed open loop, they drive
     exactly its episodes — with each episode's time to clear [s] (NaN: never) and dirty ticks,
-    as :func:`drive_open_loop` reports them."""
-    interval = task.config.episode.decision_interval
-    actions = np.zeros((len(scenarios.north_speed), task.config.episode.horizon_ticks // interval))
+    as :func:`drive_open_loop` reports them, and its first dirty tick (−1: none)."""
+    config = task.config
+    interval = config.episode.decision_interval
+    n = len(scenarios.north_speed)
+    actions = np.zeros((n, config.episode.horizon_ticks // interval))
+    first = np.full(n, -1, dtype=np.int64)
+    live = np.ones(n, dtype=bool)
 
     def policy(obs: Any, state: TaskState, tick: int) -> FloatArray:
         a = np.clip(np.asarray(act(obs, state, tick), dtype=float).reshape(-1), -1.0, 1.0)
         actions[:, tick // interval] = a
         return a
 
-    return (actions, *_clear_and_dirty(rollout(task, scenarios, policy)))
+    def on_tick(state: TaskState, record: StepRecord, tick: int) -> None:
+        dirty = record.safety_active | comfort_exceeded(record, config) | speeding(record, config)
+        first[live & dirty & (first < 0)] = tick
+        live[record.terminated | record.truncated] = False
+
+    result = rollout(task, scenarios, policy, on_tick)
+    return (actions, *_clear_and_dirty(result), first)
 
 
 def rank_score(clear: FloatArray, progress: FloatArray, horizon: float) -> FloatArray:

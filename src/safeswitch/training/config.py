@@ -309,6 +309,12 @@ class RefineConfig:
         margin: A label must stay clean with every action this much higher and lower too
             (the search ranks each sequence by the dirty ticks of all three episodes; 0: its
             own alone): room for a fitted policy, which tracks its labels only approximately.
+        lock_s: Where the policy's episode has a dirty tick, the search keeps the policy's own
+            actions up to this long before the first one and searches only the rest [s]
+            (``null``: the whole sequence). The labels before the fix are then the states the
+            policy itself drives through, and the fix starts from one of them: a DAgger-style
+            correction where a policy fitted to a label changed from the start arrives a little
+            off it (ours).
         weight: How many times an improved scene's samples count in the fit.
         epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
         learning_rate: The fit's step size.
@@ -343,6 +349,7 @@ class RefineConfig:
     min_gain_s: Annotated[float, Bounds(0, unit="s")] = 0.1
     knot: Annotated[int, Bounds(1)] = 5
     margin: Annotated[float, Bounds(0, 1, high_open=True)] = 0.0
+    lock_s: Annotated[float | None, Bounds(0, 120, unit="s")] = None
     weight: Annotated[int, Bounds(1, 100)] = 5
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4

@@ -112,13 +112,17 @@ def refine_iteration(
     n = config.scenes
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
-    actions, clear, dirty = policy_actions(task, scenes, policy.as_policy())
+    actions, clear, dirty, first_dirty = policy_actions(task, scenes, policy.as_policy())
     drivers = _drivers(episode)
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
+    frozen = None
+    if config.lock_s is not None:  # its own decisions up to lock_s before its first dirty tick
+        lock = round(config.lock_s / episode.dt)
+        frozen = np.maximum(0, (first_dirty[failing] - lock) // episode.decision_interval)
     f_clear, f_dirty, f_seqs = search_sequences(
         task, scenes.take(failing), actions[failing], population=config.population,
         rounds=config.rounds, seed=seed + iteration, seeds=drivers, knot=config.knot,
-        margin=config.margin,
+        margin=config.margin, frozen=frozen,
     )  # fmt: skip
     fixed = ~np.isnan(f_clear) & (f_dirty == 0)
     labels, weight = actions.copy(), np.ones(n, dtype=np.int64)
