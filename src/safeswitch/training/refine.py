@@ -254,8 +254,8 @@ def refine_run(
         summary = validation.summary(validated)
         row.update({k: summary.get(k) for k in VALIDATED if k in summary})
         row["clear_time_s"] = constraint_measures(summary, horizon)["clear_time"]
-        row["key"] = selection_key(config, summary, budgets)
         row["final_key"] = selection_key(config, summary)
+        row["key"] = row["final_key"] if budgets else selection_key(config, summary, budgets)
         row["wall_time_s"] = round(time.perf_counter() - started, 1)
         rows.append(row)
 
