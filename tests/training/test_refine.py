@@ -208,6 +208,28 @@ def test_refinement_settings_are_checked_by_name():
         RefineConfig(lock_s=-1.0)
 
 
+@pytest.mark.parametrize("allowed", [0, 3])
+def test_a_dirty_clear_is_a_label_only_where_the_policy_never_clears(monkeypatch, allowed):
+    config = small_config(uncleared_dirty_ticks=allowed, speed_scenes=0, scenes=200)
+    task, policy = search_task(config), load_policy("certified")
+    # every failing scene "cleared" by the search at 5 s with 3 dirty ticks
+    stub = lambda task, scenarios, start, **kw: (  # noqa: E731
+        np.full(len(start), 5.0),
+        np.full(len(start), 3),
+        start.copy(),
+    )
+    monkeypatch.setattr(refine_module, "search_sequences", stub)
+    monkeypatch.setattr(refine_module, "fit_actor", lambda *args, **kwargs: None)
+    done = refine_module.refine_iteration(task, policy, config.refine, seed=7, iteration=1)
+    n = config.refine.scenes
+    ids = refine_module.REFINE_ENV_OFFSET + np.arange(n)
+    scenes = task.draw_scenarios(7, ids, np.zeros(n, dtype=np.int64))
+    _, clear, _, _ = refine_module.policy_actions(task, scenes, policy.as_policy())
+    never = int(np.isnan(clear).sum())
+    assert never > 0 and done["failing"] > never  # some never clear, some clear dirty
+    assert done["fixed"] == (never if allowed >= 3 else 0)
+
+
 def test_a_lock_keeps_the_policys_own_decisions_before_its_first_dirty_tick(monkeypatch):
     config = small_config(lock_s=1.0)
     task, policy = search_task(config), load_policy("certified")

@@ -315,6 +315,10 @@ class RefineConfig:
             policy itself drives through, and the fix starts from one of them: a DAgger-style
             correction where a policy fitted to a label changed from the start arrives a little
             off it (ours).
+        uncleared_dirty_ticks: Where the policy never clears, a searched clear with at most
+            this many dirty ticks becomes a label too (0: only a clean clear): a scene only a
+            brief touch of the filter or a comfort limit lets any driver clear (the band of
+            docs/learning_experiments.md, "The ceiling") is then taught to clear (ours).
         weight: How many times an improved scene's samples count in the fit.
         epochs: Passes of the fit (mean squared error on the actor's mean, Adam).
         learning_rate: The fit's step size.
@@ -350,6 +354,7 @@ class RefineConfig:
     knot: Annotated[int, Bounds(1)] = 5
     margin: Annotated[float, Bounds(0, 1, high_open=True)] = 0.0
     lock_s: Annotated[float | None, Bounds(0, 120, unit="s")] = None
+    uncleared_dirty_ticks: Annotated[int, Bounds(0, unit="ticks")] = 0
     weight: Annotated[int, Bounds(1, 100)] = 5
     epochs: Annotated[int, Bounds(1)] = 20
     learning_rate: Annotated[float, Bounds(0, 1, True, True)] = 1e-4

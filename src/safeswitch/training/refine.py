@@ -14,7 +14,8 @@ iteration / guided policy search with a sampling optimiser):
 2. where it fails — never clears, or breaks a comfort limit, passes the speed limit or needs
    the safety action on some tick — the cross-entropy search
    (:func:`~safeswitch.evaluation.search.search_sequences`) starts from its actions; where it
-   clears cleanly, its actions become the labels;
+   clears cleanly (or, in a scene the policy never clears, with at most
+   ``refine.uncleared_dirty_ticks`` dirty ticks), its actions become the labels;
 3. on ``refine.speed_scenes`` of the scenes it drives cleanly, a cheaper search looks for a
    clean clear at least ``refine.min_gain_s`` sooner; found, its actions become the labels;
 4. the actor's mean is fitted to the labels at the observations they drive through — the
@@ -124,7 +125,8 @@ def refine_iteration(
         rounds=config.rounds, seed=seed + iteration, seeds=drivers, knot=config.knot,
         margin=config.margin, frozen=frozen,
     )  # fmt: skip
-    fixed = ~np.isnan(f_clear) & (f_dirty == 0)
+    allowed = np.where(np.isnan(clear[failing]), config.uncleared_dirty_ticks, 0)
+    fixed = ~np.isnan(f_clear) & (f_dirty <= allowed)
     labels, weight = actions.copy(), np.ones(n, dtype=np.int64)
     labels[failing[fixed]] = f_seqs[fixed]
     weight[failing[fixed]] = config.weight
