@@ -212,12 +212,10 @@ def test_refinement_settings_are_checked_by_name():
 def test_a_dirty_clear_is_a_label_only_where_the_policy_never_clears(monkeypatch, allowed):
     config = small_config(uncleared_dirty_ticks=allowed, speed_scenes=0, scenes=200)
     task, policy = search_task(config), load_policy("certified")
-    # every failing scene "cleared" by the search at 5 s with 3 dirty ticks
-    stub = lambda task, scenarios, start, **kw: (  # noqa: E731
-        np.full(len(start), 5.0),
-        np.full(len(start), 3),
-        start.copy(),
-    )
+
+    def stub(task, scenarios, start, **kwargs):  # every failing scene cleared at 5 s, 3 dirty ticks
+        return np.full(len(start), 5.0), np.full(len(start), 3), start.copy()
+
     monkeypatch.setattr(refine_module, "search_sequences", stub)
     monkeypatch.setattr(refine_module, "fit_actor", lambda *args, **kwargs: None)
     done = refine_module.refine_iteration(task, policy, config.refine, seed=7, iteration=1)
