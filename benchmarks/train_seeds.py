@@ -15,8 +15,13 @@ With ``--traffic-eval FAMILY ...`` (a recipe trained in traffic) each run is als
 1,000 scenes of each traffic family named, as ``safeswitch evaluate --model RUN --traffic
 FAMILY`` does.
 
+With ``--collect DIR`` nothing is trained: the rows are read from the runs an earlier
+``--keep DIR`` kept (``DIR/seed_<seed>/metrics.json``), e.g. to add a field this script now
+reports to a table without training again.
+
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
-[--deploy LOGIC] [--parallel N] [--keep DIR] [--traffic-eval FAMILY ...] [--out FILE]``; writes
+[--deploy LOGIC] [--parallel N] [--keep DIR | --collect DIR] [--traffic-eval FAMILY ...]
+[--out FILE]``; writes
 ``benchmarks/results/train_seeds_<config>[_<switching>][_deployed_<logic>].json``.
 """
 
@@ -45,7 +50,8 @@ TRAFFIC_EPISODES = 1000
 EVALUATED = (
     "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
     "cut_episodes", "cleared_episodes", "mean_efficiency", "speeding_episodes", "max_speed_kmh",
-    "faster_than_oracle_episodes",
+    "faster_than_oracle_episodes", "faster_than_oracle_speeding", "faster_than_oracle_comfort",
+    "faster_than_oracle_either",
 )  # fmt: skip
 
 
@@ -63,7 +69,7 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         "constraints": metrics.get("constraints"),
         "training_episodes": t["episodes"],
         "selected_timesteps": (metrics.get("selected") or {}).get("best_timesteps"),
-        **{k: e[k] for k in EVALUATED},
+        **{k: e.get(k) for k in EVALUATED},  # a run kept before a field was added: None
     }
 
 
@@ -115,6 +121,21 @@ def one_seed(
     return result
 
 
+def collected(run: Path, seed: int) -> dict[str, object]:
+    """The row of a run kept earlier (``--keep``), from its ``metrics.json``.
+
+    Raises:
+        SystemExit: the run has no ``metrics.json`` or was trained with another seed.
+    """
+    path = run / "metrics.json"
+    if not path.is_file():
+        raise SystemExit(f"--collect: {path} does not exist (a run kept with --keep?)")
+    metrics = json.loads(path.read_text(encoding="utf-8"))
+    if load_config(run / "config.yaml").seed != seed:
+        raise SystemExit(f"--collect: {run} was not trained with seed {seed}")
+    return {**row(seed, metrics), "run": str(run)}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="experimental/scratch_annealed_noise")
@@ -140,26 +161,42 @@ def main(argv: list[str] | None = None) -> int:
         help="a recipe trained in traffic: also evaluate each run on 1,000 scenes of each of "
         "these traffic families (e.g. test light medium heavy)",
     )  # fmt: skip
+    parser.add_argument(
+        "--collect", type=Path, metavar="DIR",
+        help="train nothing: read each seed's row from DIR/seed_<seed>/metrics.json (runs an "
+        "earlier --keep DIR kept)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.collect and (args.keep or args.deploy or args.traffic_eval):
+        parser.error("--collect reads kept runs: it trains and evaluates nothing, so it takes "
+                     "no --keep, --deploy or --traffic-eval")  # fmt: skip
     config = load_config(args.config)
     if args.traffic_eval and config.traffic_settings is None:
         parser.error(f"--traffic-eval needs a recipe trained in traffic; {args.config!r} is not")
     if args.switching:
         config = replace(config, env=replace(config.env, switching=args.switching),
                          deploy_switching=None)  # fmt: skip
-    with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
-        futures = [
-            pool.submit(one_seed, config, seed, args.deploy, args.keep, tuple(args.traffic_eval))
-            for seed in args.seeds
-        ]
-        rows = []
-        for future in futures:
-            rows.append(future.result())
-            print(json.dumps(rows[-1]), flush=True)
+    if args.collect:
+        rows = [collected(args.collect / f"seed_{seed}", seed) for seed in args.seeds]
+        for one in rows:
+            print(json.dumps(one), flush=True)
+    else:
+        with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
+            futures = [
+                pool.submit(
+                    one_seed, config, seed, args.deploy, args.keep, tuple(args.traffic_eval)
+                )
+                for seed in args.seeds
+            ]
+            rows = []
+            for future in futures:
+                rows.append(future.result())
+                print(json.dumps(rows[-1]), flush=True)
     result = {
         "benchmark": "train_seeds",
         **_common.machine(),
         "parallel": args.parallel,
+        **({"collected_from": str(args.collect)} if args.collect else {}),
         "config": args.config,
         "switching": config.env.switching,
         "evaluated_under": config.deployed_env.switching,
