@@ -63,6 +63,7 @@ def test_failures_are_counted_as_the_plant_declares_them(tmp_path, forgotten):
     assert not registry.failure_check(None)({"hit_wall": True})
     assert set(e) >= {"episodes", "failures", "steps", "safety_activation_steps",
                       "safety_share", "mean_return"}  # fmt: skip
+    assert (run / "training_curves.png").stat().st_size > 0  # drawn for any plant
 
 
 def test_a_users_logic_keeps_its_plant_safe_in_training_and_evaluation(tmp_path, forgotten):

@@ -270,8 +270,8 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _train_env(args: argparse.Namespace) -> int:
+    from safeswitch.app.train import train_and_plot
     from safeswitch.core.config import with_settings
-    from safeswitch.training import train
     from safeswitch.training.config import EnvTrainConfig, load_env_config
 
     if args.no_adas_penalty:
@@ -296,7 +296,9 @@ def _train_env(args: argparse.Namespace) -> int:
         if v is not None
     }
     config = replace(base, **overrides)
-    metrics = train(config, args.out, resume=args.resume, progress_bar=not args.no_progress)
+    metrics = train_and_plot(
+        config, args.out, resume=args.resume, progress_bar=not args.no_progress
+    )
     t = metrics["training"]
     print(
         f"trained {metrics['timesteps']:,} steps on {config.env_id} in "

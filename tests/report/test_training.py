@@ -70,3 +70,27 @@ def test_the_curves_mark_every_rollout_in_which_training_collided(tmp_path):
     training_curves(path, tmp_path / "curves.png")
     write_progress(path, [rollout(1000, 1500.0)])  # a log without the running total
     assert collision_steps(path) == []
+
+
+def test_any_other_plants_log_is_drawn_with_its_declared_failures_marked(tmp_path):
+    """``training.generic``'s log (no reward terms): return, the Safety controller's share of
+    steps and the failures the plant declares, each failing rollout on the rug — the one
+    that finished no episode too."""
+    from safeswitch.training.generic import PROGRESS_FIELDS as PLANT_FIELDS
+
+    rows = [{"timesteps": 512 * (k + 1), "episodes": 4 * (k + 1), "failures_total": 0,
+             "activation_rate": 0.1, "failure_rate": 0.0, "return": 90.0 + k}
+            for k in range(8)]  # fmt: skip
+    rows[2] |= {"failures_total": 1, "failure_rate": 0.25}
+    rows[3] = {"timesteps": 2048, "failures_total": 3, "activation_rate": 0.2}  # no episode ended
+    for row in rows[4:]:
+        row["failures_total"] = 3
+    path = tmp_path / "progress.csv"
+    with open(path, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=PLANT_FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    assert collision_steps(path) == [(1536, 1), (2048, 2)]
+    training_curves(path, tmp_path / "curves.png", title="plant")
+    with Image.open(tmp_path / "curves.png") as image:
+        assert image.size[0] < 800 < image.size[1]  # three panels, one above the other

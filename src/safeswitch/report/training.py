@@ -1,4 +1,6 @@
-"""Training curves like the paper's Fig. 5, from a run's ``progress.csv``."""
+"""Training curves like the paper's Fig. 5, from a run's ``progress.csv`` — the left turn's
+(its reward terms) or any other plant's (return, the Safety controller's share of steps, the
+failures the plant declares)."""
 
 from __future__ import annotations
 
@@ -36,17 +38,33 @@ def steps_label(steps: float) -> str:
     return f"{steps:.0f}"
 
 
+#: Any other plant's panels (``training.generic``'s log): its return, how often the Safety
+#: controller acted, and the failures it declares.
+PLANT_PANELS = (
+    ("return", "(a) return (per episode)"),
+    ("activation_rate", "(b) share of steps with the Safety controller"),
+    ("failure_rate", "(c) share of episodes that failed (as the plant declares)"),
+)
+
+
 def collision_steps(progress_csv: str | Path) -> list[tuple[int, int]]:
-    """``(time step, collisions)`` of every rollout in which training collided, from the log's
-    running total (empty for a log that does not record it)."""
+    """``(time step, collisions)`` of every rollout in which training collided — for any other
+    plant, failed —, from the log's running total (empty for a log that does not record it)."""
     with open(progress_csv, encoding="utf-8") as handle:
-        return _collision_steps(list(csv.DictReader(handle)))
+        rows = list(csv.DictReader(handle))
+    return _collision_steps(rows, _total_key(rows))
 
 
-def _collision_steps(rows: list[dict[str, str]]) -> list[tuple[int, int]]:
+def _total_key(rows: list[dict[str, str]]) -> str:
+    """The running total of failures a log keeps: the left turn's collisions or any other
+    plant's declared failures."""
+    return "failures_total" if rows and "failures_total" in rows[0] else "collisions_total"
+
+
+def _collision_steps(rows: list[dict[str, str]], key: str) -> list[tuple[int, int]]:
     out, before = [], 0
     for row in rows:
-        total = int(float(row.get("collisions_total") or before))
+        total = int(float(row.get(key) or before))
         if total > before:
             out.append((int(row["timesteps"]), total - before))
         before = total
@@ -54,33 +72,45 @@ def _collision_steps(rows: list[dict[str, str]]) -> list[tuple[int, int]]:
 
 
 def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = "") -> None:
-    """Eight panels against timesteps: the episode return and each reward term's per-episode
-    sum (not normalised; the paper's Fig. 5), then the share of episodes that cut in front and
-    the share with a safety action, each averaged over a rollout's finished episodes. Every
-    rollout in which training collided is marked along the return panel's foot (a red tick)
-    and the total is in the title."""
+    """The left turn's log: eight panels against timesteps — the episode return and each
+    reward term's per-episode sum (not normalised; the paper's Fig. 5), then the share of
+    episodes that cut in front and the share with a safety action, each averaged over a
+    rollout's finished episodes. Any other plant's log: its return, the share of steps with
+    the Safety controller and the share of episodes that failed. Every rollout in which
+    training collided (failed) is marked along the return panel's foot (a red tick) and the
+    total is in the title."""
     with open(progress_csv, encoding="utf-8") as handle:
         logged = list(csv.DictReader(handle))
+    key = _total_key(logged)
+    plant = key == "failures_total"
     # every rollout counts its collisions, those that finished no episode too
-    collisions = _collision_steps(logged)
+    collisions = _collision_steps(logged, key)
     rows = [r for r in logged if r["return"] != ""]
     if not rows:
         raise ValueError(f"{progress_csv} has no finished episodes yet")
     steps = [int(r["timesteps"]) for r in rows]
-    fig, axes = plt.subplots(4, 2, figsize=(10, 10.5), sharex=True)
-    for ax, (key, label) in zip(axes.ravel(), PANELS, strict=True):
-        ax.plot(steps, [float(r[key]) for r in rows], lw=1.2)
+    panels = PLANT_PANELS if plant else PANELS
+    fig, grid = plt.subplots(
+        *((len(panels), 1) if plant else (4, 2)), figsize=(7, 7.5) if plant else (10, 10.5),
+        sharex=True, squeeze=False,
+    )  # fmt: skip
+    axes = grid.ravel()
+    for ax, (column, label) in zip(axes, panels, strict=True):
+        ax.plot(steps, [float(r[column] or "nan") for r in rows], lw=1.2)
         ax.set_title(label, fontsize=10)
         ax.grid(alpha=0.3)
+        if column.endswith("_rate"):  # a share: from 0
+            ax.set_ylim(bottom=0.0)
     total = sum(n for _, n in collisions)
+    what = "failure" if plant else "collision"
     if collisions:  # a rug of red ticks along the return panel's foot, one per rollout
-        ax = axes[0, 0]
+        ax = axes[0]
         ax.plot([step for step, _ in collisions], [0.03] * len(collisions), "|", color="red",
                 ms=10, transform=ax.get_xaxis_transform(),
-                label=f"collision in training ({total})")  # fmt: skip
+                label=f"{what} in training ({total})")  # fmt: skip
         ax.legend(fontsize=8, loc="lower right")
-    title = (title + "; " if title else "") + f"collisions in training: {total}"
-    for ax in axes[-1]:
+    title = (title + "; " if title else "") + f"{what}s in training: {total}"
+    for ax in grid[-1]:
         ax.set_xlabel("time steps")
         # a few ticks, written short (400k, 1.2M): legible at any run length
         ax.xaxis.set_major_locator(MaxNLocator(5))

@@ -10,7 +10,8 @@ pipeline (:mod:`safeswitch.training.pipeline`) and for evaluation.
   :class:`~safeswitch.core.wrappers.SafeSwitch` with the named logic.
 
 The run directory is the left turn's (``config.yaml``, ``progress.csv``, ``tb/``, checkpoints,
-``model.zip``, ``vecnormalize.pkl``, ``metrics.json`` last), and ``--resume`` works the same.
+``model.zip``, ``vecnormalize.pkl``, ``metrics.json`` last; ``safeswitch train`` then draws
+``training_curves.png``), and ``--resume`` works the same.
 Failures are what the plant declares (``register_safety_controller(..., failure=)``: an
 ``info`` key or a predicate on the last step's ``info``; by default ``crashed`` or
 ``collision``), counted in training and evaluation as ``failures``.
