@@ -13,8 +13,9 @@ failure is ``info["hit_wall"]``, its logic ``stopping-distance``), imported as a
 would be (``module:EnvId``).
 
 Run: ``python benchmarks/interventions.py [--env ID] [--switching LOGIC] [--penalty P]
-[--timesteps N] [--seeds 1 2 3] [--weight W] [--out FILE]``; writes
-``benchmarks/results/interventions_<plant>.json``.
+[--timesteps N] [--seeds 1 2 3] [--weight W] [--set KEY=VALUE ...] [--out FILE]``; writes
+``benchmarks/results/interventions_<plant>.json``. ``--set`` changes a setting of every run's
+configuration as ``safeswitch train --set`` does (e.g. ``ppo.learning_rate=5e-4``).
 """
 
 from __future__ import annotations
@@ -35,7 +36,9 @@ WALL = "tests.core.user_plant:UserWall-v0"
 
 
 def one_run(env_id: str, switching: str, penalty: float, timesteps: int, seed: int,
-            weight: float, episodes: int) -> dict[str, object]:  # fmt: skip
+            weight: float, episodes: int, settings: tuple[str, ...] = ()
+            ) -> dict[str, object]:  # fmt: skip
+    from safeswitch.core.config import with_settings
     from safeswitch.training import train
     from safeswitch.training.config import EnvPolicyConfig, EnvTrainConfig
 
@@ -44,6 +47,7 @@ def one_run(env_id: str, switching: str, penalty: float, timesteps: int, seed: i
         n_envs=4, torch_threads=1, eval_episodes=episodes,
         policy=EnvPolicyConfig(intervention_imitation=weight),
     )  # fmt: skip
+    config = with_settings(config, settings)
     with tempfile.TemporaryDirectory() as run:
         metrics = train(config, run, progress_bar=False)
     t, e = metrics["training"], metrics["evaluation"]
@@ -66,19 +70,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--weight", type=float, default=1.0)
     parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a setting of every run (repeatable)",
+    )
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
+    from safeswitch.core.config import with_settings
+    from safeswitch.training.config import EnvTrainConfig
+
+    with_settings(EnvTrainConfig(env_id=args.env), args.set)  # a bad setting fails here, named
     jobs = [(s, w) for s in args.seeds for w in (0.0, args.weight)]
+    settings = tuple(args.set)
     with ProcessPoolExecutor(2) as pool:
         common = (args.env, args.switching, args.penalty, args.timesteps)
-        futures = [pool.submit(one_run, *common, s, w, args.episodes) for s, w in jobs]
+        futures = [pool.submit(one_run, *common, s, w, args.episodes, settings) for s, w in jobs]
         rows = [f.result() for f in futures]
     plant = args.env.rpartition(":")[2].split("/")[-1]
     out = args.out or RESULTS / f"interventions_{plant}.json"
     result = {
         "benchmark": "interventions", **_common.machine(), "env_id": args.env,
         "switching": args.switching, "penalty": args.penalty, "weight": args.weight,
-        "runs": rows,
+        "settings": list(settings), "runs": rows,
     }  # fmt: skip
     _common.publish(result, out, False)
     print(f"{args.env} under {args.switching}, penalty {args.penalty}, {args.timesteps:,} steps")
