@@ -8,7 +8,7 @@ from typing import Any
 
 from safeswitch.report.training import training_curves
 from safeswitch.training import train
-from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_config
+from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_any_config
 
 
 def train_and_plot(
@@ -20,24 +20,24 @@ def train_and_plot(
     """:func:`~safeswitch.training.pipeline.train` — the left turn or any other plant —, then
     ``training_curves.png`` in the run directory; returns the run's metrics."""
     metrics = train(config, out, resume=resume, progress_bar=progress_bar)
-    run = Path(out)
     try:
-        plot_run(run, config if isinstance(config, EnvTrainConfig) else None)
+        plot_run(Path(out))
     except Exception as exc:  # a figure must never cost a finished run
         print(f"warning: training_curves.png not written: {exc}", file=sys.stderr)
     return metrics
 
 
-def plot_run(run: Path, config: EnvTrainConfig | None = None) -> Path:
+def plot_run(run: Path) -> Path:
     """``training_curves.png`` of the run directory ``run`` from its ``progress.csv``, titled
-    with its plant, logic and penalty (``config``: another plant's configuration; ``None``:
-    the left turn's, read from the run). Returns the figure's path."""
-    if config is not None:
+    with its plant, logic and penalty as its ``config.yaml`` has them. Returns the figure's
+    path."""
+    config = load_any_config(run / "config.yaml")
+    if isinstance(config, EnvTrainConfig):
         logic = config.switching or "the environment's default"
         penalty = "the default" if config.penalty is None else f"{config.penalty:g}"
         title = f"{config.env_id}: switching {logic}, penalty {penalty}"
     else:
-        env = load_config(run / "config.yaml").env
+        env = config.env
         title = f"switching={env.switching}, R_ADAS {'on' if env.adas_penalty else 'off'}"
     out = run / "training_curves.png"
     training_curves(run / "progress.csv", out, title=title)
