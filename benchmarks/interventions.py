@@ -79,10 +79,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
-    from safeswitch.core.config import with_settings
+    from safeswitch.core.config import ConfigError, with_settings
     from safeswitch.training.config import EnvTrainConfig
 
-    with_settings(EnvTrainConfig(env_id=args.env), args.set)  # a bad setting fails here, named
+    try:  # a bad setting is refused before any run starts, by name
+        with_settings(EnvTrainConfig(env_id=args.env), args.set)
+    except ConfigError as exc:
+        parser.error(str(exc))
     jobs = [(s, w) for s in args.seeds for w in (0.0, args.weight)]
     settings = tuple(args.set)
     with ProcessPoolExecutor(2) as pool:
