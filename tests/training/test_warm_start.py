@@ -281,3 +281,57 @@ def test_an_annealed_learning_rate_falls_linearly_over_the_run_and_is_saved(tmp_
 def test_an_annealed_noise_that_would_also_be_learned_is_refused():
     with pytest.raises(ConfigError, match="log_std_final"):
         config(ppo={"learn_log_std": True, "log_std_final": -2.0})
+
+
+def sampled(model, observations):
+    """Exploring actions of ``model`` for ``observations`` (no new noise weights drawn)."""
+    with torch.no_grad():
+        actions, _, _ = model.policy(torch.as_tensor(observations))
+    return actions.numpy()
+
+
+def test_gsde_explores_consistently_until_its_noise_is_drawn_again(tmp_path):
+    """``use_sde``: the same observation gets the same exploring action until the noise weights
+    are drawn again (a Gaussian's draws differ every step), and the deterministic policy is
+    the mean either way."""
+    c = config(policy={"use_sde": True, "log_std_init": -1.0})
+    env = VecNormalize(LeftTurnVecEnv(4, config=c.env, seed=0))
+    model = build_model(c, env, None)
+    assert model.use_sde and model.sde_sample_freq == -1
+    observations = np.random.default_rng(0).normal(size=(4, 6)).astype(np.float32)
+    model.policy.reset_noise(4)
+    first, again = sampled(model, observations), sampled(model, observations)
+    np.testing.assert_array_equal(first, again)
+    with torch.no_grad():
+        mean = model.policy.get_distribution(torch.as_tensor(observations)).mode().numpy()
+    assert np.all(np.abs(first - mean) > 1e-6)
+    model.policy.reset_noise(4)
+    assert np.all(np.abs(sampled(model, observations) - first) > 1e-6)
+    plain = build_model(config(), env, None)
+    assert not np.allclose(sampled(plain, observations), sampled(plain, observations))
+
+
+def test_an_annealed_noise_scales_gsde_and_its_resampling_is_checked(tmp_path, monkeypatch):
+    """The annealed noise sets gSDE's log std (the matrix the noise weights are drawn with)
+    before each rollout; a resampling interval without gSDE, or of 0, is refused."""
+    annealed = config(
+        policy={"use_sde": True, "learn_log_std": False, "log_std_init": -1.0,
+                "log_std_final": -3.0, "sde_sample_freq": 16}
+    )  # fmt: skip
+    seen = []
+    original = SwitchPPO.train
+
+    def record(self):
+        log_std = self.policy.log_std.detach()
+        seen.append((tuple(log_std.shape), float(log_std.min()), float(log_std.max())))
+        original(self)
+
+    monkeypatch.setattr(SwitchPPO, "train", record)
+    train(annealed, tmp_path / "run", progress_bar=False)
+    assert seen == [((128, 1), -1.0, -1.0), ((128, 1), -2.0, -2.0)]
+    model = load_policy(tmp_path / "run").model
+    assert model.use_sde and model.sde_sample_freq == 16
+    with pytest.raises(ConfigError, match=r"sde_sample_freq.*use_sde.*16"):
+        config(policy={"sde_sample_freq": 16})
+    with pytest.raises(ConfigError, match=r"sde_sample_freq.*\b0\b"):
+        config(policy={"use_sde": True, "sde_sample_freq": 0})

@@ -110,6 +110,15 @@ class PolicyConfig:
             on a throttle action asks for half throttle everywhere; starting at a gentle cruise
             (-0.3) keeps early training out of the timid and the careless basins
             (docs/learning_experiments.md).
+        use_sde: Generalized state-dependent exploration (gSDE, Raffin et al. 2021; SB3's
+            ``use_sde``): the exploration noise is a function of the policy's last hidden
+            layer with weights drawn afresh only every ``sde_sample_freq`` steps, so an
+            exploring episode deviates from the mean consistently instead of tick by tick.
+            ``log_std_init`` / ``log_std_final`` then scale those features (SB3's meaning):
+            the action's noise is about ``exp(log_std)`` times the features' norm, which is
+            near 5-6 for a fresh 128-wide tanh layer.
+        sde_sample_freq: With ``use_sde``, steps between fresh noise weights (-1: once per
+            rollout, SB3's default).
         intervention_imitation: Learning from the Safety controller's interventions (ours;
             the HG-DAgger / EGPO line): after each PPO update the actor is also fitted toward
             the executed safety action on the rollout's states where it ran, with this weight
@@ -126,6 +135,8 @@ class PolicyConfig:
     actor_frozen_steps: Annotated[int, Bounds(0)] = 0
     actor_ramp_steps: Annotated[int, Bounds(0)] = 0
     initial_action: Annotated[float | None, Bounds(-1, 1)] = None
+    use_sde: bool = False
+    sde_sample_freq: Annotated[int, Bounds(-1)] = -1
     intervention_imitation: Annotated[float, Bounds(0, 1000)] = 0.0
 
     def __post_init__(self) -> None:
@@ -133,6 +144,10 @@ class PolicyConfig:
         if self.log_std_final is not None:
             check(not self.learn_log_std, "policy", "log_std_final", self.log_std_final,
                   "anneals a fixed noise: needs learn_log_std: false")  # fmt: skip
+        check(self.sde_sample_freq != 0, "policy", "sde_sample_freq", self.sde_sample_freq,
+              "must be -1 (once per rollout) or a number of steps >= 1")  # fmt: skip
+        check(self.use_sde or self.sde_sample_freq == -1, "policy", "sde_sample_freq",
+              self.sde_sample_freq, "resamples gSDE's noise: needs use_sde: true")  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -177,6 +177,8 @@ def build_model(
         max_grad_norm=ppo.max_grad_norm,
         seed=config.seed,
         device="cpu",
+        use_sde=policy.use_sde,
+        sde_sample_freq=policy.sde_sample_freq,
         policy_kwargs={
             "net_arch": {"pi": arch, "vf": arch},
             "activation_fn": _activation(ppo.activation, policy.fast_tanh),
