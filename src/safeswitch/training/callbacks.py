@@ -41,15 +41,82 @@ PROGRESS_FIELDS = (
 )
 
 
-class TrainingMonitor(BaseCallback):
-    """Counts what matters for safe training and logs it once per rollout.
+class RunMonitor(BaseCallback):
+    """What every plant's monitor shares: counters restored on resume, the run's wall time,
+    a resumable checkpoint every ``checkpoint_every`` timesteps, and one row per rollout to
+    ``progress.csv`` (columns ``fields``) and TensorBoard.
 
     Args:
         progress_csv: File the per-rollout rows are appended to.
         checkpoint_every: Call ``save_checkpoint`` every this many timesteps.
         save_checkpoint: Writes a resumable checkpoint (given this monitor).
-        totals: Counters restored from a checkpoint (on resume).
+        totals: The counters and their starting values (a checkpoint's on resume).
+        fields: The columns of ``progress.csv``.
     """
+
+    def __init__(
+        self,
+        progress_csv: Path,
+        checkpoint_every: int,
+        save_checkpoint: Callable[[Any], object],
+        totals: dict[str, float],
+        fields: tuple[str, ...],
+    ) -> None:
+        super().__init__()
+        self.progress_csv = progress_csv
+        self.checkpoint_every = checkpoint_every
+        self.save_checkpoint = save_checkpoint
+        self.totals = totals
+        self.fields = fields
+        self._started = time.perf_counter()
+        self._wall_before = float(self.totals["wall_time_s"])
+        self._next_checkpoint = 0
+
+    @property
+    def wall_time_s(self) -> float:
+        return self._wall_before + time.perf_counter() - self._started
+
+    def _on_training_start(self) -> None:
+        every = self.checkpoint_every
+        self._next_checkpoint = (self.num_timesteps // every + 1) * every
+
+    def checkpoint_if_due(self) -> None:
+        """A checkpoint once the run has reached the next multiple of ``checkpoint_every``."""
+        if self.num_timesteps >= self._next_checkpoint:
+            self.totals["wall_time_s"] = self.wall_time_s
+            self.save_checkpoint(self)
+            self._next_checkpoint += self.checkpoint_every
+
+    def write_row(self, row: dict[str, float], tags: dict[str, str]) -> None:
+        """``row`` to TensorBoard (each key of ``tags`` the row has, under its tag) and
+        appended to ``progress.csv`` (a header first in a new file; a column the row lacks
+        left empty)."""
+        for key, tag in tags.items():
+            if key in row:
+                self.logger.record(tag, row[key])
+        new_file = not self.progress_csv.exists()
+        with open(self.progress_csv, "a", newline="", encoding="utf-8") as handle:
+            writer = csv.DictWriter(handle, fieldnames=self.fields)
+            if new_file:
+                writer.writeheader()
+            writer.writerow({k: row.get(k, "") for k in self.fields})
+
+
+#: TensorBoard tags of the left turn's progress columns.
+TAGS = {
+    "collisions_total": "safety/collisions_total",
+    "activation_rate": "safety/activation_rate",
+    "activation_episode_rate": "safety/activation_episode_rate",
+    "cut_rate": "outcome/cut_rate",
+    "yield_rate": "outcome/yield_rate",
+    "return": "reward/return",
+    **{name: f"reward/{name}" for name in REWARD_TERMS},
+}
+
+
+class TrainingMonitor(RunMonitor):
+    """Counts what matters for safe training on the left turn and logs it once per rollout
+    (the arguments are :class:`RunMonitor`'s; ``totals``: a checkpoint's counters)."""
 
     def __init__(
         self,
@@ -58,11 +125,7 @@ class TrainingMonitor(BaseCallback):
         save_checkpoint: Callable[[TrainingMonitor], object],
         totals: dict[str, float] | None = None,
     ) -> None:
-        super().__init__()
-        self.progress_csv = progress_csv
-        self.checkpoint_every = checkpoint_every
-        self.save_checkpoint = save_checkpoint
-        self.totals: dict[str, float] = {
+        counters: dict[str, float] = {
             "collisions": 0,
             "collision_episodes": 0,
             "lost_control": 0,
@@ -73,23 +136,13 @@ class TrainingMonitor(BaseCallback):
             "ticks": 0,
             "wall_time_s": 0.0,
         } | (totals or {})
-        self._started = time.perf_counter()
-        self._wall_before = float(self.totals["wall_time_s"])
-        self._next_checkpoint = 0
+        super().__init__(progress_csv, checkpoint_every, save_checkpoint, counters, PROGRESS_FIELDS)
         self._reset_rollout()
 
     def _reset_rollout(self) -> None:
         self._ticks = 0
         self._safety_ticks = 0
         self._episodes: list[dict[str, Any]] = []
-
-    @property
-    def wall_time_s(self) -> float:
-        return self._wall_before + time.perf_counter() - self._started
-
-    def _on_training_start(self) -> None:
-        every = self.checkpoint_every
-        self._next_checkpoint = (self.num_timesteps // every + 1) * every
 
     def _on_step(self) -> bool:
         infos = self.locals["infos"]
@@ -108,10 +161,7 @@ class TrainingMonitor(BaseCallback):
             self.totals["collision_episodes"] += int(episode["collision"])
             self.totals["failures"] += int(episode["collision"] or episode["lost_control"])
             self.totals["safety_episodes"] += int(episode["safety_steps"] > 0)
-        if self.num_timesteps >= self._next_checkpoint:
-            self.totals["wall_time_s"] = self.wall_time_s
-            self.save_checkpoint(self)
-            self._next_checkpoint += self.checkpoint_every
+        self.checkpoint_if_due()
         return True
 
     def _on_rollout_end(self) -> None:
@@ -133,25 +183,7 @@ class TrainingMonitor(BaseCallback):
             row["return"] = float(np.mean([e["r"] for e in episodes]))
             for name in REWARD_TERMS:
                 row[name] = float(np.mean([e[f"term_{name}"] for e in episodes]))
-        self.logger.record("safety/collisions_total", row["collisions_total"])
-        self.logger.record("safety/activation_rate", row["activation_rate"])
-        for key, tag in (
-            ("activation_episode_rate", "safety/activation_episode_rate"),
-            ("cut_rate", "outcome/cut_rate"),
-            ("yield_rate", "outcome/yield_rate"),
-            ("return", "reward/return"),
-        ):
-            if key in row:
-                self.logger.record(tag, row[key])
-        for name in REWARD_TERMS:
-            if name in row:
-                self.logger.record(f"reward/{name}", row[name])
-        new_file = not self.progress_csv.exists()
-        with open(self.progress_csv, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
-            if new_file:
-                writer.writeheader()
-            writer.writerow({k: row.get(k, "") for k in PROGRESS_FIELDS})
+        self.write_row(row, TAGS)
         self._reset_rollout()
 
 

@@ -19,9 +19,7 @@ Failures are what the plant declares (``register_safety_controller(..., failure=
 
 from __future__ import annotations
 
-import csv
 import inspect
-import time
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
@@ -42,6 +40,7 @@ from safeswitch.core.registry import (
 )
 from safeswitch.core.tally import StepTally
 from safeswitch.core.wrappers import SafeSwitch
+from safeswitch.training.callbacks import RunMonitor
 from safeswitch.training.config import EnvTrainConfig, dump_env_config
 from safeswitch.training.constraints import SWITCH_COSTS, ConstraintUpdate, NamedCostConstraints
 from safeswitch.training.plant import Plant
@@ -121,11 +120,21 @@ def _make_supervised(
     )
 
 
-class EnvMonitor(BaseCallback):
+#: TensorBoard tags of a plant's progress columns.
+TAGS = {
+    "failures_total": "safety/failures_total",
+    "activation_rate": "safety/activation_rate",
+    "failure_rate": "safety/failure_rate",
+    "return": "reward/return",
+}
+
+
+class EnvMonitor(RunMonitor):
     """Failures (as the plant declares them), safety activations and returns of a run on any
     environment, logged once per rollout to ``progress.csv`` and TensorBoard
     (``safety/failures_total``, ``safety/activation_rate``, ``safety/failure_rate``,
-    ``reward/return``)."""
+    ``reward/return``; the arguments are :class:`~safeswitch.training.callbacks.RunMonitor`'s,
+    ``failed``: whether an episode's last ``info`` is a failure)."""
 
     def __init__(
         self,
@@ -135,33 +144,19 @@ class EnvMonitor(BaseCallback):
         totals: dict[str, float] | None = None,
         failed: Callable[[dict[str, Any]], bool] | None = None,
     ) -> None:
-        super().__init__()
-        self.progress_csv = progress_csv
-        self.checkpoint_every = checkpoint_every
-        self.save_checkpoint = save_checkpoint
         self.failed = failed or failure_check(None)
         totals = dict(totals or {})
         if "collisions" in totals:  # a checkpoint written before failures were declared
             totals.setdefault("failures", totals.pop("collisions"))
-        self.totals: dict[str, float] = {
+        counters: dict[str, float] = {
             "failures": 0,
             "safety_steps": 0,
             "episodes": 0,
             "steps": 0,
             "wall_time_s": 0.0,
         } | totals
-        self._started = time.perf_counter()
-        self._wall_before = float(self.totals["wall_time_s"])
-        self._next_checkpoint = 0
+        super().__init__(progress_csv, checkpoint_every, save_checkpoint, counters, PROGRESS_FIELDS)
         self._rollout: dict[str, list[float]] = {"safety": [], "failure": [], "return": []}
-
-    @property
-    def wall_time_s(self) -> float:
-        return self._wall_before + time.perf_counter() - self._started
-
-    def _on_training_start(self) -> None:
-        every = self.checkpoint_every
-        self._next_checkpoint = (self.num_timesteps // every + 1) * every
 
     def _on_step(self) -> bool:
         for info, done in zip(self.locals["infos"], self.locals["dones"], strict=True):
@@ -176,10 +171,7 @@ class EnvMonitor(BaseCallback):
                 self._rollout["failure"].append(float(failed))
                 if "episode" in info:
                     self._rollout["return"].append(float(info["episode"]["r"]))
-        if self.num_timesteps >= self._next_checkpoint:
-            self.totals["wall_time_s"] = self.wall_time_s
-            self.save_checkpoint(self)
-            self._next_checkpoint += self.checkpoint_every
+        self.checkpoint_if_due()
         return True
 
     def _on_rollout_end(self) -> None:
@@ -195,20 +187,7 @@ class EnvMonitor(BaseCallback):
             row["failure_rate"] = float(np.mean(r["failure"]))
         if r["return"]:
             row["return"] = float(np.mean(r["return"]))
-        for key, tag in (
-            ("failures_total", "safety/failures_total"),
-            ("activation_rate", "safety/activation_rate"),
-            ("failure_rate", "safety/failure_rate"),
-            ("return", "reward/return"),
-        ):
-            if key in row:
-                self.logger.record(tag, row[key])
-        new_file = not self.progress_csv.exists()
-        with open(self.progress_csv, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
-            if new_file:
-                writer.writeheader()
-            writer.writerow({k: row.get(k, "") for k in PROGRESS_FIELDS})
+        self.write_row(row, TAGS)
         self._rollout = {"safety": [], "failure": [], "return": []}
 
 
