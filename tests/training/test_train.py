@@ -1,12 +1,17 @@
+import csv
 import json
+import subprocess
+import sys
 
 import pytest
 import yaml
 
 from safeswitch.cli import main
+from safeswitch.io import complete_checkpoints
 from safeswitch.training import train
 from safeswitch.training.config import TrainConfig, dump_config, load_config
-from safeswitch.training.run import RunDirectoryError
+from safeswitch.training.run import INTERRUPTED, RunDirectoryError
+from safeswitch.training.validation import BestPolicy
 
 SMALL = {
     "timesteps": 4096,
@@ -164,3 +169,71 @@ def test_every_packaged_configuration_loads_and_validates():
         config = load_any_config(config_path(name))
         assert config.timesteps >= 1, name
         assert load_any_config(config_path(name)) == config
+
+
+def timesteps_of(path):
+    with open(path, newline="", encoding="utf-8") as handle:
+        return [int(float(row["timesteps"])) for row in csv.DictReader(handle)]
+
+
+def test_a_killed_run_resumes_without_repeating_its_logs(tmp_path, monkeypatch, capsys):
+    """A run killed between checkpoints (no interrupt handler ran) wrote rows past its last
+    checkpoint; ``--resume`` starts again from that checkpoint and sets those rows aside, so
+    every log goes on without a repeated timestep and no row is lost."""
+    run = tmp_path / "run"
+    data = SMALL | {"timesteps": 6144, "eval_episodes": 0,
+                    "validation": {"every": 1024, "start": 1024, "episodes": 20}}  # fmt: skip
+    config = load_config(write_config(tmp_path, data))
+    original = BestPolicy._on_rollout_end  # the validation: after the progress row
+
+    def crash(self):
+        original(self)
+        if self.num_timesteps >= 3072:
+            raise RuntimeError("killed")  # not an interrupt: no checkpoint is written
+
+    monkeypatch.setattr(BestPolicy, "_on_rollout_end", crash)
+    with pytest.raises(RuntimeError, match="killed"):
+        train(config, run, progress_bar=False)
+    monkeypatch.setattr(BestPolicy, "_on_rollout_end", original)
+    assert timesteps_of(run / "progress.csv") == [1024, 2048, 3072]
+    assert [p.name for p in complete_checkpoints(run)] == ["step_000002048"]
+    before = (run / "validation.csv").read_text().splitlines()
+    assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
+    assert "1 row(s) of progress.csv came after the checkpoint" in capsys.readouterr().err
+    for log in ("progress", "validation"):
+        assert timesteps_of(run / f"{log}.csv") == [1024 * k for k in range(1, 7)]
+        assert timesteps_of(run / f"{log}.discarded.csv") == [3072]
+    discarded = (run / "validation.discarded.csv").read_text().splitlines()
+    assert discarded[1] == before[3]  # moved as it was
+
+
+SIGTERM_AT_3072 = """
+import os, signal, sys
+from safeswitch.cli import main
+from safeswitch.training.callbacks import TrainingMonitor
+original = TrainingMonitor._on_rollout_end
+def terminate(self):
+    original(self)
+    if self.num_timesteps >= 3072:
+        os.kill(os.getpid(), signal.SIGTERM)
+TrainingMonitor._on_rollout_end = terminate
+sys.exit(main(["train", "--config", sys.argv[1], "--out", sys.argv[2], "--no-progress"]))
+"""
+
+
+def test_sigterm_checkpoints_as_ctrl_c_does(tmp_path):
+    """A SIGTERM (a scheduler's preemption) stops training as Ctrl-C does: a checkpoint at the
+    step it arrived, kept, and a resume that loses and repeats nothing."""
+    run = tmp_path / "run"
+    config = write_config(tmp_path, SMALL | {"timesteps": 6144, "eval_episodes": 0})
+    done = subprocess.run(
+        [sys.executable, "-c", SIGTERM_AT_3072, str(config), str(run)],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode == 130, done.stderr
+    assert "interrupted at 3,072 timesteps" in done.stderr
+    latest = complete_checkpoints(run)[-1]
+    assert latest.name == "step_000003072" and (latest / INTERRUPTED).is_file()
+    assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
+    assert timesteps_of(run / "progress.csv") == [1024 * k for k in range(1, 7)]
+    assert not (run / "progress.discarded.csv").exists()

@@ -26,6 +26,8 @@ intervention), ``info["costs"]`` (its named costs) and the declared failure.
 from __future__ import annotations
 
 import functools
+import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -46,6 +48,7 @@ from safeswitch.training.run import (
     normalized,
     open_run,
     save_checkpoint,
+    set_aside_after,
     start_run,
 )
 from safeswitch.training.validation import select_best
@@ -107,6 +110,22 @@ def train(
         start_run(run, plant.dump())
     else:
         plant.restore_vec(vec, checkpoint)
+        for name, rows in set_aside_after(run, int(checkpoint["timesteps"])).items():
+            print(
+                f"note: {rows} row(s) of {name} came after the checkpoint resumed from "
+                f"({int(checkpoint['timesteps']):,} timesteps); moved to "
+                f"{Path(name).stem}.discarded.csv",
+                file=sys.stderr,
+            )
+        best = run / "best" / "state.json"
+        if best.is_file():
+            at = json.loads(best.read_text(encoding="utf-8")).get("best_timesteps") or 0
+            if at > int(checkpoint["timesteps"]):
+                print(
+                    f"note: the best validated policy so far (best/, {at:,} timesteps) is from "
+                    "after that checkpoint; it stays the one later validations must beat",
+                    file=sys.stderr,
+                )
     learning = plant.learning(vec)
     if checkpoint is not None:
         learning.restore(checkpoint)

@@ -7,6 +7,8 @@ Run directory::
     config.yaml          the resolved configuration
     progress.csv         one row per rollout (see training.callbacks)
     validation.csv       one row per validation (with ``validation.every``; training.validation)
+    *.discarded.csv      rows a run wrote after its last checkpoint before it was killed
+                         (set aside by ``--resume``, which starts again from that checkpoint)
     best/                the best validated policy so far (model.zip, vecnormalize.pkl, its score)
     last/                the last policy, when the run's policy is the best validated one
     tb/                  TensorBoard logs
@@ -20,10 +22,15 @@ Run directory::
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import shutil
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -290,6 +297,63 @@ def load_model(checkpoint: dict[str, Any], env: VecEnv, run: Path) -> SwitchPPO:
     )
 
 
+#: The per-rollout logs that ``--resume`` cuts back to the checkpoint it starts from.
+RUN_LOGS = ("progress.csv", "validation.csv")
+
+
+def set_aside_after(run: Path, timesteps: int) -> dict[str, int]:
+    """Move the rows of the run's logs (:data:`RUN_LOGS`) written after ``timesteps`` — by a run
+    killed before it could checkpoint them — to ``<log>.discarded.csv`` (appended, with a
+    header), so that a resumed run's logs go on from its checkpoint without repeating
+    timesteps; each log is rewritten whole. Returns the rows moved per log (logs with none
+    left out)."""
+    moved: dict[str, int] = {}
+    for name in RUN_LOGS:
+        path = run / name
+        if not path.is_file():
+            continue
+        with open(path, newline="", encoding="utf-8") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            rows = list(reader)
+        if header is None or "timesteps" not in header:
+            continue
+        at = header.index("timesteps")
+        later = [row for row in rows if row and float(row[at]) > timesteps]
+        if not later:
+            continue
+        kept = [row for row in rows if not (row and float(row[at]) > timesteps)]
+        text = io.StringIO()
+        csv.writer(text, lineterminator="\r\n").writerows([header, *kept])
+        write_atomic(path, text.getvalue())
+        aside = run / f"{path.stem}.discarded.csv"
+        new_file = not aside.exists()
+        with open(aside, "a", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle, lineterminator="\r\n")
+            writer.writerows([header, *later] if new_file else later)
+        moved[name] = len(later)
+    return moved
+
+
+@contextmanager
+def terminate_as_interrupt() -> Iterator[None]:
+    """Within the block a SIGTERM (a scheduler's preemption, ``kill``, Ray stopping a task)
+    raises ``KeyboardInterrupt`` as Ctrl-C does, so training checkpoints before it stops;
+    outside the main thread, where Python cannot install a handler, nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def learn(
     model: SwitchPPO,
     run: Path,
@@ -300,8 +364,8 @@ def learn(
     progress_bar: bool,
     extra: list[BaseCallback] | None = None,
 ) -> None:
-    """PPO up to ``timesteps``; on Ctrl-C a checkpoint first (``save()``), then the
-    interrupt goes on. ``progress_bar``: SB3's bar on a terminal, a plain line every 15 s
+    """PPO up to ``timesteps``; on Ctrl-C or SIGTERM a checkpoint first (``save()``), then
+    the interrupt goes on. ``progress_bar``: SB3's bar on a terminal, a plain line every 15 s
     otherwise (a log never stays silent for minutes). ``extra``: further callbacks."""
     remaining = timesteps - model.num_timesteps
     rollout = model.n_steps * model.n_envs
@@ -317,14 +381,15 @@ def learn(
     if progress_bar and not terminal:
         callbacks.append(ProgressLines(remaining, f"train {run.name}"))
     try:
-        if remaining > 0:
-            model.learn(
-                total_timesteps=remaining,
-                callback=CallbackList(callbacks),
-                progress_bar=progress_bar and terminal,
-                reset_num_timesteps=not resume,
-                tb_log_name="ppo",
-            )
+        with terminate_as_interrupt():
+            if remaining > 0:
+                model.learn(
+                    total_timesteps=remaining,
+                    callback=CallbackList(callbacks),
+                    progress_bar=progress_bar and terminal,
+                    reset_num_timesteps=not resume,
+                    tb_log_name="ppo",
+                )
     except KeyboardInterrupt:
         monitor.totals["wall_time_s"] = monitor.wall_time_s
         path = save()
