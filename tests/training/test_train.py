@@ -198,11 +198,14 @@ def test_a_killed_run_resumes_without_repeating_its_logs(tmp_path, monkeypatch, 
     assert timesteps_of(run / "progress.csv") == [1024, 2048, 3072]
     assert [p.name for p in complete_checkpoints(run)] == ["step_000002048"]
     before = (run / "validation.csv").read_text().splitlines()
+    with open(run / "progress.csv", "a", encoding="utf-8") as handle:
+        handle.write("40")  # a row the kill cut short, without its line's end
     assert main(["train", "--resume", "--out", str(run), "--no-progress"]) == 0
-    assert "1 row(s) of progress.csv came after the checkpoint" in capsys.readouterr().err
+    assert "2 row(s) of progress.csv came after the checkpoint" in capsys.readouterr().err
     for log in ("progress", "validation"):
         assert timesteps_of(run / f"{log}.csv") == [1024 * k for k in range(1, 7)]
-        assert timesteps_of(run / f"{log}.discarded.csv") == [3072]
+    assert timesteps_of(run / "progress.discarded.csv") == [3072, 40]
+    assert timesteps_of(run / "validation.discarded.csv") == [3072]
     discarded = (run / "validation.discarded.csv").read_text().splitlines()
     assert discarded[1] == before[3]  # moved as it was
 

@@ -303,9 +303,10 @@ RUN_LOGS = ("progress.csv", "validation.csv")
 
 def set_aside_after(run: Path, timesteps: int) -> dict[str, int]:
     """Move the rows of the run's logs (:data:`RUN_LOGS`) written after ``timesteps`` — by a run
-    killed before it could checkpoint them — to ``<log>.discarded.csv`` (appended, with a
-    header), so that a resumed run's logs go on from its checkpoint without repeating
-    timesteps; each log is rewritten whole. Returns the rows moved per log (logs with none
+    killed before it could checkpoint them, a row it was writing when killed included — to
+    ``<log>.discarded.csv`` (appended, with a header; written before the log is rewritten
+    whole, so a second kill loses nothing), so that a resumed run's logs go on from its
+    checkpoint without repeating timesteps. Returns the rows moved per log (logs with none
     left out)."""
     moved: dict[str, int] = {}
     for name in RUN_LOGS:
@@ -315,24 +316,34 @@ def set_aside_after(run: Path, timesteps: int) -> dict[str, int]:
         with open(path, newline="", encoding="utf-8") as handle:
             reader = csv.reader(handle)
             header = next(reader, None)
-            rows = list(reader)
+            rows = [row for row in reader if row]
         if header is None or "timesteps" not in header:
             continue
-        at = header.index("timesteps")
-        later = [row for row in rows if row and float(row[at]) > timesteps]
+        keep = [_logged_by(row, header, timesteps) for row in rows]
+        later = [row for row, k in zip(rows, keep, strict=True) if not k]
         if not later:
             continue
-        kept = [row for row in rows if not (row and float(row[at]) > timesteps)]
-        text = io.StringIO()
-        csv.writer(text, lineterminator="\r\n").writerows([header, *kept])
-        write_atomic(path, text.getvalue())
         aside = run / f"{path.stem}.discarded.csv"
         new_file = not aside.exists()
         with open(aside, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.writer(handle, lineterminator="\r\n")
-            writer.writerows([header, *later] if new_file else later)
+            csv.writer(handle, lineterminator="\r\n").writerows(
+                [header, *later] if new_file else later
+            )
+        text = io.StringIO()
+        csv.writer(text, lineterminator="\r\n").writerows(
+            [header, *(row for row, k in zip(rows, keep, strict=True) if k)]
+        )
+        write_atomic(path, text.getvalue())
         moved[name] = len(later)
     return moved
+
+
+def _logged_by(row: list[str], header: list[str], timesteps: int) -> bool:
+    """Whether a log row is whole and from ``timesteps`` or before."""
+    try:
+        return len(row) == len(header) and float(row[header.index("timesteps")]) <= timesteps
+    except ValueError:
+        return False
 
 
 @contextmanager
