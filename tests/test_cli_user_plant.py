@@ -3,6 +3,7 @@ every command, Gymnasium's ``module:EnvId``, ``--switching`` checked after the i
 ``--penalty``, a configuration file alone, failures as the plant declares them, and Safety
 controllers from installed packages' entry points."""
 
+import csv
 import json
 import sys
 from importlib import metadata
@@ -181,6 +182,14 @@ def test_a_plants_named_costs_are_constraints_whose_multipliers_move(tmp_path, c
     # speeding multiplier has risen; safety episodes above half of them would raise theirs.
     assert metrics["constraints"]["speeding"]["value"] > 0
     assert set(metrics["constraints"]) == {"speeding", "safety"}
+    with open(run / "constraints.csv", newline="") as handle:  # the multipliers, update by update
+        rows = list(csv.DictReader(handle))
+    assert list(rows[0]) == ["timesteps", "safety", "safety_multiplier", "speeding",
+                             "speeding_multiplier"]  # fmt: skip
+    assert [float(r["speeding_multiplier"]) for r in rows] != [0.0] * len(rows)
+    assert float(rows[-1]["speeding_multiplier"]) == pytest.approx(
+        metrics["constraints"]["speeding"]["value"]
+    )
     saved = yaml.safe_load((run / "config.yaml").read_text())
     assert saved["constraints"]["speeding"]["budget"] == 0.01
     # a cost the plant does not publish is refused before anything is written

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import shutil
@@ -30,6 +31,19 @@ def write_atomic(path: str | Path, text: str) -> None:
     """Write a text file so that readers see either nothing or all of it (:func:`replacing`)."""
     with replacing(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def append_row(path: str | Path, fields: tuple[str, ...], row: dict[str, Any]) -> None:
+    """Append ``row`` to the CSV log ``path`` (columns ``fields``; a header first in a new
+    file; a column the row lacks left empty): a run's per-rollout logs, one line per write, so
+    that a killed run leaves at most its last line short (``--resume`` sets it aside)."""
+    path = Path(path)
+    new_file = not path.exists()
+    with open(path, "a", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=fields)
+        if new_file:
+            writer.writeheader()
+        writer.writerow({k: row.get(k, "") for k in fields})
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:

@@ -1,6 +1,7 @@
 """Constrained PPO: the multipliers' update, the costs charged per tick, what is measured, and
 the staggered episode starts it relies on."""
 
+import csv
 import json
 
 import numpy as np
@@ -216,6 +217,14 @@ def test_a_constrained_run_records_its_multipliers_and_resumes_them(tmp_path, in
     assert resumed == [{k: v["value"] for k, v in saved.items()}]
     assert set(metrics["constraints"]) == {"comfort", "clear_time"}
     assert metrics["constraints"]["clear_time"]["value"] > saved["clear_time"]["value"]
+    with open(run / "constraints.csv", newline="") as handle:  # one row per update, resumed
+        rows = list(csv.DictReader(handle))
+    steps = [int(r["timesteps"]) for r in rows]
+    assert steps == sorted(set(steps)) and steps[-1] == metrics["timesteps"]
+    multipliers = [float(r["clear_time_multiplier"]) for r in rows]
+    assert multipliers == sorted(multipliers)  # the ego never clears: it only rises
+    assert multipliers[-1] == pytest.approx(metrics["constraints"]["clear_time"]["value"])
+    assert {float(r["comfort_multiplier"]) for r in rows if int(r["timesteps"]) < 6000} == {0.0}
 
 
 def test_bad_constraint_settings_are_named():

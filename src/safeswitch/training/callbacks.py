@@ -14,7 +14,6 @@ TensorBoard scalars (beyond SB3's own ``rollout/`` and ``train/``):
 
 from __future__ import annotations
 
-import csv
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,6 +22,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from safeswitch.io import append_row
 from safeswitch.leftturn.rewards import REWARD_TERMS
 from safeswitch.progress import Progress
 
@@ -94,12 +94,7 @@ class RunMonitor(BaseCallback):
         for key, tag in tags.items():
             if key in row:
                 self.logger.record(tag, row[key])
-        new_file = not self.progress_csv.exists()
-        with open(self.progress_csv, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=self.fields)
-            if new_file:
-                writer.writeheader()
-            writer.writerow({k: row.get(k, "") for k in self.fields})
+        append_row(self.progress_csv, self.fields, row)
 
 
 #: TensorBoard tags of the left turn's progress columns.

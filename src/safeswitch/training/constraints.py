@@ -62,6 +62,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -70,6 +71,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
+from safeswitch.io import append_row
 from safeswitch.training.config import ConstraintConfig, ConstraintsConfig
 from safeswitch.training.shaping import left_turn_beneath
 
@@ -420,20 +422,36 @@ class NamedCostConstraints(CostPool, VecEnvWrapper):
         return measured
 
 
+#: The run's log of the constraints' measurements and multipliers.
+CONSTRAINTS_LOG = "constraints.csv"
+
+
 class ConstraintUpdate(BaseCallback):
     """Moves the multipliers after every rollout (each from its ``start`` on) and logs
-    ``constraints/<name>`` (what the rollout measured) and ``constraints/<name>_multiplier``."""
+    ``constraints/<name>`` (what the pooled episodes measured) and
+    ``constraints/<name>_multiplier`` to TensorBoard and, with ``log``, a row of both per
+    update to that CSV file (``timesteps``, then ``<name>`` and ``<name>_multiplier`` per
+    constraint: the run's ``constraints.csv``)."""
 
-    def __init__(self, costs: ConstraintCosts | NamedCostConstraints) -> None:
+    def __init__(self, costs: ConstraintCosts | NamedCostConstraints, log: Path | None = None):
         super().__init__()
         self.costs = costs
+        self.log = log
+        names = sorted(costs.multipliers)
+        self.fields = ("timesteps", *(f for n in names for f in (n, f"{n}_multiplier")))
 
     def _on_step(self) -> bool:
         return True
 
     def _on_rollout_end(self) -> None:
         measured = self.costs.end_rollout(self.num_timesteps)
-        for name, value in (measured or {}).items():
+        if measured is None:
+            return
+        row: dict[str, float] = {"timesteps": self.num_timesteps}
+        for name, value in measured.items():
+            multiplier = self.costs.multipliers[name].value
             self.logger.record(f"constraints/{name}", value)
-            self.logger.record(f"constraints/{name}_multiplier",
-                               self.costs.multipliers[name].value)  # fmt: skip
+            self.logger.record(f"constraints/{name}_multiplier", multiplier)
+            row |= {name: value, f"{name}_multiplier": multiplier}
+        if self.log is not None:
+            append_row(self.log, self.fields, row)

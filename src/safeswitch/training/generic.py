@@ -42,7 +42,12 @@ from safeswitch.core.tally import StepTally
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.training.callbacks import RunMonitor
 from safeswitch.training.config import EnvTrainConfig, dump_env_config
-from safeswitch.training.constraints import SWITCH_COSTS, ConstraintUpdate, NamedCostConstraints
+from safeswitch.training.constraints import (
+    CONSTRAINTS_LOG,
+    SWITCH_COSTS,
+    ConstraintUpdate,
+    NamedCostConstraints,
+)
 from safeswitch.training.plant import Plant
 from safeswitch.training.policies import load_policy
 from safeswitch.training.validation import BestPolicy
@@ -265,8 +270,10 @@ class GymLearning:
         self.constrained = NamedCostConstraints(vec, constraints) if constraints else None
         self.env: VecEnv = self.constrained or vec
 
-    def schedules(self) -> list[BaseCallback]:
-        return [ConstraintUpdate(self.constrained)] if self.constrained is not None else []
+    def schedules(self, run: Path | None = None) -> list[BaseCallback]:
+        if self.constrained is None:
+            return []
+        return [ConstraintUpdate(self.constrained, run / CONSTRAINTS_LOG if run else None)]
 
     def state(self) -> dict[str, Any]:
         return {} if self.constrained is None else {"constraints": self.constrained.state()}

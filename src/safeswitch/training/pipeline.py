@@ -145,7 +145,7 @@ def train(
     validator = plant.validator(run)
     extra: list[BaseCallback] = [*(callbacks or [])]
     extra += [validator] if validator is not None else []
-    extra += learning.schedules()
+    extra += learning.schedules(run)
     learn(
         model, run, config.timesteps, monitor, lambda: save(monitor), resume, progress_bar,
         extra=extra,

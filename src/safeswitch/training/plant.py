@@ -35,7 +35,7 @@ class Plant:
 
     def learning(self, vec: VecEnv) -> Any:
         """The learning-only wrappers around ``vec``: ``env`` (what ``VecNormalize`` wraps),
-        ``schedules()`` (their callbacks), ``state()`` / ``restore(checkpoint)``."""
+        ``schedules(run)`` (their callbacks), ``state()`` / ``restore(checkpoint)``."""
         raise NotImplementedError
 
     def monitor(

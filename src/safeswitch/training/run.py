@@ -7,6 +7,8 @@ Run directory::
     config.yaml          the resolved configuration
     progress.csv         one row per rollout (see training.callbacks)
     validation.csv       one row per validation (with ``validation.every``; training.validation)
+    constraints.csv      what each constraint measured and its multiplier, per update (with
+                         ``constraints``; training.constraints)
     *.discarded.csv      rows a run wrote after its last checkpoint before it was killed
                          (set aside by ``--resume``, which starts again from that checkpoint)
     best/                the best validated policy so far (model.zip, vecnormalize.pkl, its score)
@@ -53,7 +55,7 @@ from safeswitch.training.config import (
     TrainConfig,
     dump_config,
 )
-from safeswitch.training.constraints import ConstraintCosts, ConstraintUpdate
+from safeswitch.training.constraints import CONSTRAINTS_LOG, ConstraintCosts, ConstraintUpdate
 from safeswitch.training.interventions import InterventionRecorder
 from safeswitch.training.plant import Plant
 from safeswitch.training.policies import TrainedPolicy, load_policy
@@ -131,8 +133,9 @@ class LearningEnv:
             env = self.constrained = ConstraintCosts(env, constraints)
         self.env = env
 
-    def schedules(self) -> list[BaseCallback]:
-        """Callbacks that move the shaping and the charge over the run, as configured."""
+    def schedules(self, run: Path | None = None) -> list[BaseCallback]:
+        """Callbacks that move the shaping and the charge over the run, as configured (with
+        ``run``, the constraints' log in it)."""
         shaping = self.shaping
         out: list[BaseCallback] = []
         if self.shaped is not None and shaping.progress_shaping_final is not None:
@@ -146,7 +149,7 @@ class LearningEnv:
         if self.counterfactual is not None:
             out.append(CounterfactualLog(self.counterfactual))
         if self.constrained is not None:
-            out.append(ConstraintUpdate(self.constrained))
+            out.append(ConstraintUpdate(self.constrained, run / CONSTRAINTS_LOG if run else None))
         return out
 
     def state(self) -> dict[str, Any]:
@@ -298,7 +301,7 @@ def load_model(checkpoint: dict[str, Any], env: VecEnv, run: Path) -> SwitchPPO:
 
 
 #: The per-rollout logs that ``--resume`` cuts back to the checkpoint it starts from.
-RUN_LOGS = ("progress.csv", "validation.csv")
+RUN_LOGS = ("progress.csv", "validation.csv", CONSTRAINTS_LOG)
 
 
 def set_aside_after(run: Path, timesteps: int) -> dict[str, int]:
