@@ -290,7 +290,7 @@ def sampled(model, observations):
     return actions.numpy()
 
 
-def test_gsde_explores_consistently_until_its_noise_is_drawn_again(tmp_path):
+def test_gsde_explores_consistently_until_its_noise_is_drawn_again():
     """``use_sde``: the same observation gets the same exploring action until the noise weights
     are drawn again (a Gaussian's draws differ every step), and the deterministic policy is
     the mean either way."""
