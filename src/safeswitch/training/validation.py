@@ -40,7 +40,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
-from safeswitch.io import replacing, write_snapshot
+from safeswitch.io import append_row, replacing, write_snapshot
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
@@ -152,16 +152,11 @@ class BestPolicy(BaseCallback):
         row = {"timesteps": self.num_timesteps, **summary, **self.record(summary),
                "best": int(better)}  # fmt: skip
         path = self.run / "validation.csv"
-        new_file = not path.exists()
-        fields: list[str] = list(self.fields)
-        if not new_file:  # a resumed run keeps its file's columns (an older version's too)
+        fields = tuple(self.fields)
+        if path.exists():  # a resumed run keeps its file's columns (an older version's too)
             with open(path, newline="", encoding="utf-8") as handle:
-                fields = next(csv.reader(handle), fields)
-        with open(path, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=fields, extrasaction="ignore")
-            if new_file:
-                writer.writeheader()
-            writer.writerow(row)
+                fields = tuple(next(csv.reader(handle), fields))
+        append_row(path, fields, row)
 
     def _old_key(self, state: dict[str, Any]) -> list[float] | None:
         """The key of the best policy a run resumed from before keys recorded (its return and
