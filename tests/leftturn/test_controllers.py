@@ -107,6 +107,76 @@ def test_a_bad_speed_limiter_is_named(bad):
         ControllerConfig(learned_speed_limiter_gain=0.0)
 
 
+def _commanded_task(command_kmh, switching="none", limiter_kmh=None):
+    c = LeftTurnConfig()
+    controllers = replace(
+        c.controllers,
+        learned_speed_command_kmh=command_kmh,
+        learned_speed_limiter_kmh=limiter_kmh,
+    )
+    return LeftTurnTask(
+        replace(
+            c,
+            switching=switching,
+            episode=replace(c.episode, learned_scope="episode"),
+            controllers=controllers,
+        )
+    )
+
+
+@pytest.mark.parametrize("kmh", [12.0, 20.0, 29.9])
+def test_a_commanded_speed_is_held_by_one_constant_action(kmh):
+    task = _commanded_task(29.9)
+    action = 2.0 * kmh / 29.9 - 1.0
+    records = _drive(task, action, 400)
+    late = np.concatenate([r.ego_speed for r in records[250:]])
+    # The cruise control settles on the commanded speed (within 0.1 km/h) and holds it ...
+    assert np.abs(late * 3.6 - kmh).max() < 0.1
+    # ... approached from the starting speed without overshooting it (the paper's throttle
+    # action has no set point: the same constant action as a throttle settles far from it).
+    start = records[0].ego_speed
+    speeds = np.stack([r.ego_speed for r in records])
+    target = kmh / 3.6
+    assert np.all(speeds <= np.maximum(start, target) + SPEEDING_MARGIN)
+    assert np.all(speeds >= np.minimum(start, target) - SPEEDING_MARGIN)
+    as_throttle = _drive(_commanded_task(None), action, 400)
+    assert abs(as_throttle[-1].ego_speed[0] * 3.6 - kmh) > 1.0
+
+
+def test_a_zero_speed_command_coasts_and_the_full_command_tops_at_its_speed():
+    task = _commanded_task(29.9)
+    stopped = _drive(task, -1.0, 400)
+    assert all(np.all(r.throttle <= 0.05) for r in stopped)  # never more than rolling holds
+    assert stopped[-1].ego_speed.max() < 0.1
+    full = _drive(task, 1.0, 600)
+    assert max(r.ego_speed.max() for r in full) <= 29.9 / 3.6 + SPEEDING_MARGIN
+    assert min(r.ego_speed.min() for r in full[150:]) * 3.6 >= 29.5
+
+
+def test_a_speed_command_keeps_the_action_checks():
+    task = _commanded_task(29.9, switching="paper")
+    state = task.initial(task.draw_scenarios(0, np.arange(4), np.zeros(4, dtype=np.int64)))
+    for _ in range(20):
+        state, record = task.step(state, np.zeros(4))
+    state, record = task.step(state, np.array([5.0, np.nan, 1.0, np.inf]))
+    # Out of range: clipped to the top speed's command and counted as clipped.
+    assert record.action_clipped[0] and not record.action_clipped[2]
+    assert record.throttle[0] == record.throttle[2]
+    # NaN and inf are refused by the logic, not turned into a set point.
+    for i in (1, 3):
+        assert task.reasons[record.reason[i]] == "invalid_learned_action"
+
+
+@pytest.mark.parametrize("bad", [float("nan"), 2.0, 500.0])
+def test_a_bad_speed_command_is_named(bad):
+    with pytest.raises(
+        ConfigError, match=r"controllers\.learned_speed_command_kmh.*" + str(bad)[:3]
+    ):
+        ControllerConfig(learned_speed_command_kmh=bad)
+    with pytest.raises(ConfigError, match="learned_speed_command_gain"):
+        ControllerConfig(learned_speed_command_gain=-1.0)
+
+
 def _same(a, b):
     """Equal trees of (named) tuples, arrays and numbers, field by field."""
     if isinstance(a, tuple):

@@ -54,6 +54,15 @@ class ControllerConfig:
             is never limited. ``None``: no limiter.
         learned_speed_limiter_gain: Throttle taken off per m/s of speed towards and over the
             limit (ours).
+        learned_speed_command_kmh: What the learned action commands (ours, off by default: the
+            paper's action is the throttle, ``(a + 1) / 2``). If set, the action is a speed
+            set point ``v* = (a + 1) / 2 · this`` [km/h], tracked by the learned controller's
+            own throttle ``clip(u_ss(v*) + gain · (v* − v), 0, 1)`` (a cruise control): holding
+            a speed is then one constant action, and a "go" one step of it. An action out of
+            [-1, 1] is clipped to the range and counted as clipped; NaN/inf stays invalid for
+            the logic to refuse. The limiter above, if set, still cuts the throttle.
+        learned_speed_command_gain: Throttle per m/s of the set point's speed error (ours; the
+            gap planner's 0.6).
     """
 
     speed_limit_kmh: Annotated[float, Bounds(0, 130, low_open=True, unit="km/h")] = 25.0
@@ -66,6 +75,8 @@ class ControllerConfig:
     emergency_decel: Annotated[float, Bounds(0, 9, low_open=True, unit="m/s²")] = 6.0
     learned_speed_limiter_kmh: Annotated[float | None, Bounds(5, 130, unit="km/h")] = None
     learned_speed_limiter_gain: Annotated[float, Bounds(0, 10, low_open=True, unit="per m/s")] = 1.0
+    learned_speed_command_kmh: Annotated[float | None, Bounds(5, 130, unit="km/h")] = None
+    learned_speed_command_gain: Annotated[float, Bounds(0, 10, low_open=True, unit="per m/s")] = 0.6
 
     def __post_init__(self) -> None:
         check_bounds(self, "controllers")

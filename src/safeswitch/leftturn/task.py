@@ -34,7 +34,7 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from safeswitch.core.arrays import columns, jit, plain, put_rows, take_rows
+from safeswitch.core.arrays import clamp, columns, jit, plain, put_rows, take_rows
 from safeswitch.core.pid import PIDState, pid_tick
 from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
@@ -353,6 +353,11 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             v_cap = ctrl.learned_speed_limiter_kmh / 3.6
             hold = float(steady_state_throttle(config.vehicle, np.asarray(v_cap)))
             self._limiter = (v_cap, hold, ctrl.learned_speed_limiter_gain)
+        #: The learned action's speed command (``None``: the action is the throttle): the
+        #: speed of ``a = 1`` [m/s] and the tracking gain (see ControllerConfig).
+        self._command: tuple[float, float] | None = None
+        if ctrl.learned_speed_command_kmh is not None:
+            self._command = (ctrl.learned_speed_command_kmh / 3.6, ctrl.learned_speed_command_gain)
 
     # -- the switching logic, built once the whole scene (a subclass's too) is ---------------
 
@@ -488,6 +493,25 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             return throttle
         v_cap, hold, gain = self._limiter
         return np.minimum(throttle, np.clip(hold + gain * (v_cap - speed), 0.0, 1.0))
+
+    def learned_throttle(
+        self, action: FloatArray, speed: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.bool_] | None]:
+        """The learned controller's throttle for ``action`` at the ego's ``speed`` [m/s], and
+        where an action out of [-1, 1] was clipped (``None`` if the action is the throttle: the
+        logic sees and counts it). The paper's ``(a + 1) / 2``; with
+        ``controllers.learned_speed_command_kmh``, the throttle that tracks the commanded speed.
+        NaN/inf stays NaN/inf (refused by the logic)."""
+        if self._command is None:
+            return 0.5 * (action + 1.0), None
+        v_top, gain = self._command
+        finite = np.isfinite(action)
+        over = finite & (np.abs(action) > 1.0)
+        target = 0.5 * (clamp(action, -1.0, 1.0) + 1.0) * v_top
+        throttle = steady_state_throttle(self.config.vehicle, target) + gain * (target - speed)
+        throttle = clamp(throttle, 0.0, 1.0)
+        throttle[~finite] = action[~finite]
+        return throttle, over
 
     @property
     def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -728,8 +752,10 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
 
         # 1. Every controller side by side, who proposes the ego's pedals, and what the
         # switching logic sees (one compiled loop, see _controllers).
-        learned_throttle = 0.5 * (np.asarray(action, dtype=np.float64).reshape(batch) + 1.0)
         v = world.vehicles
+        learned_throttle, commanded_over_range = self.learned_throttle(
+            np.asarray(action, dtype=np.float64).reshape(batch), v.speed[:, 0]
+        )
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
         seen, seen_progress = state.perception, world.progress
         if seen is not None:  # the north car where the ego sees it
@@ -765,7 +791,10 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         # as without the NaN ticks).
         view = self.view(state, out.both)
         sup = supervise(self.switching, view, proposed, out.safe, 0.0, 1.0, out.fallback)
-        clipped = sup.clipped if cut_over_range is None else sup.clipped | cut_over_range
+        clipped = sup.clipped
+        for over in (cut_over_range, commanded_over_range):
+            if over is not None:
+                clipped = clipped | over
         return Switched(learned_throttle, out, sup, clipped)
 
     def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
