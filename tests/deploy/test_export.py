@@ -10,8 +10,9 @@ import pytest
 
 from safeswitch.cli import main
 from safeswitch.deploy import export as export_module
-from safeswitch.deploy.export import ExportError, export
+from safeswitch.deploy.export import ExportError, export, left_turn_action
 from safeswitch.deploy.onnx_policy import OPSET, policy_graph
+from safeswitch.leftturn.config import ControllerConfig
 from safeswitch.training.policies import load_policy
 from safeswitch.training.shipped import SHIPPED, SHIPPED_DIR
 
@@ -66,6 +67,14 @@ def test_manifest_states_layout_units_logic_assumptions_and_versions(exported):
     assert manifest["versions"]["onnxruntime"] != "not installed"
     assert manifest["runtime"]["supported"] is True
     assert manifest["policy"]["opset"] == OPSET
+    assert "throttle = (a + 1) / 2" in manifest["action"]["layout"][0]["meaning"]
+
+
+def test_a_speed_set_point_action_is_stated_as_one():
+    commanded = ControllerConfig(learned_speed_command_kmh=29.9)
+    meaning = left_turn_action(commanded)[0]["meaning"]
+    assert "speed set point" in meaning and "29.9 km/h" in meaning and "0.6" in meaning
+    assert "throttle = (a + 1) / 2" in left_turn_action(ControllerConfig())[0]["meaning"]
 
 
 def test_a_failed_parity_check_writes_nothing(tmp_path, monkeypatch):

@@ -54,13 +54,21 @@ LEFT_TURN_OBSERVATION = [
     {"name": "y_n", "unit": "m", "meaning": "north car's centre of gravity, north"},
     {"name": "v_n", "unit": "m/s", "meaning": "north car's speed"},
 ]
-LEFT_TURN_ACTION = [
-    {
-        "name": "a",
-        "unit": "1",
-        "meaning": "learned throttle command: throttle = (a + 1) / 2; the brake stays released",
-    }
-]
+
+
+def left_turn_action(controllers: Any) -> list[dict[str, str]]:
+    """The left turn's action as the manifest states it, for the scene's ``controllers``."""
+    top = controllers.learned_speed_command_kmh
+    if top is None:
+        meaning = "learned throttle command: throttle = (a + 1) / 2; the brake stays released"
+    else:
+        meaning = (
+            f"learned speed set point: v* = (a + 1) / 2 · {top:g} km/h, tracked by the learned "
+            f"controller's throttle (gain {controllers.learned_speed_command_gain:g} per m/s); "
+            "the brake stays released"
+        )
+    return [{"name": "a", "unit": "1", "meaning": meaning}]
+
 
 #: What each built-in logic's claim rests on (docs/certified.md, docs/leftturn.md).
 ASSUMPTIONS = {
@@ -257,6 +265,7 @@ def export(
         if config.traffic is not None:
             scene_dict = {"env": scene_dict, "traffic": to_dict(config.traffic_settings)}
         observation_layout = LEFT_TURN_OBSERVATION if config.traffic is None else None
+        action_layout = left_turn_action(scene.controllers) if config.traffic is None else None
         logic: str | None = scene.switching
         decision_interval, dt = scene.episode.decision_interval, scene.episode.dt
         env_id = "safeswitch/LeftTurnTraffic-v0" if config.traffic else "safeswitch/LeftTurn-v0"
@@ -264,7 +273,7 @@ def export(
     else:
         seen = env_observations(policy, config, observations)
         scene_dict = to_dict(config)
-        observation_layout = None
+        observation_layout = action_layout = None
         logic = switching or config.switching
         decision_interval, dt = 1, None
         env_id = config.env_id
@@ -304,7 +313,7 @@ def export(
             "high": np.asarray(space.high).tolist(),
         },
         "action": {
-            "layout": LEFT_TURN_ACTION if observation_layout is not None else None,
+            "layout": action_layout,
             "low": np.asarray(action_space.low).tolist(),
             "high": np.asarray(action_space.high).tolist(),
         },

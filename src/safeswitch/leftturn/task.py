@@ -958,7 +958,8 @@ class Switched(NamedTuple):
     """What decides a tick's ego pedals (:meth:`LeftTurnTask.switch`).
 
     Attributes:
-        learned_throttle: The learned controller's throttle ``(a + 1) / 2`` ``[B]``.
+        learned_throttle: The learned controller's throttle ``[B]``
+            (:meth:`LeftTurnTask.learned_throttle`).
         controllers: Every controller's output and new memory.
         supervision: The switching logic's decision and the executed pedals.
         clipped: The learned throttle was out of range and was clipped (by the supervision or
