@@ -75,6 +75,8 @@ def test_a_speed_set_point_action_is_stated_as_one():
     meaning = left_turn_action(commanded)[0]["meaning"]
     assert "speed set point" in meaning and "29.9 km/h" in meaning and "0.6" in meaning
     assert "throttle = (a + 1) / 2" in left_turn_action(ControllerConfig())[0]["meaning"]
+    pedals = left_turn_action(ControllerConfig(learned_brake=True))[0]["meaning"]
+    assert "the brake -a" in pedals
 
 
 def test_a_failed_parity_check_writes_nothing(tmp_path, monkeypatch):

@@ -525,3 +525,37 @@ def test_a_configuration_written_with_the_old_north_names_still_loads():
     assert (old.certified.other_max_accel, old.certified.other_max_speed_kmh) == (1.5, 40.0)
     with pytest.raises(ConfigError, match="north_max_accel is the old name of other_max_accel"):
         resolve_config({"certified": {"north_max_accel": 1.5, "other_max_accel": 2.0}})
+
+
+@pytest.fixture(scope="module")
+def braking_task():
+    """The certified filter with a learned controller that works both pedals."""
+    return LeftTurnTask(
+        resolve_config(
+            {"episode": {"learned_scope": "episode"}, "controllers": {"learned_brake": True}},
+            switching="certified",
+        )
+    )
+
+
+@pytest.mark.parametrize("adversary", ["uniform", "bang_bang", "enter_then_stop", "noisy_cruise"])
+def test_no_learned_braking_makes_certified_collide(braking_task, adversary):
+    """With the learned brake (``controllers.learned_brake``) every negative action brakes —
+    anywhere, inside the conflict zone too; the filter judges both pedals and still lets no
+    collision through, while executing the learned brake wherever that is safe."""
+    task = braking_task
+    learned_braking = 0
+    for scenarios in scenarios_for(task):
+        batch = scenarios.ego_speed.shape[0]
+
+        def count(state, record, tick):
+            nonlocal learned_braking
+            learned = ~record.safety_active & (record.controller == 0)
+            learned_braking += int((learned & (record.brake > 0)).sum())
+
+        make = catalogue(task, batch, seed=1)[adversary]
+        result = rollout(task, scenarios, make(), count)
+        assert result.collision.sum() == 0
+        assert result.lost_control.sum() == 0
+        assert result.min_separation.min() > 0.0
+    assert learned_braking > 1000  # the learned brake really ran, not the filter's

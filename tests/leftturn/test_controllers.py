@@ -177,6 +177,54 @@ def test_a_bad_speed_command_is_named(bad):
         ControllerConfig(learned_speed_command_gain=-1.0)
 
 
+def _braking_task(switching="none"):
+    c = LeftTurnConfig()
+    return LeftTurnTask(
+        replace(
+            c,
+            switching=switching,
+            episode=replace(c.episode, learned_scope="episode"),
+            controllers=replace(c.controllers, learned_brake=True),
+        )
+    )
+
+
+def test_the_learned_brake_works_both_pedals_from_one_action():
+    task = _braking_task()
+    state = task.initial(task.draw_scenarios(0, np.arange(5), np.zeros(5, dtype=np.int64)))
+    actions = np.array([0.4, 0.0, -0.5, -3.0, np.nan])
+    state, record = task.step(state, actions)
+    np.testing.assert_allclose(record.throttle[:4], [0.4, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(record.brake[:4], [0.0, 0.0, 0.5, 1.0])
+    # Out of range: clipped to full brake and counted; NaN refused as ever.
+    assert record.action_clipped.tolist()[:4] == [False, False, False, True]
+    assert task.reasons[record.reason[4]] == "invalid_learned_action"
+    # The brake slows the car far harder than the closed throttle the paper's action has.
+    for _ in range(50):
+        state, record = task.step(state, actions)
+    assert record.ego_speed[2] < record.ego_speed[1] - 3.0
+
+
+def test_a_learned_brake_with_a_speed_set_point_is_refused():
+    with pytest.raises(ConfigError, match=r"controllers\.learned_brake.*must be false"):
+        ControllerConfig(learned_brake=True, learned_speed_command_kmh=29.9)
+
+
+@pytest.mark.parametrize(
+    "setting, named",
+    [({"learned_brake": True}, "learned_brake=true"),
+     ({"learned_speed_command_kmh": 25.0}, "learned_speed_command_kmh=25")],
+)  # fmt: skip
+def test_scripted_throttle_drivers_refuse_another_action(setting, named):
+    from safeswitch.evaluation.planner import Planner
+
+    c = LeftTurnConfig()
+    task = LeftTurnTask(replace(c, controllers=replace(c.controllers, **setting)))
+    with pytest.raises(ValueError, match=named):
+        Planner(task)
+    Planner(LeftTurnTask(c))  # the paper's throttle action: fine
+
+
 def _same(a, b):
     """Equal trees of (named) tuples, arrays and numbers, field by field."""
     if isinstance(a, tuple):

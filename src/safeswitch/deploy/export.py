@@ -59,7 +59,9 @@ LEFT_TURN_OBSERVATION = [
 def left_turn_action(controllers: Any) -> list[dict[str, str]]:
     """The left turn's action as the manifest states it, for the scene's ``controllers``."""
     top = controllers.learned_speed_command_kmh
-    if top is None:
+    if controllers.learned_brake:
+        meaning = "learned pedals: a >= 0 the throttle a, a < 0 the brake -a (throttle closed)"
+    elif top is None:
         meaning = "learned throttle command: throttle = (a + 1) / 2; the brake stays released"
     else:
         meaning = (

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.evaluation.planner_config import PlannerConfig
 from safeswitch.leftturn.logics.paper import PaperSwitching, firing_distance
-from safeswitch.leftturn.spaces import speed_tracking_action
+from safeswitch.leftturn.spaces import require_throttle_action, speed_tracking_action
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 
 FloatArray = NDArray[np.float64]
@@ -155,6 +155,7 @@ class FastDrive:
         self, task: LeftTurnTask, top_speed_kmh: float, accel_lat: float, curve_decel: float,
         preview_s: float, speed_gain: float,
     ) -> None:  # fmt: skip
+        require_throttle_action(task.config.controllers, "the planner's drive")
         limits = dataclasses.replace(
             OracleLimits.from_config(task.config),
             max_speed=top_speed_kmh / 3.6,

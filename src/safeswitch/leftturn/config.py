@@ -63,6 +63,12 @@ class ControllerConfig:
             the logic to refuse. The limiter above, if set, still cuts the throttle.
         learned_speed_command_gain: Throttle per m/s of the set point's speed error (ours; the
             gap planner's 0.6).
+        learned_brake: The learned action works both pedals (ours, off by default: the paper's
+            learned controller has the throttle alone and can slow only by closing it, about
+            1.3 m/s² at 25 km/h). If true, ``a ≥ 0`` is the throttle ``a`` and ``a < 0`` the brake
+            ``−a`` with the throttle closed. The switching logic judges both pedals (the
+            certified filter predicts the tick under any pedals); an action out of [-1, 1] is
+            clipped and counted, NaN/inf refused. Not with a speed set point.
     """
 
     speed_limit_kmh: Annotated[float, Bounds(0, 130, low_open=True, unit="km/h")] = 25.0
@@ -77,9 +83,19 @@ class ControllerConfig:
     learned_speed_limiter_gain: Annotated[float, Bounds(0, 10, low_open=True, unit="per m/s")] = 1.0
     learned_speed_command_kmh: Annotated[float | None, Bounds(5, 130, unit="km/h")] = None
     learned_speed_command_gain: Annotated[float, Bounds(0, 10, low_open=True, unit="per m/s")] = 0.6
+    learned_brake: bool = False
 
     def __post_init__(self) -> None:
         check_bounds(self, "controllers")
+        both = self.learned_brake and self.learned_speed_command_kmh is not None
+        check(not both, "controllers", "learned_brake", self.learned_brake,
+              "must be false with a speed set point (learned_speed_command_kmh)")  # fmt: skip
+
+    @property
+    def throttle_action(self) -> bool:
+        """The learned action is the paper's throttle, ``(a + 1) / 2`` (neither a speed set
+        point nor both pedals): what scripted drivers that output a throttle assume."""
+        return self.learned_speed_command_kmh is None and not self.learned_brake
 
     @property
     def speed_limit(self) -> float:

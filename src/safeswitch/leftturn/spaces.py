@@ -43,3 +43,24 @@ def speed_tracking_action(
     base: Any = float(held) if np.ndim(target) == 0 else held
     throttle = np.clip(base + gain * (goal - speed), 0.0, 1.0)
     return np.asarray(2.0 * throttle - 1.0)
+
+
+def require_throttle_action(controllers: Any, who: str) -> None:
+    """Refuse a scripted driver whose actions are throttles (``who`` names it) on a scene whose
+    learned action means something else (``controllers.learned_speed_command_kmh`` or
+    ``controllers.learned_brake``).
+
+    Raises:
+        ValueError: naming the setting.
+    """
+    if controllers.throttle_action:
+        return
+    setting = (
+        f"controllers.learned_speed_command_kmh={controllers.learned_speed_command_kmh:g}"
+        if controllers.learned_speed_command_kmh is not None
+        else "controllers.learned_brake=true"
+    )
+    raise ValueError(
+        f"{who} drives with throttle actions, (a + 1) / 2; this scene's learned action is "
+        f"another ({setting})"
+    )

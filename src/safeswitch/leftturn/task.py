@@ -494,24 +494,26 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         v_cap, hold, gain = self._limiter
         return np.minimum(throttle, np.clip(hold + gain * (v_cap - speed), 0.0, 1.0))
 
-    def learned_throttle(
-        self, action: FloatArray, speed: FloatArray
-    ) -> tuple[FloatArray, NDArray[np.bool_] | None]:
-        """The learned controller's throttle for ``action`` at the ego's ``speed`` [m/s], and
-        where an action out of [-1, 1] was clipped (``None`` if the action is the throttle: the
-        logic sees and counts it). The paper's ``(a + 1) / 2``; with
-        ``controllers.learned_speed_command_kmh``, the throttle that tracks the commanded speed.
-        NaN/inf stays NaN/inf (refused by the logic)."""
-        if self._command is None:
-            return 0.5 * (action + 1.0), None
-        v_top, gain = self._command
+    def learned_pedals(self, action: FloatArray, speed: FloatArray) -> LearnedPedals:
+        """The learned controller's pedals for ``action`` at the ego's ``speed`` [m/s]: the
+        paper's throttle ``(a + 1) / 2``; with ``controllers.learned_speed_command_kmh``, the
+        throttle that tracks the commanded speed; with ``controllers.learned_brake``, the
+        throttle ``a ≥ 0`` or the brake ``−a``. NaN/inf stays NaN/inf (refused by the logic)."""
+        if self._command is None and not self.config.controllers.learned_brake:
+            return LearnedPedals(0.5 * (action + 1.0), None, None)
         finite = np.isfinite(action)
         over = finite & (np.abs(action) > 1.0)
-        target = 0.5 * (clamp(action, -1.0, 1.0) + 1.0) * v_top
-        throttle = steady_state_throttle(self.config.vehicle, target) + gain * (target - speed)
-        throttle = clamp(throttle, 0.0, 1.0)
+        a = clamp(action, -1.0, 1.0)
+        brake = None
+        if self._command is None:  # both pedals
+            throttle, brake = np.maximum(a, 0.0), np.maximum(-a, 0.0)
+        else:
+            v_top, gain = self._command
+            target = 0.5 * (a + 1.0) * v_top
+            throttle = steady_state_throttle(self.config.vehicle, target) + gain * (target - speed)
+            throttle = clamp(throttle, 0.0, 1.0)
         throttle[~finite] = action[~finite]
-        return throttle, over
+        return LearnedPedals(throttle, brake, over)
 
     @property
     def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -753,9 +755,10 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         # 1. Every controller side by side, who proposes the ego's pedals, and what the
         # switching logic sees (one compiled loop, see _controllers).
         v = world.vehicles
-        learned_throttle, commanded_over_range = self.learned_throttle(
+        pedals = self.learned_pedals(
             np.asarray(action, dtype=np.float64).reshape(batch), v.speed[:, 0]
         )
+        learned_throttle = pedals.throttle
         th, br, no, la = state.pid_throttle, state.pid_brake, state.pid_north, state.pid_lane
         seen, seen_progress = state.perception, world.progress
         if seen is not None:  # the north car where the ego sees it
@@ -774,6 +777,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             tuple(out),
         )  # fmt: skip
         proposed = out.proposed
+        if pedals.brake is not None:  # the learned brake, where the learned controller proposes
+            proposed[out.in_charge, 1] = pedals.brake[out.in_charge]
         cut_over_range = None
         if self._limiter is not None:
             # The learned controller's speed limiter cuts its finite throttle (NaN/inf is left
@@ -792,7 +797,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         view = self.view(state, out.both)
         sup = supervise(self.switching, view, proposed, out.safe, 0.0, 1.0, out.fallback)
         clipped = sup.clipped
-        for over in (cut_over_range, commanded_over_range):
+        for over in (cut_over_range, pedals.over_range):
             if over is not None:
                 clipped = clipped | over
         return Switched(learned_throttle, out, sup, clipped)
@@ -954,12 +959,27 @@ class ControllerMemory(NamedTuple):
     north: PIDState
 
 
+class LearnedPedals(NamedTuple):
+    """The learned controller's pedals for a step's actions (:meth:`LeftTurnTask.learned_pedals`).
+
+    Attributes:
+        throttle: ``[B]`` (NaN/inf where the action was).
+        brake: ``[B]``, or ``None`` where the action has no brake (the pedal stays released).
+        over_range: Where an action out of [-1, 1] was clipped ``[B]``, or ``None`` where the
+            action is the throttle itself (the logic sees and counts it).
+    """
+
+    throttle: FloatArray
+    brake: FloatArray | None
+    over_range: NDArray[np.bool_] | None
+
+
 class Switched(NamedTuple):
     """What decides a tick's ego pedals (:meth:`LeftTurnTask.switch`).
 
     Attributes:
         learned_throttle: The learned controller's throttle ``[B]``
-            (:meth:`LeftTurnTask.learned_throttle`).
+            (:meth:`LeftTurnTask.learned_pedals`).
         controllers: Every controller's output and new memory.
         supervision: The switching logic's decision and the executed pedals.
         clipped: The learned throttle was out of range and was clipped (by the supervision or

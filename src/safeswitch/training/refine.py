@@ -71,6 +71,7 @@ from safeswitch.io import complete_checkpoints, write_atomic, write_policy_files
 from safeswitch.leftturn.config import EpisodeConfig
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
+from safeswitch.leftturn.spaces import require_throttle_action
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.training.config import RefineConfig, TrainConfig
 from safeswitch.training.policies import TrainedPolicy, load_policy
@@ -114,6 +115,7 @@ def refine_iteration(
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
     actions, clear, dirty, first_dirty = policy_actions(task, scenes, policy.as_policy())
+    require_throttle_action(task.config.controllers, "the refinement's structured drivers")
     drivers = _drivers(episode)
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
     frozen = None
