@@ -33,16 +33,21 @@ def test_pid_b_holds_the_emergency_deceleration(task, v0):
     assert state.x[0] <= reserved
 
 
-def _limited_task(limit_kmh, switching="none"):
+def _task_with(switching="none", **controllers):
+    """The left turn with the learned controller in charge all episode and ``controllers``."""
     c = LeftTurnConfig()
     return LeftTurnTask(
         replace(
             c,
             switching=switching,
             episode=replace(c.episode, learned_scope="episode"),
-            controllers=replace(c.controllers, learned_speed_limiter_kmh=limit_kmh),
+            controllers=replace(c.controllers, **controllers),
         )
     )
+
+
+def _limited_task(limit_kmh, switching="none"):
+    return _task_with(switching, learned_speed_limiter_kmh=limit_kmh)
 
 
 def _drive(task, action, ticks):
@@ -97,31 +102,18 @@ def test_the_learned_speed_limiter_keeps_the_action_checks():
     assert task.reasons[record.reason[1]] == "invalid_learned_action"
 
 
+@pytest.mark.parametrize("kind", ["limiter", "command"])
 @pytest.mark.parametrize("bad", [float("nan"), 2.0, 500.0])
-def test_a_bad_speed_limiter_is_named(bad):
-    with pytest.raises(
-        ConfigError, match=r"controllers\.learned_speed_limiter_kmh.*" + str(bad)[:3]
-    ):
-        ControllerConfig(learned_speed_limiter_kmh=bad)
-    with pytest.raises(ConfigError, match="learned_speed_limiter_gain"):
-        ControllerConfig(learned_speed_limiter_gain=0.0)
+def test_a_bad_speed_limiter_or_command_is_named(kind, bad):
+    speed, gain = f"learned_speed_{kind}_kmh", f"learned_speed_{kind}_gain"
+    with pytest.raises(ConfigError, match=rf"controllers\.{speed}.*" + str(bad)[:3]):
+        ControllerConfig(**{speed: bad})
+    with pytest.raises(ConfigError, match=gain):
+        ControllerConfig(**{gain: 0.0})
 
 
-def _commanded_task(command_kmh, switching="none", limiter_kmh=None):
-    c = LeftTurnConfig()
-    controllers = replace(
-        c.controllers,
-        learned_speed_command_kmh=command_kmh,
-        learned_speed_limiter_kmh=limiter_kmh,
-    )
-    return LeftTurnTask(
-        replace(
-            c,
-            switching=switching,
-            episode=replace(c.episode, learned_scope="episode"),
-            controllers=controllers,
-        )
-    )
+def _commanded_task(command_kmh, switching="none"):
+    return _task_with(switching, learned_speed_command_kmh=command_kmh)
 
 
 @pytest.mark.parametrize("kmh", [12.0, 20.0, 29.9])
@@ -167,26 +159,8 @@ def test_a_speed_command_keeps_the_action_checks():
         assert task.reasons[record.reason[i]] == "invalid_learned_action"
 
 
-@pytest.mark.parametrize("bad", [float("nan"), 2.0, 500.0])
-def test_a_bad_speed_command_is_named(bad):
-    with pytest.raises(
-        ConfigError, match=r"controllers\.learned_speed_command_kmh.*" + str(bad)[:3]
-    ):
-        ControllerConfig(learned_speed_command_kmh=bad)
-    with pytest.raises(ConfigError, match="learned_speed_command_gain"):
-        ControllerConfig(learned_speed_command_gain=-1.0)
-
-
 def _braking_task(switching="none"):
-    c = LeftTurnConfig()
-    return LeftTurnTask(
-        replace(
-            c,
-            switching=switching,
-            episode=replace(c.episode, learned_scope="episode"),
-            controllers=replace(c.controllers, learned_brake=True),
-        )
-    )
+    return _task_with(switching, learned_brake=True)
 
 
 def test_the_learned_brake_works_both_pedals_from_one_action():
