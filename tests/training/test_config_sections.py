@@ -123,3 +123,17 @@ def test_the_reference_describes_a_key_a_section_inherits():
     assert fields["intervention_imitation"].default == "1.0"
     assert "Safety controller's interventions" in fields["intervention_imitation"].description
     assert all(f.description for f in fields.values())
+
+
+@pytest.mark.parametrize(
+    "section, key", [({"warm_start": {"episodes": 50}}, "warm_start.teacher"),
+                     ({"refine": {"iterations": 1}}, "refine.iterations")],
+)  # fmt: skip
+@pytest.mark.parametrize("action", [{"learned_brake": True}, {"learned_speed_command_kmh": 29.9}])
+def test_a_throttle_teacher_or_search_on_another_action_is_refused(section, key, action):
+    """Demonstrations and the refinement's drivers are throttles, (a + 1) / 2: on a scene whose
+    learned action is a speed set point or both pedals they would mean something else."""
+    base = {"env": {"switching": "certified", "controllers": action}}
+    with pytest.raises(ConfigError, match=rf"{key}.*throttle actions"):
+        from_dict(TrainConfig, {**base, **section})
+    from_dict(TrainConfig, base)  # without them: fine

@@ -25,8 +25,9 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """Unprotected left turn in front of a non-yielding oncoming car (paper Section IV).
 
     Observation: ``(x_e, y_e, v_e, x_n, y_n, v_n)`` float32. Action: ``Box(-1, 1, (1,))``,
-    throttle ``= (a + 1) / 2``. Reward: Eq. 5. ``terminated`` on a collision, ``truncated`` at
-    the fixed horizon. Each step's ``info`` is described in
+    throttle ``= (a + 1) / 2`` (the paper's; ``controllers.learned_speed_command_kmh`` and
+    ``controllers.learned_brake`` give it another meaning). Reward: Eq. 5. ``terminated`` on a
+    collision, ``truncated`` at the fixed horizon. Each step's ``info`` is described in
     :func:`safeswitch.leftturn.info.step_info`.
 
     The ``k``-th episode after ``reset(seed=s)`` plays the scenario drawn from ``(s, env_index,

@@ -24,7 +24,8 @@ def observation_space(task: Any = None) -> spaces.Box:
 
 
 def action_space() -> spaces.Box:
-    """One number in [-1, 1]; throttle = (a + 1) / 2."""
+    """One number in [-1, 1]; throttle = (a + 1) / 2 (the paper's meaning; see
+    :meth:`~safeswitch.leftturn.task.LeftTurnTask.learned_pedals` for the others)."""
     return spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
 

@@ -7,7 +7,8 @@ One tick (paper Fig. 3 and Algorithm 1):
 
 1. All controllers run side by side: ``PID_th`` (throttle to the speed limit), ``PID_b`` (the
    Safety controller: brake to track ``a_max``), ``PID_lka`` (steering, both cars), the north
-   car's autopilot, and the learned action ``a ∈ [-1, 1]`` → throttle ``(a + 1) / 2``.
+   car's autopilot, and the learned action ``a ∈ [-1, 1]`` → throttle ``(a + 1) / 2`` (or, as
+   the scene's ``controllers`` choose, a speed set point or both pedals: :meth:`learned_pedals`).
 2. Who proposes the ego's pedals: the learned controller while both cars are at the
    intersection (or always, with ``learned_scope="episode"``), ``PID_th`` otherwise.
 3. The switching logic — the registered logic named by ``config.switching`` — decides through

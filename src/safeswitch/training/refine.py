@@ -114,8 +114,8 @@ def refine_iteration(
     n = config.scenes
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
-    actions, clear, dirty, first_dirty = policy_actions(task, scenes, policy.as_policy())
     require_throttle_action(task.config.controllers, "the refinement's structured drivers")
+    actions, clear, dirty, first_dirty = policy_actions(task, scenes, policy.as_policy())
     drivers = _drivers(episode)
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
     frozen = None
