@@ -657,16 +657,6 @@ class TrainConfig:
         if self.warm_start.episodes and self.warm_start.teacher == "gap_planner":
             check(self.traffic is not None, "warm_start", "teacher", self.warm_start.teacher,
                   "needs traffic (the single-car scene has teacher: planner)")  # fmt: skip
-        if not self.env.controllers.throttle_action:  # a teacher's or a search's throttles
-            why = (
-                "drives with throttle actions, (a + 1) / 2: needs the paper's action (no "
-                "env.controllers.learned_speed_command_kmh or learned_brake)"
-            )
-            check(
-                not self.warm_start.episodes, "warm_start", "teacher", self.warm_start.teacher, why
-            )
-            check(not self.refine.iterations, "refine", "iterations", self.refine.iterations,
-                  why)  # fmt: skip
         if self.deploy_switching is not None:
             known = ", ".join(logic_names())
             check(self.deploy_switching in logic_names(), o, "deploy_switching",
@@ -677,6 +667,16 @@ class TrainConfig:
                   "counterfactual_penalty", self.shaping.counterfactual_penalty,
                   "rolls the single-car scene under deploy_switching: needs deploy_switching "
                   "and no traffic")  # fmt: skip
+        if not self.env.controllers.throttle_action:  # a teacher's or a search's throttles
+            why = (
+                "drives with throttle actions, (a + 1) / 2: needs the paper's action (no "
+                "env.controllers.learned_speed_command_kmh or learned_brake)"
+            )
+            check(
+                not self.warm_start.episodes, "warm_start", "teacher", self.warm_start.teacher, why
+            )
+            check(not self.refine.iterations, "refine", "iterations", self.refine.iterations,
+                  why)  # fmt: skip
         clear = self.constraints.clear_time
         if clear is not None:
             horizon = self.env.episode.horizon_s
