@@ -7,6 +7,7 @@ import pytest
 
 from safeswitch.core.config import ConfigError
 from safeswitch.core.pid import PIDState, pid_step
+from safeswitch.evaluation.planner import Planner
 from safeswitch.leftturn.config import ControllerConfig, LeftTurnConfig
 from safeswitch.leftturn.statistics import SPEEDING_MARGIN
 from safeswitch.leftturn.task import LeftTurnTask
@@ -190,8 +191,6 @@ def test_a_learned_brake_with_a_speed_set_point_is_refused():
      ({"learned_speed_command_kmh": 25.0}, "learned_speed_command_kmh=25")],
 )  # fmt: skip
 def test_scripted_throttle_drivers_refuse_another_action(setting, named):
-    from safeswitch.evaluation.planner import Planner
-
     c = LeftTurnConfig()
     task = LeftTurnTask(replace(c, controllers=replace(c.controllers, **setting)))
     with pytest.raises(ValueError, match=named):

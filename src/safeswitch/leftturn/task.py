@@ -359,6 +359,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         self._command: tuple[float, float] | None = None
         if ctrl.learned_speed_command_kmh is not None:
             self._command = (ctrl.learned_speed_command_kmh / 3.6, ctrl.learned_speed_command_gain)
+        self._throttle_action = ctrl.throttle_action
 
     # -- the switching logic, built once the whole scene (a subclass's too) is ---------------
 
@@ -500,7 +501,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         paper's throttle ``(a + 1) / 2``; with ``controllers.learned_speed_command_kmh``, the
         throttle that tracks the commanded speed; with ``controllers.learned_brake``, the
         throttle ``a ≥ 0`` or the brake ``−a``. NaN/inf stays NaN/inf (refused by the logic)."""
-        if self._command is None and not self.config.controllers.learned_brake:
+        if self._throttle_action:
             return LearnedPedals(0.5 * (action + 1.0), None, None)
         finite = np.isfinite(action)
         over = finite & (np.abs(action) > 1.0)

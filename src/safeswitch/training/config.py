@@ -672,11 +672,9 @@ class TrainConfig:
                 "drives with throttle actions, (a + 1) / 2: needs the paper's action (no "
                 "env.controllers.learned_speed_command_kmh or learned_brake)"
             )
-            check(
-                not self.warm_start.episodes, "warm_start", "teacher", self.warm_start.teacher, why
-            )
-            check(not self.refine.iterations, "refine", "iterations", self.refine.iterations,
-                  why)  # fmt: skip
+            ws, refine = self.warm_start, self.refine
+            check(not ws.episodes, "warm_start", "teacher", ws.teacher, why)
+            check(not refine.iterations, "refine", "iterations", refine.iterations, why)
         clear = self.constraints.clear_time
         if clear is not None:
             horizon = self.env.episode.horizon_s

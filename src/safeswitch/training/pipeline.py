@@ -26,7 +26,6 @@ intervention), ``info["costs"]`` (its named costs) and the declared failure.
 from __future__ import annotations
 
 import functools
-import json
 import sys
 import time
 from collections.abc import Callable
@@ -51,7 +50,7 @@ from safeswitch.training.run import (
     set_aside_after,
     start_run,
 )
-from safeswitch.training.validation import select_best
+from safeswitch.training.validation import best_so_far, select_best
 
 
 def plant_for(
@@ -117,15 +116,13 @@ def train(
                 f"{Path(name).stem}.discarded.csv",
                 file=sys.stderr,
             )
-        best = run / "best" / "state.json"
-        if best.is_file():
-            at = json.loads(best.read_text(encoding="utf-8")).get("best_timesteps") or 0
-            if at > int(checkpoint["timesteps"]):
-                print(
-                    f"note: the best validated policy so far (best/, {at:,} timesteps) is from "
-                    "after that checkpoint; it stays the one later validations must beat",
-                    file=sys.stderr,
-                )
+        at = best_so_far(run)["best_timesteps"] or 0
+        if at > int(checkpoint["timesteps"]):
+            print(
+                f"note: the best validated policy so far (best/, {at:,} timesteps) is from "
+                "after that checkpoint; it stays the one later validations must beat",
+                file=sys.stderr,
+            )
     learning = plant.learning(vec)
     if checkpoint is not None:
         learning.restore(checkpoint)

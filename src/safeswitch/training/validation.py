@@ -70,6 +70,16 @@ VALIDATION_FIELDS = (
 )
 
 
+def best_so_far(run: Path) -> dict[str, Any]:
+    """The score of the run's best validated policy so far and when it was reached
+    (``best/state.json``; ``None`` values before the first validation)."""
+    saved = run / "best" / "state.json"
+    if not saved.is_file():
+        return {"best_return": None, "best_timesteps": None}
+    state: dict[str, Any] = json.loads(saved.read_text(encoding="utf-8"))
+    return state
+
+
 class BestPolicy(BaseCallback):
     """Validates the policy after the rollouts that reach each ``validation.every`` timesteps
     and keeps the best (see the module docstring): what every plant shares. A plant's
@@ -88,13 +98,8 @@ class BestPolicy(BaseCallback):
     def __init__(self, config: Any, run: Path) -> None:
         super().__init__()
         self.config, self.run = config, run
-        saved = run / "best" / "state.json"
         #: The best score and when it was reached (``None``: no validation yet).
-        self.state: dict[str, Any] = (
-            json.loads(saved.read_text(encoding="utf-8"))
-            if saved.is_file()
-            else {"best_return": None, "best_timesteps": None}
-        )
+        self.state: dict[str, Any] = best_so_far(run)
         self._next = 0
 
     def validate(self) -> dict[str, Any]:
