@@ -322,8 +322,10 @@ def set_aside_after(run: Path, timesteps: int) -> dict[str, int]:
             rows = [row for row in reader if row]
         if header is None or "timesteps" not in header:
             continue
-        keep = [_logged_by(row, header, timesteps) for row in rows]
-        later = [row for row, k in zip(rows, keep, strict=True) if not k]
+        kept: list[list[str]] = []
+        later: list[list[str]] = []
+        for row in rows:
+            (kept if _logged_by(row, header, timesteps) else later).append(row)
         if not later:
             continue
         aside = run / f"{path.stem}.discarded.csv"
@@ -333,9 +335,7 @@ def set_aside_after(run: Path, timesteps: int) -> dict[str, int]:
                 [header, *later] if new_file else later
             )
         text = io.StringIO()
-        csv.writer(text, lineterminator="\r\n").writerows(
-            [header, *(row for row, k in zip(rows, keep, strict=True) if k)]
-        )
+        csv.writer(text, lineterminator="\r\n").writerows([header, *kept])
         write_atomic(path, text.getvalue())
         moved[name] = len(later)
     return moved
