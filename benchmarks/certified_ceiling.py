@@ -28,6 +28,10 @@ cleanly (no such tick), how many only by breaking a rule or leaning on the filte
 careful driver's efficiency against the oracle (a scene not cleared cleanly counts as never
 cleared) — the ceiling of a policy that keeps the rules the shipped policies keep.
 
+On a recipe whose learned action works both pedals (``env.controllers.learned_brake``) the
+structured drivers keep their throttles (the action ``(a + 1) / 2``) and the search ranges over
+both pedals.
+
 ``--default-zones`` puts the filter's default conflict zones (the ego within 0.6 m of its route,
 1.2 m of margin) in place of the recipe's (``configs/certified.yaml``: 0.45 m and 0.9 m).
 """
@@ -83,6 +87,7 @@ def main() -> None:
     from safeswitch.evaluation.evaluate import run_controller, scenario_set
     from safeswitch.evaluation.planner import Planner
     from safeswitch.leftturn.config import CertifiedConfig
+    from safeswitch.leftturn.spaces import throttle_driver
     from safeswitch.leftturn.task import LeftTurnTask
     from safeswitch.training.config import load_config
 
@@ -114,8 +119,9 @@ def main() -> None:
     drivers["full throttle"] = clear
     best_score = rank_score(clear, progress, horizon)
     drivers["planner"] = np.asarray(planner.time_to_clear, dtype=float)
+    to_scene = throttle_driver(task.config.controllers, "the coast-then-go drivers")
 
-    family = family_of_drivers(segments)
+    family = to_scene(family_of_drivers(segments))
     left = np.flatnonzero(np.isnan(drivers["full throttle"]) & np.isnan(drivers["planner"]))
     family_clear = np.full(n, np.nan)
     if left.size:
@@ -197,9 +203,11 @@ def _careful(
 ) -> None:  # fmt: skip
     """``--careful``: the search on every scene, and its table."""
     from safeswitch.evaluation.oracle import efficiency
+    from safeswitch.leftturn.spaces import throttle_driver
 
     horizon = env.episode.horizon_s
-    seeds, start, own = family_of_drivers(segments), None, None
+    to_scene = throttle_driver(task.config.controllers, "the coast-then-go drivers")
+    seeds, start, own = to_scene(family_of_drivers(segments)), None, None
     if args.model:
         from safeswitch.training.policies import load_policy
 

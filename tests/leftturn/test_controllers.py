@@ -8,7 +8,10 @@ import pytest
 from safeswitch.core.config import ConfigError
 from safeswitch.core.pid import PIDState, pid_step
 from safeswitch.evaluation.planner import Planner
+from safeswitch.evaluation.rollout import rollout
+from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.leftturn.config import ControllerConfig, LeftTurnConfig
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.statistics import SPEEDING_MARGIN
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.sim.vehicle import VehicleState, vehicle_step
@@ -185,17 +188,43 @@ def test_a_learned_brake_with_a_speed_set_point_is_refused():
         ControllerConfig(learned_brake=True, learned_speed_command_kmh=29.9)
 
 
-@pytest.mark.parametrize(
-    "setting, named",
-    [({"learned_brake": True}, "learned_brake=true"),
-     ({"learned_speed_command_kmh": 25.0}, "learned_speed_command_kmh=25")],
-)  # fmt: skip
-def test_scripted_throttle_drivers_refuse_another_action(setting, named):
+def test_scripted_throttle_drivers_refuse_a_speed_set_point():
     c = LeftTurnConfig()
-    task = LeftTurnTask(replace(c, controllers=replace(c.controllers, **setting)))
-    with pytest.raises(ValueError, match=named):
-        Planner(task)
-    Planner(LeftTurnTask(c))  # the paper's throttle action: fine
+    scene = replace(c, controllers=replace(c.controllers, learned_speed_command_kmh=25.0))
+    with pytest.raises(ValueError, match="learned_speed_command_kmh=25"):
+        Planner(LeftTurnTask(scene))
+
+
+def _pedals_driven(task, driver, scenes):
+    """The executed throttle and brake of every tick of ``driver`` on ``scenes`` [ticks, B]."""
+    pedals = []
+
+    def on_tick(state, record, tick):
+        pedals.append((record.throttle.copy(), record.brake.copy()))
+
+    result = rollout(task, scenes, driver, on_tick)
+    return np.array(pedals), result
+
+
+@pytest.mark.parametrize("traffic", [None, {"preset": "train", "horizon_s": 8.0}])
+def test_the_planners_drive_a_two_pedal_scene_as_the_papers(traffic):
+    """A planner's throttles map to the two-pedal action ((a + 1) / 2, the brake never used)
+    and its foresight checks its own throttle drives: on a scene with controllers.learned_brake
+    it works the pedals tick for tick as on the paper's scene, the filter's braking included."""
+    runs = []
+    for brake in (False, True):
+        env = {"switching": "certified", "controllers": {"learned_brake": brake}}
+        task = build_task(None, env, traffic=traffic)
+        planner = Planner(task) if traffic is None else GapPlanner(task)
+        scenes = task.draw_scenarios(3, np.arange(12), np.zeros(12, dtype=np.int64))
+        runs.append(_pedals_driven(task, planner, scenes))
+    (paper, paper_run), (pedals, pedal_run) = runs
+    np.testing.assert_allclose(pedals, paper, atol=1e-12)
+    np.testing.assert_array_equal(pedal_run.time_to_clear, paper_run.time_to_clear)
+    assert np.isfinite(paper_run.time_to_clear).any()  # they drove, and cleared
+    # Full and closed throttles both driven: the closed one (-1) is a coast on both scenes,
+    # where the action unmapped would be the full brake.
+    assert paper[:, 0].max() > 0.9 and (paper[:, 0] == 0.0).any()
 
 
 def _same(a, b):

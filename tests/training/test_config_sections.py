@@ -129,11 +129,13 @@ def test_the_reference_describes_a_key_a_section_inherits():
     "section, key", [({"warm_start": {"episodes": 50}}, "warm_start.teacher"),
                      ({"refine": {"iterations": 1}}, "refine.iterations")],
 )  # fmt: skip
-@pytest.mark.parametrize("action", [{"learned_brake": True}, {"learned_speed_command_kmh": 29.9}])
-def test_a_throttle_teacher_or_search_on_another_action_is_refused(section, key, action):
-    """Demonstrations and the refinement's drivers are throttles, (a + 1) / 2: on a scene whose
-    learned action is a speed set point or both pedals they would mean something else."""
-    base = {"env": {"switching": "certified", "controllers": action}}
-    with pytest.raises(ConfigError, match=rf"{key}.*throttle actions"):
-        from_dict(TrainConfig, {**base, **section})
-    from_dict(TrainConfig, base)  # without them: fine
+def test_a_throttle_teacher_or_search_on_a_speed_set_point_is_refused(section, key):
+    """Demonstrations and the refinement's drivers are throttles, (a + 1) / 2: no speed set
+    point means one. On a two-pedal scene they map to its action (the brake unused)."""
+    base = {"env": {"switching": "certified"}}
+    command = {"env": {**base["env"], "controllers": {"learned_speed_command_kmh": 29.9}}}
+    with pytest.raises(ConfigError, match=rf"{key}.*throttle actions.*29.9"):
+        from_dict(TrainConfig, {**command, **section})
+    from_dict(TrainConfig, command)  # without them: fine
+    pedals = {"env": {**base["env"], "controllers": {"learned_brake": True}}}
+    from_dict(TrainConfig, {**pedals, **section})

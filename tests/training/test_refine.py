@@ -199,6 +199,26 @@ def test_the_structured_drivers_seed_the_search_at_any_decision_interval(interva
     np.testing.assert_array_equal(drivers, family[:, (starts / SEGMENT_S + 1e-9).astype(int)])
 
 
+def test_on_a_two_pedal_scene_the_structured_drivers_seed_the_search_as_throttles(monkeypatch):
+    # the drivers' closed throttle (-1) is a coast, not the full brake: mapped to (a + 1) / 2
+    base = small_config(speed_scenes=0, scenes=40)
+    env = replace(base.env, controllers=replace(base.env.controllers, learned_brake=True))
+    config = replace(base, env=env)
+    seeded = []
+
+    def recording(task, scenarios, start, **kwargs):
+        seeded.append(kwargs["seeds"])
+        return np.full(len(start), np.nan), np.zeros(len(start), np.int64), start
+
+    monkeypatch.setattr(refine_module, "search_sequences", recording)
+    monkeypatch.setattr(refine_module, "fit_actor", lambda *args, **kwargs: None)
+    task = search_task(config)
+    refine_module.refine_iteration(task, load_policy("certified"), config.refine, 4, 1)
+    throttles = refine_module._drivers(task.config.episode)
+    np.testing.assert_array_equal(seeded[0], (throttles + 1.0) / 2.0)
+    assert seeded[0].min() == 0.0 and throttles.min() == -1.0
+
+
 def test_refinement_settings_are_checked_by_name():
     with pytest.raises(ConfigError, match=r"refine\.scenes.*got 0"):
         RefineConfig(scenes=0)

@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from safeswitch.evaluation.oracle import Oracle, OracleLimits
 from safeswitch.evaluation.planner_config import PlannerConfig
 from safeswitch.leftturn.logics.paper import PaperSwitching, firing_distance
-from safeswitch.leftturn.spaces import require_throttle_action, speed_tracking_action
+from safeswitch.leftturn.spaces import speed_tracking_action, throttle_driver, throttle_scene
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 
 FloatArray = NDArray[np.float64]
@@ -73,14 +73,17 @@ class Planner:
             paper, ttr_threshold_s=paper.ttr_threshold_s + c.ttr_margin_s
         )
         self._check_task = LeftTurnTask(
-            dataclasses.replace(tc, switching="paper", paper=check_paper, scenario=None)
+            dataclasses.replace(
+                throttle_scene(tc), switching="paper", paper=check_paper, scenario=None
+            )
         )
         self._decision: NDArray[np.bool_] | None = None
 
     def __call__(self, obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        """Throttle actions in [-1, 1] for every episode of ``state``."""
+        """Its actions in [-1, 1] for every episode of ``state`` (throttles, as the scene's
+        learned action: :attr:`FastDrive.to_scene`)."""
         speed = state.world.vehicles.speed[:, 0]
-        return self._track(self.target_speed(state, tick), speed)
+        return self._drive.to_scene(self._track(self.target_speed(state, tick), speed))
 
     def target_speed(self, state: TaskState, tick: int) -> FloatArray:
         """The speed the planner steers for [m/s] ``[B]``."""
@@ -155,7 +158,9 @@ class FastDrive:
         self, task: LeftTurnTask, top_speed_kmh: float, accel_lat: float, curve_decel: float,
         preview_s: float, speed_gain: float,
     ) -> None:  # fmt: skip
-        require_throttle_action(task.config.controllers, "the planner's drive")
+        #: Its throttle actions as the scene's learned action (the planners work in throttles
+        #: and check their drives on :func:`throttle_scene`'s copy of the scene).
+        self.to_scene = throttle_driver(task.config.controllers, "the planner's drive")
         limits = dataclasses.replace(
             OracleLimits.from_config(task.config),
             max_speed=top_speed_kmh / 3.6,

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from safeswitch.evaluation.planner import FastDrive, drive_passes
 from safeswitch.evaluation.planner_config import GapPlannerConfig
+from safeswitch.leftturn.spaces import throttle_scene
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 
@@ -72,15 +73,16 @@ class GapPlanner:
         self._horizon = tc.episode.horizon_ticks
         self._dt = tc.episode.dt
         self._check_task = LeftTurnTrafficTask(
-            dataclasses.replace(tc, switching="certified"), task.traffic
+            dataclasses.replace(throttle_scene(tc), switching="certified"), task.traffic
         )
         self._decision: NDArray[np.bool_] | None = None
 
     def __call__(self, obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        """Throttle actions in [-1, 1] for every episode of ``state``."""
+        """Its actions in [-1, 1] for every episode of ``state`` (throttles, as the scene's
+        learned action: :attr:`~safeswitch.evaluation.planner.FastDrive.to_scene`)."""
         speed = state.world.vehicles.speed[:, 0]
         target, closed = self.plan(state, tick)
-        return np.where(closed, -1.0, self._drive.track(target, speed))
+        return self._drive.to_scene(np.where(closed, -1.0, self._drive.track(target, speed)))
 
     def plan(self, state: TaskState, tick: int) -> tuple[FloatArray, NDArray[np.bool_]]:
         """The speed the planner steers for [m/s] and where it closes the throttle instead

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -46,22 +48,43 @@ def speed_tracking_action(
     return np.asarray(2.0 * throttle - 1.0)
 
 
-def require_throttle_action(controllers: Any, who: str) -> None:
-    """Refuse a scripted driver whose actions are throttles (``who`` names it) on a scene whose
-    learned action means something else (``controllers.learned_speed_command_kmh`` or
-    ``controllers.learned_brake``).
+def throttle_driver(controllers: Any, who: str) -> Callable[[FloatArray], FloatArray]:
+    """How a scripted driver whose actions are the paper's throttles, ``(a + 1) / 2`` (the
+    planners, the refinement's structured drivers, a warm start's teacher; ``who`` names it),
+    drives a scene with ``controllers``: the returned function maps its actions to the
+    scene's learned action that works the pedals the same way — unchanged for the paper's
+    action, ``(a + 1) / 2`` with ``controllers.learned_brake`` (the same throttle; the brake
+    never used).
 
     Raises:
-        ValueError: naming the setting.
+        ValueError: the scene's action is a speed set point
+            (``controllers.learned_speed_command_kmh``), which no throttle maps to; the
+            message names the setting.
     """
-    if controllers.throttle_action:
-        return
-    setting = (
-        f"controllers.learned_speed_command_kmh={controllers.learned_speed_command_kmh:g}"
-        if controllers.learned_speed_command_kmh is not None
-        else "controllers.learned_brake=true"
-    )
-    raise ValueError(
-        f"{who} drives with throttle actions, (a + 1) / 2; this scene's learned action is "
-        f"another ({setting})"
-    )
+    if controllers.learned_speed_command_kmh is not None:
+        raise ValueError(
+            f"{who} drives with throttle actions, (a + 1) / 2; this scene's learned action is "
+            f"a speed set point (controllers.learned_speed_command_kmh="
+            f"{controllers.learned_speed_command_kmh:g})"
+        )
+    if controllers.learned_brake:
+        return _throttle_as_pedals
+    return _same_action
+
+
+def _same_action(actions: FloatArray) -> FloatArray:
+    return actions
+
+
+def _throttle_as_pedals(actions: FloatArray) -> FloatArray:
+    """The paper's action as both pedals' (``learned_brake``): throttle ``(a + 1) / 2``."""
+    return (np.asarray(actions) + 1.0) / 2.0
+
+
+def throttle_scene(config: Any) -> Any:
+    """``config`` (a :class:`~safeswitch.leftturn.config.LeftTurnConfig`) with the paper's
+    learned action: where a scripted driver checks its own throttle drives
+    (:func:`throttle_driver`) on a copy of a scene whose learned action works both pedals."""
+    if not config.controllers.learned_brake:
+        return config
+    return replace(config, controllers=replace(config.controllers, learned_brake=False))

@@ -667,10 +667,11 @@ class TrainConfig:
                   "counterfactual_penalty", self.shaping.counterfactual_penalty,
                   "rolls the single-car scene under deploy_switching: needs deploy_switching "
                   "and no traffic")  # fmt: skip
-        if not self.env.controllers.throttle_action:  # a teacher's or a search's throttles
+        command = self.env.controllers.learned_speed_command_kmh
+        if command is not None:  # a teacher's or a search's throttles map to no set point
             why = (
-                "drives with throttle actions, (a + 1) / 2: needs the paper's action (no "
-                "env.controllers.learned_speed_command_kmh or learned_brake)"
+                "drives with throttle actions, (a + 1) / 2: needs a pedal action (no "
+                f"env.controllers.learned_speed_command_kmh, here {command:g})"
             )
             ws, refine = self.warm_start, self.refine
             check(not ws.episodes, "warm_start", "teacher", ws.teacher, why)

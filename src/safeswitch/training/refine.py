@@ -71,7 +71,7 @@ from safeswitch.io import complete_checkpoints, write_atomic, write_policy_files
 from safeswitch.leftturn.config import EpisodeConfig
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
-from safeswitch.leftturn.spaces import require_throttle_action
+from safeswitch.leftturn.spaces import throttle_driver
 from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.training.config import RefineConfig, TrainConfig
 from safeswitch.training.policies import TrainedPolicy, load_policy
@@ -114,9 +114,9 @@ def refine_iteration(
     n = config.scenes
     ids = REFINE_ENV_OFFSET * iteration + np.arange(n)
     scenes = task.draw_scenarios(seed, ids, np.zeros(n, dtype=np.int64))
-    require_throttle_action(task.config.controllers, "the refinement's structured drivers")
+    to_scene = throttle_driver(task.config.controllers, "the refinement's structured drivers")
     actions, clear, dirty, first_dirty = policy_actions(task, scenes, policy.as_policy())
-    drivers = _drivers(episode)
+    drivers = to_scene(_drivers(episode))
     failing = np.flatnonzero(np.isnan(clear) | (dirty > 0))
     frozen = None
     if config.lock_s is not None:  # its own decisions up to lock_s before its first dirty tick
