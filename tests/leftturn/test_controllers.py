@@ -11,6 +11,7 @@ from safeswitch.evaluation.planner import Planner
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.leftturn.config import ControllerConfig, LeftTurnConfig
+from safeswitch.leftturn.info import step_info
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.statistics import SPEEDING_MARGIN
 from safeswitch.leftturn.task import LeftTurnTask
@@ -174,6 +175,10 @@ def test_the_learned_brake_works_both_pedals_from_one_action():
     state, record = task.step(state, actions)
     np.testing.assert_allclose(record.throttle[:4], [0.4, 0.0, 0.0, 0.0])
     np.testing.assert_allclose(record.brake[:4], [0.0, 0.0, 0.5, 1.0])
+    # The record says what the learned controller asked for: the brake included.
+    np.testing.assert_allclose(record.learned_throttle[:4], [0.4, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(record.learned_brake[:4], [0.0, 0.0, 0.5, 1.0])
+    assert step_info(record, 2, task.reasons)["learned_brake"] == 0.5
     # Out of range: clipped to full brake and counted; NaN refused as ever.
     assert record.action_clipped.tolist()[:4] == [False, False, False, True]
     assert task.reasons[record.reason[4]] == "invalid_learned_action"
@@ -196,11 +201,12 @@ def test_scripted_throttle_drivers_refuse_a_speed_set_point():
 
 
 def _pedals_driven(task, driver, scenes):
-    """The executed throttle and brake of every tick of ``driver`` on ``scenes`` [ticks, B]."""
+    """The executed throttle and brake and the learned brake of every tick of ``driver`` on
+    ``scenes`` [ticks, 3, B]."""
     pedals = []
 
     def on_tick(state, record, tick):
-        pedals.append((record.throttle.copy(), record.brake.copy()))
+        pedals.append((record.throttle.copy(), record.brake.copy(), record.learned_brake.copy()))
 
     result = rollout(task, scenes, driver, on_tick)
     return np.array(pedals), result
@@ -220,6 +226,7 @@ def test_the_planners_drive_a_two_pedal_scene_as_the_papers(traffic):
         runs.append(_pedals_driven(task, planner, scenes))
     (paper, paper_run), (pedals, pedal_run) = runs
     np.testing.assert_allclose(pedals, paper, atol=1e-12)
+    assert not pedals[:, 2].any()  # the planners never ask for the learned brake
     np.testing.assert_array_equal(pedal_run.time_to_clear, paper_run.time_to_clear)
     assert np.isfinite(paper_run.time_to_clear).any()  # they drove, and cleared
     # Full and closed throttles both driven: the closed one (-1) is a coast on both scenes,

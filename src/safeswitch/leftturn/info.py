@@ -41,7 +41,8 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
     0.0: the switch's intervention, as every switched plant has it), ``reward_terms``
     (the five terms of Eq. 5), ``reason`` (why the switching logic chose as it did),
     ``controller`` (``learned``, ``rule`` or ``safety``: who proposed the executed action),
-    ``learned_throttle`` (what the learned action asked for), ``action_clipped`` (it was outside
+    ``learned_throttle`` and ``learned_brake`` (what the learned action asked for; the brake 0
+    but with ``controllers.learned_brake``), ``action_clipped`` (it was outside
     [-1, 1] and was clipped to it), ``safety_brake`` (what ``PID_b``
     computed), ``throttle`` and ``brake`` (executed), ``both_at_intersection``, ``outcome``
     (``cut``, ``yield`` or ``undecided``), ``separation`` [m], ``ego_speed``, ``north_speed``
@@ -59,6 +60,7 @@ def step_info(record: StepRecord, i: int, reasons: tuple[str, ...]) -> dict[str,
         "reason": reasons[int(r.reason[i])],
         "controller": CONTROLLERS[int(r.controller[i])],
         "learned_throttle": float(r.learned_throttle[i]),
+        "learned_brake": float(r.learned_brake[i]),
         "action_clipped": bool(r.action_clipped[i]),
         "safety_brake": float(r.safety_brake[i]),
         "throttle": float(r.throttle[i]),

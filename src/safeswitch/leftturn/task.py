@@ -227,6 +227,8 @@ class StepRecord:
         both_at_intersection: Algorithm 1's While condition held at the start of the tick.
         learned_throttle: Throttle the learned action asked for (NaN if it was NaN; outside
             [0, 1] if the action was outside [-1, 1]).
+        learned_brake: Brake the learned action asked for, in [0, 1] (always 0 but with
+            ``controllers.learned_brake``; on its ticks ``learned_throttle`` is 0).
         action_clipped: The learned action was outside [-1, 1] and was clipped (where the
             learned controller was in charge).
         safety_brake: Brake the Safety controller ``PID_b`` computed.
@@ -256,6 +258,7 @@ class StepRecord:
     controller: NDArray[np.int8]
     both_at_intersection: BoolArray
     learned_throttle: FloatArray
+    learned_brake: FloatArray
     action_clipped: BoolArray
     safety_brake: FloatArray
     throttle: FloatArray
@@ -802,7 +805,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         for over in (cut_over_range, pedals.over_range):
             if over is not None:
                 clipped = clipped | over
-        return Switched(learned_throttle, out, sup, clipped)
+        learned_brake = np.zeros(batch) if pedals.brake is None else pedals.brake
+        return Switched(learned_throttle, out, sup, clipped, learned_brake)
 
     def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
         """Advance every episode by one tick.
@@ -890,6 +894,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             controller=controller,
             both_at_intersection=out.both,
             learned_throttle=switched.learned_throttle,
+            learned_brake=switched.learned_brake,
             action_clipped=switched.clipped,
             safety_brake=out.safety_brake,
             throttle=throttle,
@@ -986,12 +991,15 @@ class Switched(NamedTuple):
         supervision: The switching logic's decision and the executed pedals.
         clipped: The learned throttle was out of range and was clipped (by the supervision or
             the speed limiter) ``[B]``.
+        learned_brake: The learned controller's brake ``[B]`` (zeros but with
+            ``controllers.learned_brake``).
     """
 
     learned_throttle: FloatArray
     controllers: ControllerOutputs
     supervision: Supervision
     clipped: BoolArray
+    learned_brake: FloatArray
 
 
 class ControllerGains(NamedTuple):

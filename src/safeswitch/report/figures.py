@@ -18,6 +18,7 @@ from safeswitch.leftturn.task import LeftTurnTask, StepRecord, TaskState
 #: Record fields kept per tick by :class:`Trace`.
 TRACED = (
     "learned_throttle",
+    "learned_brake",
     "safety_brake",
     "throttle",
     "brake",
@@ -95,11 +96,13 @@ class Trace:
 
 
 def _spans(ax: object, time: NDArray[np.float64], mask: NDArray[np.bool_], **style: object) -> None:
-    """Shade the intervals of ``time`` where ``mask`` holds."""
+    """Shade the intervals of ``time`` where ``mask`` holds; a ``label`` names the first only
+    (one legend entry however often the interval recurs)."""
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
     dt = time[1] - time[0] if time.size > 1 else 0.02
     for start, stop in zip(edges[::2], edges[1::2], strict=True):
         ax.axvspan(time[start] - dt, time[stop - 1], **style)  # type: ignore[attr-defined]
+        style = {**style, "label": None}
 
 
 def episode_figure(
@@ -146,15 +149,25 @@ def episode_figure(
         if crash_time is not None:
             ax.axvline(crash_time, color="red", lw=2.0, label="COLLISION" if first else None)
     learned = sig("controller") == 0
+    # A learned controller with a brake (controllers.learned_brake) proposes brakes of its own:
+    # then the executed brake is not only PID_b's.
+    learned_brake = np.where(learned, sig("learned_brake"), np.nan)
+    brakes = bool(np.nanmax(learned_brake, initial=0.0) > 0.0)
     if learned.any():  # the learned controller proposed the pedals on these ticks
         axes[0].plot(
             time, np.where(learned, sig("learned_throttle"), np.nan), color="tab:green",
             lw=2.5, alpha=0.6, label="learned throttle (proposed)",
         )  # fmt: skip
+    if brakes:
+        axes[0].plot(
+            time, learned_brake, color="tab:purple", lw=2.5, alpha=0.6,
+            label="learned brake (proposed)",
+        )  # fmt: skip
     axes[0].plot(time, sig("throttle"), color="k", lw=1.0, label="executed throttle")
     axes[0].plot(
-        time, sig("brake"), color="tab:red", lw=1.0, ls="--", label="executed brake (PID_b)"
-    )
+        time, sig("brake"), color="tab:red", lw=1.0, ls="--",
+        label="executed brake" if brakes else "executed brake (PID_b)",
+    )  # fmt: skip
     axes[0].set_ylabel("pedal [0, 1]")
     axes[0].set_ylim(-0.05, 1.05)
     axes[1].plot(time, 3.6 * sig("ego_speed"), color="tab:blue", label="ego")
