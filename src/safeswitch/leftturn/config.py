@@ -94,7 +94,8 @@ class ControllerConfig:
     @property
     def throttle_action(self) -> bool:
         """The learned action is the paper's throttle, ``(a + 1) / 2`` (neither a speed set
-        point nor both pedals): what scripted drivers that output a throttle assume."""
+        point nor both pedals); scripted drivers that output throttles reach the other actions
+        through :func:`~safeswitch.leftturn.spaces.throttle_driver`."""
         return self.learned_speed_command_kmh is None and not self.learned_brake
 
     @property
