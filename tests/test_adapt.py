@@ -38,6 +38,7 @@ def adversarial_updates(monkeypatch):
     return paused
 
 
+@pytest.mark.slow
 def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, adversarial_updates):
     """With adversarial updates the policy the switch supervises changes each rollout, for the
     worse, and no block collides (without rollback: the adversarial policy stays deployed)."""
@@ -58,6 +59,7 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, ad
     assert adapted == pytest.approx(frozen) and adapted != pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_a_block_that_ranks_below_the_selected_policy_is_rolled_back(tmp_path, adversarial_updates):
     """With adversarial updates and rollback (the default), every block's policy ranks below
     the frozen one, so learning goes on from the frozen policy each time (not from the rejected
@@ -100,6 +102,7 @@ def updates(monkeypatch):
     return count
 
 
+@pytest.mark.slow
 def test_a_policy_within_every_target_is_deployed_without_noise_and_not_updated(
     tmp_path, monkeypatch, updates
 ):
@@ -122,6 +125,7 @@ def test_a_policy_within_every_target_is_deployed_without_noise_and_not_updated(
     assert updates[0] > 0
 
 
+@pytest.mark.slow
 def test_a_deployed_block_over_the_budget_resumes_learning(tmp_path, monkeypatch, updates):
     """The selection says the frozen policy meets its targets, but the field disagrees (a
     budget of 0 deployed safety actions): the first block is settled, learning resumes after
@@ -258,6 +262,7 @@ def test_the_training_terms_follow_the_deployment_logic():
     assert same.reason_penalties == config.shaping.reason_penalties
 
 
+@pytest.mark.slow
 def test_the_deployed_exploration_noise_is_the_size_asked(tmp_path):
     """``noise`` sets the exploration noise the policy is deployed with (the shipped
     ``certified`` policy's is fixed, so the adapted one keeps it); a bad value is refused before
@@ -279,6 +284,7 @@ def test_the_deployed_exploration_noise_is_the_size_asked(tmp_path):
         )
 
 
+@pytest.mark.slow
 def test_the_rehearsing_environments_replay_the_original_scenarios_and_are_not_counted(
     tmp_path, monkeypatch
 ):

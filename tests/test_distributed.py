@@ -211,6 +211,7 @@ def test_a_sweep_trains_seeds_in_parallel_into_normal_run_directories(tmp_path, 
     assert main([*args[:-2], "--workers", "0", "--out", str(tmp_path / "s")]) == 0
 
 
+@pytest.mark.slow
 def test_a_cluster_takes_its_tasks_lazily_within_a_window():
     """Arguments are drawn from the iterator only as the window frees up: a campaign of any
     length holds a bounded number of shards, here and on the cluster."""

@@ -113,6 +113,7 @@ def test_cli_exports_and_reports_parity(tmp_path, capsys):
     assert "not empty" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_traffic_policy_exports_the_policy_and_says_the_runtime_does_not_run_it(exported):
     manifest = json.loads((exported("traffic-certified") / "manifest.json").read_text())
     assert manifest["parity"]["max_abs_diff"] <= 1e-5

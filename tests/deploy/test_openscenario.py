@@ -181,6 +181,7 @@ def test_index_lists_parameters_and_outcomes(random50):
     assert json.loads(json.dumps(index)) == index
 
 
+@pytest.mark.slow
 def test_a_traffic_scene_exports_every_vehicle_from_entry_to_exit(tmp_path):
     out = tmp_path / "traffic"
     index = export_scenarios(out, "random", 3, seed=5, traffic="medium")

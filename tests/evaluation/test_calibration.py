@@ -49,6 +49,7 @@ def test_bad_pairs_are_refused_with_their_row():
         calibrate(*(np.zeros(50),) * 4, alpha=0.01)
 
 
+@pytest.mark.slow
 def test_calibrate_perception_writes_a_block_that_evaluate_reads(tmp_path, capsys):
     rng = np.random.default_rng(0)
     truth = rng.uniform(0, 100, 4000)

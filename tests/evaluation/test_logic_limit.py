@@ -35,6 +35,7 @@ def bounds(setup):
     }
 
 
+@pytest.mark.slow
 def test_without_the_logic_it_is_the_oracle_up_to_the_grid(setup, bounds):
     _, _, oracle = setup
     free = bounds["comfort", False]
@@ -43,6 +44,7 @@ def test_without_the_logic_it_is_the_oracle_up_to_the_grid(setup, bounds):
     assert np.mean(oracle - free) < 0.05  # and a tight one
 
 
+@pytest.mark.slow
 def test_the_logic_costs_time_and_a_closed_throttle_more(setup, bounds):
     _, _, oracle = setup
     free, paper, throttle = (
@@ -56,6 +58,7 @@ def test_the_logic_costs_time_and_a_closed_throttle_more(setup, bounds):
     assert np.sum(paper > oracle + 0.5) > EPISODES // 4
 
 
+@pytest.mark.slow
 def test_no_controller_that_never_triggers_the_logic_clears_sooner(setup, bounds):
     """Three planners and speed trackers (targets below the turn's comfort speed) on the same
     scenarios: every episode without a safety action, comfort violation or speeding clears no
@@ -141,6 +144,7 @@ def test_in_traffic_the_bound_without_the_logic_is_below_the_multi_conflict_orac
     assert np.median(oracle[both] - free[both]) < 0.05
 
 
+@pytest.mark.slow
 def test_in_traffic_every_conflicting_vehicle_counts(traffic):
     """Against the north car alone the bound is never later, and in some scenes it is
     earlier: the other vehicles' zones and their Algorithm 1 are in the bound."""
@@ -156,6 +160,7 @@ def test_in_traffic_every_conflicting_vehicle_counts(traffic):
     assert np.all(traffic["throttle"][fin] >= full[fin] - 1e-9)
 
 
+@pytest.mark.slow
 def test_in_traffic_no_controller_that_never_triggers_the_logic_clears_sooner(traffic):
     """Speed trackers and the planner in the same scenes: every episode without a safety
     action, comfort violation, speeding or collision clears no sooner than the bound."""
@@ -195,6 +200,7 @@ def test_in_traffic_no_controller_that_never_triggers_the_logic_clears_sooner(tr
     assert margin.min() < 0.3
 
 
+@pytest.mark.slow
 def test_bad_settings_are_named(setup):
     task, _, _ = setup
     with pytest.raises(ConfigError, match="braking"):
@@ -203,6 +209,7 @@ def test_bad_settings_are_named(setup):
         PaperLogicLimit(task, speed_step=0.0)
 
 
+@pytest.mark.slow
 def test_clearing_into_a_zone_about_to_be_occupied_does_not_count(setup):
     """A second conflict zone just past the north car's, occupied from shortly after the ego
     could first clear: clearing then would leave the ego inside it, so the bound moves later.

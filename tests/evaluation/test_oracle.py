@@ -107,6 +107,7 @@ def cruise(target_kmh):
     return policy
 
 
+@pytest.mark.slow
 def test_no_controller_that_keeps_the_limits_is_faster_than_the_oracle(oracle, random_plan):
     scenarios, plan = random_plan
     base = LeftTurnConfig()

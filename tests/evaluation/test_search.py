@@ -85,6 +85,7 @@ def test_the_search_ranks_no_scene_below_its_start(scene, knot):
     np.testing.assert_array_equal(dirty_again, dirty)
 
 
+@pytest.mark.slow
 def test_a_margin_counts_the_dirty_ticks_of_the_pushed_sequences_too(scene):
     task, scenarios = scene
     start, _, own_dirty, _ = policy_actions(task, scenarios, load_policy("certified").as_policy())

@@ -95,6 +95,7 @@ def test_paper_policy_is_safe_and_comfortable_on_unseen_scenarios(paper):
     assert paper["yield_episodes"] >= 0.20 * 1000
 
 
+@pytest.mark.slow
 def test_the_ablation_needs_the_safety_controller_more_than_the_paper_policy(paper):
     ablation = evaluate("learned", "no-adas", switching=None, **EVAL)
     assert ablation["safety_activation_episodes"] > paper["safety_activation_episodes"]

@@ -61,6 +61,7 @@ def test_under_the_switch_it_never_crashed_and_drives_within_the_rules():
     assert "Safety controller" in missing_targets("highway-certified")
 
 
+@pytest.mark.slow
 def test_the_shipped_name_drives_from_the_command_line_without_a_crash(capsys):
     """The first episodes of the evaluation seed, driven from the command line by the shipped
     name under the logic the policy was trained with."""

@@ -34,6 +34,7 @@ def run_random(switching, episodes, seed=0):
     return crashes, off_road, steps, safety, reasons
 
 
+@pytest.mark.slow
 def test_ttc_keeps_a_random_driver_on_the_road_and_out_of_other_cars():
     crashes, off_road, steps, safety, reasons = run_random("ttc", 5)
     assert crashes == 0 and off_road == 0

@@ -155,6 +155,7 @@ def test_certified_is_one_name_for_the_left_turn_and_highway_env():
         make_logic("certified", gym.make("CartPole-v1"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", Adversary.KINDS)
 def test_adversarial_drivers_never_crash_under_certified(kind):
     env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching="certified")

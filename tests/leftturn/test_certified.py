@@ -77,6 +77,7 @@ def test_no_adversary_makes_certified_collide(request, shipped_act, adversary, s
         assert result.max_lateral.max() <= task.config.certified.ego_max_lateral_m
 
 
+@pytest.mark.slow
 def test_the_paper_logic_has_a_blind_spot_that_certified_closes():
     """Changing pace after the gap looked safe (here: random bang-bang throttle) defeats the
     paper's rule, not the filter, nor the filter beneath the paper's rule; there, both act (the

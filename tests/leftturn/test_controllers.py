@@ -212,6 +212,7 @@ def _pedals_driven(task, driver, scenes):
     return np.array(pedals), result
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("traffic", [None, {"preset": "train", "horizon_s": 8.0}])
 def test_the_planners_drive_a_two_pedal_scene_as_the_papers(traffic):
     """A planner's throttles map to the two-pedal action ((a + 1) / 2, the brake never used)

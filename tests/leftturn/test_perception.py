@@ -151,6 +151,7 @@ def test_adversarial_errors_make_the_north_car_look_as_late_as_the_bounds_allow(
         assert np.all(arrival["adversarial"] >= arrival["random"] - 1e-9)
 
 
+@pytest.mark.slow
 def test_adversarial_errors_make_the_paper_logic_collide_more_than_random_ones():
     bounds = {"position_error_m": 3.0, "speed_error_mps": 3.0, "latency_s": 0.3}
     collisions = {}
@@ -318,6 +319,7 @@ def collisions_by_adversary(task, count, trained, seed=5):
     return out
 
 
+@pytest.mark.slow
 def test_certified_with_declared_bounds_never_collides_under_adversarial_errors(trained):
     task = task_with(EVERYTHING)
     found = collisions_by_adversary(task, 400, trained)
@@ -348,6 +350,7 @@ def test_the_guarantee_holds_on_many_scenarios(perception, trained):
     assert sum(found.values()) == 0, found
 
 
+@pytest.mark.slow
 def test_in_traffic_certified_with_declared_bounds_never_collides():
     found = collisions_by_adversary(traffic_task(EVERYTHING, preset="heavy"), 24, None)
     assert len(found) == 8 and sum(found.values()) == 0, found

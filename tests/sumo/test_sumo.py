@@ -90,6 +90,7 @@ def test_certified_never_collides_on_sumo():
         task.close()
 
 
+@pytest.mark.slow
 def test_sumos_collisions_are_ours_within_a_tick():
     """SUMO's own collision check against ours, computed on SUMO's poses of its car: a
     constant throttle without a switching logic into the north car (slow enough that the
@@ -166,6 +167,7 @@ def test_missing_sumo_names_the_extra(monkeypatch):
         network.sumo_home()
 
 
+@pytest.mark.slow
 def test_vec_env_workers_step_and_close():
     env = make_sumo_vec_env(2, seed=5, learned_scope="episode")
     try:
@@ -273,6 +275,7 @@ def test_in_traffic_the_north_car_is_sumos_from_the_start():
         task.close()
 
 
+@pytest.mark.slow
 def test_sumo_drives_the_traffic_and_certified_keeps_the_ego_safe():
     """Whole episodes in heavy traffic under adversaries: vehicles keep entering and leaving
     (SUMO's drivers, handed over from the embedded schedule), the ego never collides by our
@@ -317,6 +320,7 @@ def test_traffic_on_sumo_is_a_gym_environment():
         embedded.close()
 
 
+@pytest.mark.slow
 def test_in_traffic_the_oracle_plans_against_the_embedded_scene():
     """Efficiency on SUMO is measured against the same oracle as on the embedded simulator:
     it plans against the embedded scene's drivers (not SUMO's, nor SUMO run a second time)."""

@@ -193,6 +193,7 @@ SMALL = {
 }
 
 
+@pytest.mark.slow
 def test_a_constrained_run_records_its_multipliers_and_resumes_them(tmp_path, interrupted_training):
     """The multipliers are part of a checkpoint: a resumed run starts from the values the
     interrupted one had, and ``metrics.json`` holds the final ones."""

@@ -75,6 +75,7 @@ def refined(tmp_path_factory):
     return run, config, refine_run(run, config), original
 
 
+@pytest.mark.slow
 def test_an_iteration_fits_the_actor_toward_the_searchs_labels(refined):
     run = refined[0]
     rows = rows_of(run)
@@ -83,6 +84,7 @@ def test_an_iteration_fits_the_actor_toward_the_searchs_labels(refined):
     assert float(first["mse"]) < float(first["mse_before"])
 
 
+@pytest.mark.slow
 def test_the_stage_keeps_the_iteration_its_criterion_ranks_first(refined):
     run, config, record, _ = refined
     rows = rows_of(run)
@@ -93,6 +95,7 @@ def test_the_stage_keeps_the_iteration_its_criterion_ranks_first(refined):
     assert full_key(config, rows[chosen]) == max(full_key(config, r) for r in rows)
 
 
+@pytest.mark.slow
 def test_the_selected_iteration_is_the_runs_policy_and_ppos_is_kept(refined):
     run, config, record, original = refined
     chosen = record["selected_iteration"]
@@ -108,6 +111,7 @@ def test_the_selected_iteration_is_the_runs_policy_and_ppos_is_kept(refined):
     assert summary["cleared_episodes"] == record["validation"]["cleared_episodes"]
 
 
+@pytest.mark.slow
 def test_an_interrupted_stage_leaves_ppos_policy(tmp_path, monkeypatch):
     run = shipped_run(tmp_path / "run")
     original = (run / "model.zip").read_bytes()
@@ -125,6 +129,7 @@ def test_an_interrupted_stage_leaves_ppos_policy(tmp_path, monkeypatch):
     assert not (run / "refine.csv").exists() and not (run / "ppo").exists()
 
 
+@pytest.mark.slow
 def test_the_pipeline_evaluates_the_refined_policy(tmp_path):
     config = load_config("certified")
     small = replace(
@@ -325,6 +330,7 @@ def finetuned(tmp_path_factory):
     return run, config, refine_run(run, config, train), original
 
 
+@pytest.mark.slow
 def test_the_fine_tune_phase_trains_the_fastest_searched_iteration_under_the_constraints(
     finetuned,
 ):
@@ -345,6 +351,7 @@ def test_the_fine_tune_phase_trains_the_fastest_searched_iteration_under_the_con
     assert record["finetune"]["timesteps"] == 4096
 
 
+@pytest.mark.slow
 def test_the_run_keeps_the_fine_tuned_policy_only_if_it_ranks_at_least_as_high_as_ppos(
     finetuned,
 ):

@@ -283,6 +283,7 @@ BAND = {  # where the paper logic's gap lies
 }
 
 
+@pytest.mark.slow
 def test_the_first_counterfactual_of_an_episode_is_the_episode_under_the_deployed_logic_alone():
     """``shaping.counterfactual_penalty``: with a constant action per environment the guarded and
     the paper-alone episodes are the same until the guard first intervenes, so the

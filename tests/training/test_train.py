@@ -176,6 +176,7 @@ def timesteps_of(path):
         return [int(float(row["timesteps"])) for row in csv.DictReader(handle)]
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_without_repeating_its_logs(tmp_path, monkeypatch, capsys):
     """A run killed between checkpoints (no interrupt handler ran) wrote rows past its last
     checkpoint; ``--resume`` starts again from that checkpoint and sets those rows aside, so
@@ -224,6 +225,7 @@ sys.exit(main(["train", "--config", sys.argv[1], "--out", sys.argv[2], "--no-pro
 """
 
 
+@pytest.mark.slow
 def test_sigterm_checkpoints_as_ctrl_c_does(tmp_path):
     """A SIGTERM (a scheduler's preemption) stops training as Ctrl-C does: a checkpoint at the
     step it arrived, kept, and a resume that loses and repeats nothing."""

@@ -74,6 +74,7 @@ def cloned(tmp_path_factory):
     return warm, folder
 
 
+@pytest.mark.slow
 def test_the_warm_started_actor_imitates_the_planner_far_better_than_a_fresh_one(cloned):
     warm, folder = cloned
     task = LeftTurnTask(warm.env)
@@ -101,6 +102,7 @@ def observation_statistics(path):
         return pickle.load(handle).obs_rms
 
 
+@pytest.mark.slow
 def test_the_observation_statistics_stay_those_of_the_demonstrations(cloned, tmp_path):
     """Between the two checkpoints a run keeps (1,024 PPO steps apart) the statistics do not
     move after a warm start; left running (the control) they do."""
@@ -221,6 +223,7 @@ def test_the_warm_start_demonstrates_with_its_configured_planner(tmp_path, monke
     assert "accel_lat: 2.6" in saved
 
 
+@pytest.mark.slow
 def test_the_warm_start_clones_in_traffic_with_the_traffic_observation(tmp_path):
     """In traffic the demonstrations are driven in the training task, so the clone learns on
     the observation it will see (the paper's six values and the nearest vehicles), and the
