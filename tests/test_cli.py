@@ -243,6 +243,7 @@ def test_a_checkpoint_and_an_interrupted_run_can_be_evaluated(
     assert from_run["mean_return"] == from_checkpoint["mean_return"]
 
 
+@pytest.mark.slow
 def test_render_writes_an_animation_of_one_episode(tmp_path, capsys):
     from PIL import Image
 

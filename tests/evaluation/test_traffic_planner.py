@@ -85,6 +85,7 @@ def test_a_go_margin_starts_no_sooner_and_the_filter_still_never_acts(drive):
     assert np.all(later >= first) and np.any(later > first)
 
 
+@pytest.mark.slow
 def test_an_observed_foresight_ignores_what_no_car_could_see():
     """``foresight: observed``: the go check runs on a copy with no vehicle still to come and
     every driver rude, so changing the drivers' yielding or the vehicles still to come changes

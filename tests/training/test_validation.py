@@ -62,6 +62,7 @@ def test_the_best_validated_policy_becomes_the_runs_policy(tmp_path):
     assert main(["evaluate", "--model", str(run / "last"), "--episodes", "4", "--json"]) == 0
 
 
+@pytest.mark.slow
 def test_a_resumed_run_keeps_the_best_it_had(tmp_path, interrupted_training):
     config = from_dict(TrainConfig, SMALL | {"timesteps": 6144})
     run = tmp_path / "run"

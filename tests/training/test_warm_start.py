@@ -169,6 +169,7 @@ def test_a_frozen_actor_without_its_own_rate_thaws_to_the_configured_one():
     assert model.actor_rate(1000) == pytest.approx(3e-4)
 
 
+@pytest.mark.slow
 def test_an_interrupted_warm_started_run_resumes_with_its_parameter_groups(
     tmp_path, interrupted_training
 ):
