@@ -1,27 +1,36 @@
-"""Seed robustness of a training recipe: train it with each seed and evaluate each run.
+"""Seed robustness of a training recipe on any plant: train it with each seed and evaluate each run.
 
 Trains ``--config`` (default ``experimental/scratch_annealed_noise``) once per ``--seeds``
 value (optionally under another ``--switching``) into a temporary run directory, one torch
-thread, and collects each run's ``metrics.json``: training collisions and safety episodes, the
+thread, and collects each run's ``metrics.json``. Every seed's row is reported (no seed is
+picked over another), as JSON lines while the runs end and as one Markdown table at the end.
+
+*The left turn* (a recipe without ``env_id``): training collisions and safety episodes, the
 step of the policy the run selected on its validation set (if it validates), and the
 deterministic evaluation on 1,000 unseen scenarios (``--seed 1000003``, under the logic the
 recipe deploys its policy under — ``deploy_switching``, by default the one it trains with —
 and with ``--deploy`` under another too): collisions, safety episodes, comfort,
-full stops, cuts, cleared, efficiency.
-Every seed's row is reported (no seed is picked over another). 2 to 4 minutes per seed on a
-two-core machine, by recipe.
+full stops, cuts, cleared, efficiency. 2 to 4 minutes per seed on a two-core machine, by
+recipe.
 
-With ``--traffic-eval FAMILY ...`` (a recipe trained in traffic) each run is also evaluated on
-1,000 scenes of each traffic family named, as ``safeswitch evaluate --model RUN --traffic
-FAMILY`` does.
+*Any other plant* (a recipe with ``env_id``, e.g. ``highway`` or a user's
+``experiments/X.yaml``; ``--import MODULE`` first for a user's plant): failures (as the plant
+declares them) and the Safety controller's steps in training; in the evaluation
+(``eval_episodes`` episodes of ``eval_seed``) failures, the share of steps the Safety
+controller acted on, the mean return and the steps on which each of the plant's costs was
+incurred (and how many of them the Safety controller drove).
+
+With ``--traffic-eval FAMILY ...`` (a left-turn recipe trained in traffic) each run is also
+evaluated on 1,000 scenes of each traffic family named, as ``safeswitch evaluate --model RUN
+--traffic FAMILY`` does.
 
 With ``--collect DIR`` nothing is trained: the rows are read from the runs an earlier
 ``--keep DIR`` kept (``DIR/seed_<seed>/metrics.json``), e.g. to add a field this script now
 reports to a table without training again.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
-[--deploy LOGIC] [--parallel N] [--keep DIR | --collect DIR] [--traffic-eval FAMILY ...]
-[--out FILE]``; writes
+[--set KEY=VALUE ...] [--import MODULE ...] [--deploy LOGIC] [--parallel N] [--keep DIR |
+--collect DIR] [--traffic-eval FAMILY ...] [--out FILE]``; writes
 ``benchmarks/results/train_seeds_<config>[_<switching>][_deployed_<logic>].json``.
 """
 
@@ -34,12 +43,15 @@ import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import _common
 from safeswitch.app.evaluate import evaluate
+from safeswitch.core.config import ConfigError, with_settings
+from safeswitch.core.registry import import_modules
 from safeswitch.io import write_json
 from safeswitch.training import train
-from safeswitch.training.config import TrainConfig, load_config
+from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_any_config
 from safeswitch.training.policies import load_policy
 from safeswitch.training.run import evaluate_trained
 
@@ -53,11 +65,34 @@ EVALUATED = (
     "faster_than_oracle_episodes", "faster_than_oracle_speeding", "faster_than_oracle_comfort",
     "faster_than_oracle_either",
 )  # fmt: skip
+#: What each evaluation of any other plant reports (``safeswitch evaluate --env``'s fields).
+PLANT_EVALUATED = (
+    "episodes", "failures", "steps", "safety_activation_episodes", "safety_activation_steps",
+    "safety_share", "mean_return", "cost_steps", "safety_cost_steps",
+)  # fmt: skip
 
 
 def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
+    """A run's row: the left turn's fields, or any other plant's (its ``metrics.json`` names
+    its ``env_id``)."""
     t, e, warm = metrics["training"], metrics["evaluation"], metrics.get("warm_start")
     assert isinstance(t, dict) and isinstance(e, dict)
+    selected = (metrics.get("selected") or {}).get("best_timesteps")
+    if "env_id" in metrics:
+        return {
+            "seed": seed,
+            "env_id": metrics["env_id"],
+            "switching": metrics["switching"],
+            "timesteps": metrics["timesteps"],
+            "wall_time_s": metrics["wall_time_s"],
+            "training_failures": t["failures"],
+            "training_safety_steps": t["safety_activation_steps"],
+            "training_episodes": t["episodes"],
+            "training_steps": t["steps"],
+            "constraints": metrics.get("constraints"),
+            "selected_timesteps": selected,
+            **{k: e.get(k) for k in PLANT_EVALUATED},
+        }
     return {
         "seed": seed,
         "warm_start_collisions": warm["collisions"] if isinstance(warm, dict) else None,
@@ -68,7 +103,7 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         "training_safety_episodes": t["safety_activation_episodes"],
         "constraints": metrics.get("constraints"),
         "training_episodes": t["episodes"],
-        "selected_timesteps": (metrics.get("selected") or {}).get("best_timesteps"),
+        "selected_timesteps": selected,
         **{k: e.get(k) for k in EVALUATED},  # a run kept before a field was added: None
     }
 
@@ -90,16 +125,19 @@ def _refined(record: object) -> dict[str, object]:
 
 
 def one_seed(
-    config: TrainConfig,
+    config: TrainConfig | EnvTrainConfig,
     seed: int,
     deploy: str | None,
     keep: Path | None = None,
     families: tuple[str, ...] = (),
+    modules: tuple[str, ...] = (),
 ) -> dict[str, object]:
     """Train ``config`` with ``seed`` (one torch thread) in a temporary run directory (or in
     ``keep/seed_<seed>``) and return its row (with ``deploy``: also evaluated under that
     logic; with ``families``: also on 1,000 scenes of each of those traffic families, as
-    ``safeswitch evaluate --model RUN --traffic FAMILY`` does)."""
+    ``safeswitch evaluate --model RUN --traffic FAMILY`` does; ``modules`` are imported
+    first, in the worker too)."""
+    import_modules(modules)
     with tempfile.TemporaryDirectory() as tmp:
         run = keep / f"seed_{seed}" if keep else Path(tmp)
         metrics = train(replace(config, seed=seed, torch_threads=1), run, progress_bar=False)
@@ -107,6 +145,7 @@ def one_seed(
         if keep:
             result["run"] = str(run)
         if deploy:
+            assert isinstance(config, TrainConfig)  # main() refuses --deploy on another plant
             deployed = replace(config, deploy_switching=deploy)
             e = evaluate_trained(load_policy(run), deployed, config.eval_episodes,
                                  config.eval_seed)  # fmt: skip
@@ -131,7 +170,7 @@ def collected(run: Path, seed: int) -> dict[str, object]:
     if not path.is_file():
         raise SystemExit(f"--collect: {path} does not exist (a run kept with --keep?)")
     metrics = json.loads(path.read_text(encoding="utf-8"))
-    if load_config(run / "config.yaml").seed != seed:
+    if load_any_config(run / "config.yaml").seed != seed:
         raise SystemExit(f"--collect: {run} was not trained with seed {seed}")
     return {**row(seed, metrics), "run": str(run)}
 
@@ -141,6 +180,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", default="experimental/scratch_annealed_noise")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--switching", help="train (and evaluate) under this logic instead")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE",
+        help="change a setting of the recipe, as safeswitch train --set does (repeatable)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--import", dest="modules", action="append", default=[], metavar="MODULE",
+        help="import MODULE first (repeatable): a user's plant, Safety controller or logic",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, help="the JSON file (default under results/)")
     parser.add_argument(
         "--deploy",
@@ -170,12 +217,25 @@ def main(argv: list[str] | None = None) -> int:
     if args.collect and (args.keep or args.deploy or args.traffic_eval):
         parser.error("--collect reads kept runs: it trains and evaluates nothing, so it takes "
                      "no --keep, --deploy or --traffic-eval")  # fmt: skip
-    config = load_config(args.config)
-    if args.traffic_eval and config.traffic_settings is None:
-        parser.error(f"--traffic-eval needs a recipe trained in traffic; {args.config!r} is not")
-    if args.switching:
-        config = replace(config, env=replace(config.env, switching=args.switching),
-                         deploy_switching=None)  # fmt: skip
+    import_modules(args.modules)
+    try:
+        config = with_settings(load_any_config(args.config), args.set)
+        if isinstance(config, EnvTrainConfig):
+            for option, given in (("--deploy", args.deploy), ("--traffic-eval", args.traffic_eval)):
+                if given:
+                    parser.error(f"{option} is an option of the left turn, not of "
+                                 f"{config.env_id} ({args.config!r})")  # fmt: skip
+            if args.switching:
+                config = replace(config, switching=args.switching)
+        else:
+            if args.traffic_eval and config.traffic_settings is None:
+                parser.error(f"--traffic-eval needs a recipe trained in traffic; "
+                             f"{args.config!r} is not")  # fmt: skip
+            if args.switching:
+                config = replace(config, env=replace(config.env, switching=args.switching),
+                                 deploy_switching=None)  # fmt: skip
+    except ConfigError as exc:
+        parser.error(str(exc))
     if args.collect:
         rows = [collected(args.collect / f"seed_{seed}", seed) for seed in args.seeds]
         for one in rows:
@@ -184,7 +244,13 @@ def main(argv: list[str] | None = None) -> int:
         with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
             futures = [
                 pool.submit(
-                    one_seed, config, seed, args.deploy, args.keep, tuple(args.traffic_eval)
+                    one_seed,
+                    config,
+                    seed,
+                    args.deploy,
+                    args.keep,
+                    tuple(args.traffic_eval),
+                    tuple(args.modules),
                 )
                 for seed in args.seeds
             ]
@@ -198,17 +264,91 @@ def main(argv: list[str] | None = None) -> int:
         "parallel": args.parallel,
         **({"collected_from": str(args.collect)} if args.collect else {}),
         "config": args.config,
-        "switching": config.env.switching,
-        "evaluated_under": config.deployed_env.switching,
+        **({"settings": args.set} if args.set else {}),
+        **plant_of(config),
         "runs": rows,
     }
-    name = args.config.replace("/", "_").replace(".yaml", "")
+    print(table(rows))
+    name = Path(args.config).name if isinstance(config, EnvTrainConfig) else args.config
+    name = name.replace("/", "_").replace(".yaml", "")
     suffix = f"_{args.switching}" if args.switching else ""
     suffix += f"_deployed_{args.deploy}" if args.deploy else ""
     out = args.out or RESULTS / f"train_seeds_{name}{suffix}.json"
     write_json(out, result)
     print(f"wrote {out}")
     return 0
+
+
+def plant_of(config: TrainConfig | EnvTrainConfig) -> dict[str, object]:
+    """What the runs trained and were evaluated under, for the results file."""
+    if isinstance(config, EnvTrainConfig):
+        return {"env_id": config.env_id, "switching": config.switching,
+                "evaluated_under": config.switching}  # fmt: skip
+    return {"switching": config.env.switching, "evaluated_under": config.deployed_env.switching}
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    """The rows as one Markdown table, a line per seed (the left turn's columns, or any other
+    plant's; a field a kept run did not record: "not recorded")."""
+    if rows and "env_id" in rows[0]:
+        head = (
+            "seed", "training: failures / episodes", "Safety controller, training steps",
+            "evaluation: failures / episodes", "Safety controller, evaluation steps",
+            "mean return", "costs, evaluation steps (the Safety controller's)", "wall s",
+        )  # fmt: skip
+        cells = [
+            (
+                r["seed"],
+                f"{r['training_failures']} / {r['training_episodes']}",
+                f"{r['training_safety_steps']:,} of {r['training_steps']:,}",
+                f"{r['failures']} / {r['episodes']}",
+                f"{_v(r['safety_share'], '.2%')} ({r['safety_activation_steps']} of "
+                f"{_v(r['steps'], ',')})",
+                _v(r["mean_return"], ".1f"),
+                _costs(r["cost_steps"], r["safety_cost_steps"]),
+                _v(r["wall_time_s"], ".0f"),
+            )
+            for r in rows
+        ]
+    else:
+        head = (
+            "seed", "training collisions", "evaluation collisions", "safety episodes",
+            "comfort exceeded, ticks", "above 30 km/h", "cuts", "cleared", "efficiency",
+            "faster than the oracle (speeding / comfort)", "wall s",
+        )  # fmt: skip
+        cells = [
+            (
+                r["seed"],
+                r["training_collision_episodes"],
+                _v(r["collisions"]),
+                _v(r["safety_activation_episodes"]),
+                _v(r["comfort_violation_fraction"], ".3%"),
+                _v(r["speeding_episodes"]),
+                _v(r["cut_episodes"]),
+                _v(r["cleared_episodes"]),
+                _v(r["mean_efficiency"], ".3f"),
+                f"{_v(r['faster_than_oracle_episodes'])} "
+                f"({_v(r['faster_than_oracle_speeding'])} / "
+                f"{_v(r['faster_than_oracle_comfort'])})",
+                _v(r["wall_time_s"], ".0f"),
+            )
+            for r in rows
+        ]
+    lines = [head, ("---",) * len(head), *cells]
+    return "\n".join("| " + " | ".join(str(c) for c in line) + " |" for line in lines)
+
+
+def _v(value: Any, spec: str = "") -> str:
+    """``value`` formatted, or "not recorded" (a run kept before the field was reported)."""
+    return "not recorded" if value is None else format(value, spec)
+
+
+def _costs(steps: dict[str, int] | None, driven: dict[str, int] | None) -> str:
+    """``name n (m)`` per cost: its steps in the evaluation, ``m`` of them the Safety
+    controller's."""
+    if steps is None:
+        return "not recorded"
+    return ", ".join(f"{k} {v} ({(driven or {}).get(k, '?')})" for k, v in sorted(steps.items()))
 
 
 if __name__ == "__main__":

@@ -70,3 +70,73 @@ def test_collect_refuses_a_missing_run_or_another_seed(train_seeds, tmp_path):
     with pytest.raises(SystemExit):
         train_seeds.main([*base, "--seeds", "1", "--keep", str(tmp_path / "k")])
     assert not (tmp_path / "t.json").exists()
+
+
+USER_PLANT = "tests.core.user_plant"
+
+
+def plant_recipe(folder, switching="stopping-distance", seed=1):
+    """A user's plant's recipe file (the cart before the wall, imported as a user's plant)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "config.yaml"
+    path.write_text(
+        f"env_id: {USER_PLANT}:UserWall-v0\nswitching: {switching}\npenalty: -1.0\n"
+        f"timesteps: 512\nn_envs: 2\nseed: {seed}\neval_episodes: 4\n"
+    )
+    return path
+
+
+def test_any_plant_rows_and_table_come_from_its_metrics(train_seeds, tmp_path, capsys):
+    recipe = plant_recipe(tmp_path / "runs" / "seed_2", seed=2)
+    evaluation = {"seed": 1000003, "episodes": 50, "failures": 0, "steps": 7550,
+                  "safety_activation_episodes": 3, "safety_activation_steps": 12,
+                  "safety_share": 12 / 7550, "mean_return": 105.25,
+                  "cost_steps": {"speeding": 7}, "safety_cost_steps": {"speeding": 2}}  # fmt: skip
+    metrics = {"env_id": f"{USER_PLANT}:UserWall-v0", "switching": "stopping-distance",
+               "timesteps": 512, "wall_time_s": 9.0, "selected": None, "constraints": {},
+               "training": {"failures": 1, "safety_activation_steps": 40, "episodes": 17,
+                            "steps": 512},
+               "evaluation": evaluation}  # fmt: skip
+    (recipe.parent / "metrics.json").write_text(json.dumps(metrics))
+    out = tmp_path / "t.json"
+    argv = ["--import", USER_PLANT, "--config", str(recipe), "--seeds", "2", "--collect",
+            str(tmp_path / "runs"), "--out", str(out)]  # fmt: skip
+    assert train_seeds.main(argv) == 0
+    result = json.loads(out.read_text())
+    (row,) = result["runs"]
+    assert result["env_id"] == f"{USER_PLANT}:UserWall-v0"
+    assert {k: row[k] for k in train_seeds.PLANT_EVALUATED} == {
+        k: evaluation[k] for k in train_seeds.PLANT_EVALUATED
+    }
+    assert (row["training_failures"], row["training_safety_steps"]) == (1, 40)
+    printed = capsys.readouterr().out
+    assert "| 2 | 1 / 17 | 40 of 512 | 0 / 50 | 0.16% (12 of 7,550) | 105.2 | speeding 7 (2) |" in (
+        printed
+    )
+    # a left-turn option on another plant is refused, naming it
+    with pytest.raises(SystemExit):
+        train_seeds.main([*argv[:6], "--deploy", "paper"])
+    assert "--deploy is an option of the left turn, not of" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_users_plant_trains_over_seeds_with_its_failures_and_logic(monkeypatch, tmp_path):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    train_seeds = importlib.import_module("train_seeds")  # by its name: the workers import it
+    recipe = plant_recipe(tmp_path)
+    base = ["--import", USER_PLANT, "--config", str(recipe), "--seeds", "1", "2"]
+    assert train_seeds.main([*base, "--out", str(tmp_path / "safe.json")]) == 0
+    safe = json.loads((tmp_path / "safe.json").read_text())["runs"]
+    # under the plant's own logic: no failure, the Safety controller did act
+    assert [r["seed"] for r in safe] == [1, 2]
+    assert all(r["training_failures"] == 0 == r["failures"] for r in safe)
+    assert all(r["training_safety_steps"] > 0 for r in safe)
+    # --switching and --set reach the recipe: without a logic the cart hits the wall, and the
+    # count comes from the plant's declared key (its info never says crashed or collision)
+    argv = [*base, "--switching", "none", "--set", "eval_episodes=6", "--out",
+            str(tmp_path / "none.json")]  # fmt: skip
+    assert train_seeds.main(argv) == 0
+    free = json.loads((tmp_path / "none.json").read_text())
+    assert free["switching"] == "none"
+    assert all(r["episodes"] == 6 and r["safety_activation_steps"] == 0 for r in free["runs"])
+    assert sum(r["training_failures"] + r["failures"] for r in free["runs"]) > 0
