@@ -118,6 +118,31 @@ def test_a_plant_learns_from_the_interventions_by_default_and_the_left_turn_does
         )
 
 
+def test_a_plant_trains_with_the_one_ppo_section_and_the_left_turn_starts_from_table_ii():
+    """A plant's PPO is Table II's with the left turn's recipes' step size, λ and epochs (the
+    section measured on every plant); the left turn's own defaults stay the paper's as written
+    (its recipes set theirs), and a plant's file can still ask for Table II's."""
+    plant = EnvTrainConfig(env_id="CartPole-v1").ppo
+    assert (plant.learning_rate, plant.gae_lambda, plant.n_epochs) == (5e-4, 0.98, 8)
+    table2 = TrainConfig().ppo
+    assert (table2.learning_rate, table2.gae_lambda, table2.n_epochs) == (2.5e-4, 0.9, 4)
+    rest = {f.name for f in dataclasses.fields(PPOConfig)} - {
+        "learning_rate", "gae_lambda", "n_epochs"
+    }  # fmt: skip
+    assert all(getattr(plant, k) == getattr(table2, k) for k in rest)
+    paper = from_dict(
+        EnvTrainConfig,
+        {
+            "env_id": "CartPole-v1",
+            "ppo": {"learning_rate": 2.5e-4, "gae_lambda": 0.9, "n_epochs": 4},
+        },
+    )
+    assert dataclasses.asdict(paper.ppo) == dataclasses.asdict(table2)
+    assert from_dict(EnvTrainConfig, to_dict(paper)) == paper
+    with pytest.raises(ConfigError, match=r"ppo\.gae_lambda.*1\.5"):
+        from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"gae_lambda": 1.5}})
+
+
 def test_the_reference_describes_a_key_a_section_inherits():
     fields = {f.name: f for f in fields_of(EnvPolicyConfig)}
     assert fields["intervention_imitation"].default == "1.0"
