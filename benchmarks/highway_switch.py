@@ -283,7 +283,7 @@ def figure(runs: list[dict[str, Any]], path: Path, recipe: str | None = None) ->
         sorted({run_name(str(r["switching"]), float(r["imitation"])) for r in runs}  # type: ignore[arg-type]
                - {"none"})
     )  # fmt: skip
-    how = f"the '{recipe}' recipe" if recipe else "PPO's defaults, full steering range"
+    how = f"the '{recipe}' recipe" if recipe else "PPO as Table II, full steering range"
     fig.suptitle(
         f"PPO on {safeswitch.HIGHWAY_ENV_ID} ({how}): with the {logics} switch vs without "
         "(25-episode means)"

@@ -195,7 +195,7 @@ def _speeding(evaluation: dict[str, Any]) -> float:
 #: highway_switch.py's results: file → (the recipe, its command's options, the weight of the
 #: recipe's own fit toward the interventions or ``None``).
 HIGHWAY_RESULTS: dict[str, tuple[str, str, float | None]] = {
-    "highway.json": ("PPO's defaults on highway-env's full steering", "", None),
+    "highway.json": ("PPO as Table II on highway-env's full steering", "", None),
     "highway_comfort.json": (
         "the `highway` recipe (learned steering ±0.025 rad, comfort a constraint",
         " --config highway --timesteps 100000 --out benchmarks/results/highway_comfort.json "
