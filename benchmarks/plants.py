@@ -305,13 +305,14 @@ def own_plant(name: str, label: str, command: str) -> list[Row]:
     if data is None:
         return []
     rows = []
+    section = ", ".join(data.get("settings") or []) or "a plant's defaults"
     for weight in sorted({r["intervention_imitation"] for r in data["runs"]}):
         mine = sorted(
             (r for r in data["runs"] if r["intervention_imitation"] == weight),
             key=lambda r: r["seed"],
         )
         how = (
-            "penalty alone (the paper's method)"
+            "penalty alone (the paper's R_ADAS)"
             if weight == 0
             else f"penalty + intervention imitation {weight:g}"
             + (" (the default)" if weight == DEFAULT_FIT else "")
@@ -319,7 +320,7 @@ def own_plant(name: str, label: str, command: str) -> list[Row]:
         rows.append(
             {
                 "plant": label,
-                "method": f"PPO, {how}, {mine[0]['timesteps']:,} steps",
+                "method": f"PPO ({section}), {how}, {mine[0]['timesteps']:,} steps",
                 "seeds": [r["seed"] for r in mine],
                 "measured": (
                     "failures (training, evaluation) "
