@@ -51,6 +51,7 @@ def test_every_file_is_valid_against_the_asam_schema(random50):
     assert (folder / "intersection.xodr").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_the_files_parse_back_to_the_very_scenarios_written(random50):
     folder, _ = random50
     config, _ = baseline_setup("rule", None)
@@ -123,6 +124,7 @@ def test_a_file_for_another_scene_or_edited_by_hand_is_refused(random50, tmp_pat
         read_scenarios(invalid, task)
 
 
+@pytest.mark.slow
 def test_every_falsified_counterexample_replays_its_failure(tmp_path, capsys):
     falsified = tmp_path / "falsified"
     args = ["falsify", "--controller", "rule", "--budget", "1000", "--generation", "500",

@@ -51,7 +51,11 @@ def windowed(exported, tmp_path):
 
 @pytest.mark.parametrize(
     ("model", "switching", "scope"),
-    [("paper", None, "episode"), ("certified", "certified", "episode"), ("paper", None, "window")],
+    [
+        pytest.param("paper", None, "episode", marks=pytest.mark.slow),
+        ("certified", "certified", "episode"),
+        pytest.param("paper", None, "window", marks=pytest.mark.slow),
+    ],
 )
 def test_the_runtime_decides_exactly_as_the_environment(
     exported, windowed, model, switching, scope

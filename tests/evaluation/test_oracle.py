@@ -74,6 +74,7 @@ def test_the_oracle_keeps_every_limit_on_any_scenario(oracle, offset, north_kmh,
     assert_within_limits(oracle, oracle.plan(scenarios))
 
 
+@pytest.mark.slow
 def test_no_acceleration_sequence_of_the_same_model_beats_the_oracle(oracle, random_plan):
     """Random piecewise-constant accelerations (0.4 s pieces) on the oracle's own point mass:
     every sequence that keeps the limits clears the zone no sooner than the oracle."""

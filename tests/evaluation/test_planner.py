@@ -69,6 +69,7 @@ def test_it_is_faster_than_the_rule_based_system_when_it_yields_without_stopping
     assert result.time_to_clear[both_yield].mean() < rule_time[both_yield].mean()
 
 
+@pytest.mark.slow
 def test_the_paper_scenarios(setup):
     task, planner = setup
     scenarios, names = scenario_set(task, "paper", 3, 0)

@@ -173,6 +173,7 @@ def test_adversarial_drivers_never_crash_under_certified_at_length(kind):
     assert row["crashes"] == 0 and row["off_road"] == 0 and row["steps"] == 40 * 151
 
 
+@pytest.mark.slow
 def test_the_idm_driver_in_the_egos_seat_drives_like_highway_envs_own_vehicles():
     env = gym.make(safeswitch.HIGHWAY_ENV_ID, switching="none")
     row = drive(env, IDMDriver(), 2, seed=1_000_003)

@@ -114,8 +114,15 @@ def test_idm_stops_behind_a_stopped_leader_without_touching_it():
     assert 0.5 < gap <= IDMParams().min_gap + 0.5
 
 
-@pytest.mark.parametrize("switching", ["none", "paper"])
-@pytest.mark.parametrize("preset", ["light", "heavy"])
+@pytest.mark.parametrize(
+    ("preset", "switching"),
+    [
+        ("light", "none"),
+        pytest.param("light", "paper", marks=pytest.mark.slow),
+        pytest.param("heavy", "none", marks=pytest.mark.slow),
+        pytest.param("heavy", "paper", marks=pytest.mark.slow),
+    ],
+)
 def test_other_vehicles_never_collide_with_each_other(preset, switching):
     """Whatever the ego does — crawling through the box included — the rules keep the other
     vehicles apart: car following, right of way, occupied zones and a clear box."""
@@ -360,6 +367,7 @@ def test_certified_never_collides_in_traffic(preset):
     assert sum(collisions[("paper", name)] for name in ADVERSARIES) > 0
 
 
+@pytest.mark.slow
 def test_certified_accounts_for_vehicles_not_yet_in_the_scene():
     """Without the phantoms, a vehicle appearing on a crossing route turns the place where
     the ego waits into a conflict zone: the certificate needs them."""
@@ -372,6 +380,7 @@ def test_certified_accounts_for_vehicles_not_yet_in_the_scene():
     assert result.collision.sum() > 0
 
 
+@pytest.mark.slow
 def test_paper_logic_acts_on_a_vehicle_other_than_the_north_car():
     """A crossing vehicle from the east stopped in the ego's path: the generalised Algorithm
     1 brakes for it although the north car is far away."""
@@ -386,6 +395,7 @@ def test_paper_logic_acts_on_a_vehicle_other_than_the_north_car():
 # -- evaluation in traffic -------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_oracle_plans_around_every_crossing_vehicle():
     task = traffic_task("medium", "certified", horizon_s=20.0)
     batch = scenes(task, 64)
@@ -408,6 +418,7 @@ def test_oracle_plans_around_every_crossing_vehicle():
     assert faster.mean() < 0.1
 
 
+@pytest.mark.slow
 def test_surrogate_measures_flag_close_calls():
     """Without a switching logic collisions come with TTC 0; under the certified logic the
     post-encroachment times stay above a second."""
