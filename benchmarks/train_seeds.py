@@ -269,8 +269,8 @@ def main(argv: list[str] | None = None) -> int:
         "runs": rows,
     }
     print(table(rows))
-    name = Path(args.config).name if isinstance(config, EnvTrainConfig) else args.config
-    name = name.replace("/", "_").replace(".yaml", "")
+    given = Path(args.config)  # a file: its name; a packaged or experimental name as given
+    name = given.stem if given.is_file() else args.config.replace("/", "_")
     suffix = f"_{args.switching}" if args.switching else ""
     suffix += f"_deployed_{args.deploy}" if args.deploy else ""
     out = args.out or RESULTS / f"train_seeds_{name}{suffix}.json"
