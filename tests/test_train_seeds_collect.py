@@ -99,9 +99,8 @@ def test_any_plant_rows_and_table_come_from_its_metrics(train_seeds, tmp_path, c
                "evaluation": evaluation}  # fmt: skip
     (recipe.parent / "metrics.json").write_text(json.dumps(metrics))
     out = tmp_path / "t.json"
-    argv = ["--import", USER_PLANT, "--config", str(recipe), "--seeds", "2", "--collect",
-            str(tmp_path / "runs"), "--out", str(out)]  # fmt: skip
-    assert train_seeds.main(argv) == 0
+    plant = ["--import", USER_PLANT, "--config", str(recipe), "--seeds", "2"]
+    assert train_seeds.main([*plant, "--collect", str(tmp_path / "runs"), "--out", str(out)]) == 0
     result = json.loads(out.read_text())
     (row,) = result["runs"]
     assert result["env_id"] == f"{USER_PLANT}:UserWall-v0"
@@ -115,7 +114,7 @@ def test_any_plant_rows_and_table_come_from_its_metrics(train_seeds, tmp_path, c
     )
     # a left-turn option on another plant is refused, naming it
     with pytest.raises(SystemExit):
-        train_seeds.main([*argv[:6], "--deploy", "paper"])
+        train_seeds.main([*plant, "--deploy", "paper"])
     assert "--deploy is an option of the left turn, not of" in capsys.readouterr().err
 
 
