@@ -27,8 +27,9 @@ the shipped ``highway`` recipe does (its runs are ``certified+imitation`` with `
 1``).
 
 Run: ``python benchmarks/highway_switch.py [--config NAME] [--logics certified none]
-[--timesteps N] [--seeds 1 2 3] [--imitation W] [--parallel 2] [--eval-episodes 50]
-[--out FILE] [--keep DIR] [--resume] [--reevaluate] [--figure-only] [--json]``; writes
+[--timesteps N] [--seeds 1 2 3] [--imitation W [--imitation-only]] [--parallel 2]
+[--eval-episodes 50] [--out FILE] [--keep DIR] [--resume] [--reevaluate] [--figure-only]
+[--json]``; writes
 ``benchmarks/results/highway.json`` and ``docs/highway_training.png``. One torch thread per
 run.
 """
@@ -352,6 +353,11 @@ def main(argv: list[str] | None = None) -> int:
         help="also train the first logic with policy.intervention_imitation W (runs "
              "'LOGIC+imitation')",
     )  # fmt: skip
+    parser.add_argument(
+        "--imitation-only", action="store_true",
+        help="with --imitation: train the first logic only with the fit (the runs of a recipe "
+             "whose own weight it is), not also with R_ADAS alone",
+    )  # fmt: skip
     parser.add_argument("--parallel", type=int, default=2, help="training runs at once")
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--figure", type=Path, default=FIGURE)
@@ -412,9 +418,13 @@ def main(argv: list[str] | None = None) -> int:
             )
             again.remove(run)
     done = {run_key(r) for r in runs}
+    if args.imitation_only and not args.imitation:
+        parser.error("--imitation-only needs --imitation W")
     wanted = [(lg, 0.0) for lg in args.logics]
     if args.imitation:
         wanted.append((args.logics[0], args.imitation))
+        if args.imitation_only:
+            wanted.remove((args.logics[0], 0.0))
     jobs = [(lg, w, seed) for seed in args.seeds for lg, w in wanted if (lg, w, seed) not in done]
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
