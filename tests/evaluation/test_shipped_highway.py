@@ -57,8 +57,10 @@ def test_under_the_switch_it_never_crashed_and_drives_within_the_rules():
     assert e["failures"] == 0
     assert sum(e["safety_reasons"].values()) == e["safety_activation_steps"]
     assert e["mean_return"] >= 0.95 * none["evaluation"]["mean_return"]
-    # what it misses is said wherever it is evaluated
-    assert "Safety controller" in missing_targets("highway-certified")
+    # what it misses is said wherever it is evaluated, with the share its evaluation measured
+    why = missing_targets("highway-certified")
+    assert f"Safety controller acts on {100 * e['safety_share']:.2f} %" in why
+    assert f"of its {e['safety_activation_steps']} steps" in why
 
 
 @pytest.mark.slow

@@ -43,10 +43,10 @@ MISSING_TARGETS = {
         "(benchmarks/traffic_certified.py, docs/traffic.md)"
     ),
     "highway_certified": (
-        "the Safety controller acts on 1.18 % of its 50 evaluation episodes' steps, above the "
-        "0.5 % issue #39 asks (its fallback, no more often than highway-env's IDM/MOBIL driver "
-        "under the same logic, 36.7 %, holds): all 89 steps keep it from closing on the car "
-        "ahead (docs/highway.md)"
+        "the Safety controller acts on 0.93 % of its 50 evaluation episodes' steps, above the "
+        "0.5 % issue #39 asks first (its fallback, no more often than highway-env's IDM/MOBIL "
+        "driver under the same logic, 36.7 %, holds): 68 of its 70 steps keep it from closing "
+        "on the car ahead, 2 on the road (docs/highway.md)"
     ),
 }
 
