@@ -110,6 +110,19 @@ def run_key(run: dict[str, Any]) -> tuple[str, float, int]:
     return run["switching"], run["imitation"], run["seed"]
 
 
+def methods(
+    logics: list[str], imitation: float = 0.0, imitation_only: bool = False
+) -> list[tuple[str, float]]:
+    """The (logic, imitation weight) pairs to train: each logic with R_ADAS alone, and with
+    ``imitation`` the first logic with the fit too — instead of alone with ``imitation_only``."""
+    wanted = [(logic, 0.0) for logic in logics]
+    if imitation:
+        wanted.append((logics[0], imitation))
+        if imitation_only:
+            wanted.remove((logics[0], 0.0))
+    return wanted
+
+
 def kept_dir(keep: Path, switching: str, imitation: float, seed: int) -> Path:
     return keep / f"{run_name(switching, imitation).replace('+', '_')}_seed{seed}"
 
@@ -425,11 +438,7 @@ def main(argv: list[str] | None = None) -> int:
     done = {run_key(r) for r in runs}
     if args.imitation_only and not args.imitation:
         parser.error("--imitation-only needs --imitation W")
-    wanted = [(lg, 0.0) for lg in args.logics]
-    if args.imitation:
-        wanted.append((args.logics[0], args.imitation))
-        if args.imitation_only:
-            wanted.remove((args.logics[0], 0.0))
+    wanted = methods(args.logics, args.imitation, args.imitation_only)
     jobs = [(lg, w, seed) for seed in args.seeds for lg, w in wanted if (lg, w, seed) not in done]
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
