@@ -397,6 +397,8 @@ def main(argv: list[str] | None = None) -> int:
         "--figure-only", action="store_true", help="draw the figure from --out and stop"
     )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.imitation_only and not args.imitation:
+        parser.error("--imitation-only needs --imitation W")
     if args.figure_only:
         kept = json.loads(args.out.read_text())
         figure(kept["runs"], args.figure, kept.get("recipe"))
@@ -436,8 +438,6 @@ def main(argv: list[str] | None = None) -> int:
             )
             again.remove(run)
     done = {run_key(r) for r in runs}
-    if args.imitation_only and not args.imitation:
-        parser.error("--imitation-only needs --imitation W")
     wanted = methods(args.logics, args.imitation, args.imitation_only)
     jobs = [(lg, w, seed) for seed in args.seeds for lg, w in wanted if (lg, w, seed) not in done]
     spawn = multiprocessing.get_context("spawn")

@@ -30,3 +30,29 @@ def interrupted_training(monkeypatch):
             monkeypatch.setattr(monitor, "_on_rollout_end", original)
 
     return run
+
+
+@pytest.fixture
+def benchmark_module(monkeypatch):
+    """``benchmark_module("plants")``: a script of ``benchmarks/`` imported as a module of its
+    own (``benchmarks/`` on the path for its ``_common``), forgotten after the test."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    benchmarks = Path(__file__).resolve().parent.parent / "benchmarks"
+    monkeypatch.syspath_prepend(str(benchmarks))
+    loaded = []
+
+    def load(name):
+        spec = importlib.util.spec_from_file_location(
+            f"{name}_under_test", benchmarks / f"{name}.py"
+        )
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        loaded.append(spec.name)
+        return module
+
+    yield load
+    for name in loaded:
+        sys.modules.pop(name, None)

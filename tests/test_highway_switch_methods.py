@@ -1,27 +1,14 @@
 """``benchmarks/highway_switch.py``: which runs a command trains — a recipe's own runs with
 ``--imitation-only``, without the R_ADAS-alone ones, and the option refused without a weight."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
-
-BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
 
 pytest.importorskip("highway_env")
 
 
 @pytest.fixture
-def highway_switch(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
-    spec = importlib.util.spec_from_file_location(
-        "highway_switch_under_test", BENCHMARKS / "highway_switch.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop("highway_switch_under_test", None)
+def highway_switch(benchmark_module):
+    return benchmark_module("highway_switch")
 
 
 def test_the_recipe_runs_replace_the_first_logics_r_adas_alone_runs(highway_switch):

@@ -1,25 +1,16 @@
 """``benchmarks/plants.py``: issue #39's table is computed from the benchmarks' results — the
 traffic row's checks against what a results file records."""
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import pytest
 
-BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
-
 
 @pytest.fixture
-def plants(monkeypatch, tmp_path):
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
-    spec = importlib.util.spec_from_file_location("plants_under_test", BENCHMARKS / "plants.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+def plants(benchmark_module, monkeypatch, tmp_path):
+    module = benchmark_module("plants")
     monkeypatch.setattr(module, "RESULTS", tmp_path)
-    yield module
-    sys.modules.pop("plants_under_test", None)
+    return module
 
 
 def family(safety, efficiency=0.40, failures=0):

@@ -5,7 +5,6 @@ that is missing or was trained with another seed."""
 import importlib.util
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,14 +15,8 @@ BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
 
 
 @pytest.fixture
-def train_seeds(monkeypatch):
-    monkeypatch.syspath_prepend(str(BENCHMARKS))
-    spec = importlib.util.spec_from_file_location("train_seeds_under_test",
-                                                  BENCHMARKS / "train_seeds.py")  # fmt: skip
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    yield module
-    sys.modules.pop("train_seeds_under_test", None)
+def train_seeds(benchmark_module):
+    return benchmark_module("train_seeds")
 
 
 def kept_run(folder, evaluation):
