@@ -22,6 +22,7 @@ from safeswitch.training.config import (
     PPOConfig,
     ShapingConfig,
     TrainConfig,
+    load_config,
 )
 
 TABLE_II = {
@@ -141,6 +142,35 @@ def test_a_plant_trains_with_the_one_ppo_section_and_the_left_turn_starts_from_t
     assert from_dict(EnvTrainConfig, to_dict(paper)) == paper
     with pytest.raises(ConfigError, match=r"ppo\.gae_lambda.*1\.5"):
         from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "ppo": {"gae_lambda": 1.5}})
+
+
+@pytest.mark.parametrize(
+    ("recipe", "record", "before", "changed"),
+    [
+        ("paper", "experimental/paper_uncleared", "experimental/paper_fric_scene_guard",
+         ("policy", "constraints")),
+        ("certified", "experimental/certified_ablate_noise", "experimental/certified_narrow_safety",
+         ("policy",)),
+    ],
+)  # fmt: skip
+def test_the_left_turns_shipped_recipes_use_a_plants_ppo_section_and_its_learned_noise(
+    recipe, record, before, changed
+):
+    """Issue #39, item 5: the left turn's two shipped recipes train with a plant's PPO section
+    and its exploration (the noise learned from std 1); each is the experiment record whose
+    seeds the docs quote, and differs from the recipe it replaced in the noise alone (`paper`
+    also in the constraint on never clearing, which `certified` already had)."""
+    config = load_config(recipe)
+    plant = EnvTrainConfig(env_id="CartPole-v1")
+    shared = TABLE_II - {"n_steps"}  # a rollout's length is a step count, the plant's to set
+    assert {k: getattr(config.ppo, k) for k in shared} == {k: getattr(plant.ppo, k) for k in shared}
+    noise = ("learn_log_std", "log_std_init", "log_std_final")
+    assert [getattr(config.policy, k) for k in noise] == [getattr(plant.policy, k) for k in noise]
+    assert config == load_config(record)
+    old = load_config(before)
+    assert old.policy.log_std_final == -2.0 and not old.policy.learn_log_std
+    assert dataclasses.replace(old, **{k: getattr(config, k) for k in changed}) == config
+    assert config.constraints.uncleared == load_config("certified").constraints.uncleared
 
 
 def test_the_reference_describes_a_key_a_section_inherits():
