@@ -117,6 +117,16 @@ def missing(folder):
     return pytest.mark.xfail(why is not None, reason=why or "", strict=True)
 
 
+def test_what_the_certified_policy_misses_is_said_with_its_own_evaluation():
+    """The note every summary of the shipped `certified` policy carries quotes the figures
+    its evaluation (1,000 unseen scenarios, seed 1000003, ``metrics.json``) measured."""
+    e = metrics("certified")["evaluation"]
+    assert (e["episodes"], e["seed"]) == (1000, 1000003)
+    why = MISSING_TARGETS["certified"]
+    assert f"clears {e['cleared_episodes']} of 1,000 scenarios at {e['mean_efficiency']:.3f}" in why
+    assert f"needs the filter in {e['safety_activation_episodes']};" in why
+
+
 @pytest.fixture(scope="module")
 def certified():
     return evaluate("learned", "certified", switching=None, **EVAL)
