@@ -2,14 +2,18 @@
 ``certified`` policy, deployment seeds 1–3: the frozen policy against the adapting one, under
 ``certified``.
 
-Shifts (each one where the frozen policy needs the safety action in at least 10 % of
-episodes; it was trained on an ego at 18–25 km/h and an oncoming car at 20–32 km/h):
+Shifts (the policy was trained on an ego at 18–25 km/h starting 32–40 m before the conflict
+point and an oncoming car at 20–32 km/h; the defaults are the two on which the policy shipped
+until 2026-12-01, frozen, needed the safety action in at least 10 % of episodes):
 
 * ``north-fast`` (default): the oncoming car at 38–44 km/h (at 45 km/h some arrivals would
-  start the car before its route);
+  start the car before its route); the policy shipped since 2026-12-01 needs no safety action
+  there, and the run shows that adapting leaves such a policy as it is;
 * ``north-slow`` (default): the oncoming car at 6–12 km/h (a slow vehicle: it holds the
   conflict zone longer);
-* ``ego-fast``: the ego arriving at 28–30 km/h (adapting does not help there: docs/adapt.md);
+* ``ego-close``: the ego starting 22–28 m before the conflict point; ``ego-fast``: the ego
+  arriving at 28–30 km/h — on both the frozen policy needs the safety action in at least 10 %
+  of episodes and adapting does not help (its throttle cannot brake: docs/adapt.md);
 * ``paper-north-fast``: the shipped ``paper`` policy deployed under ``certified``, the oncoming
   car at 36–43 km/h.
 
@@ -23,11 +27,12 @@ whose policy was selected, how many blocks were rolled back and in how many lear
 paused (settled). One torch thread per run; runs go two at a time (two cores). The figure
 (the first seed's runs) is written beside the JSON (``--out``).
 
-Run: ``python benchmarks/adapt.py [--episodes 20000] [--shifts north-fast north-slow ego-fast]
-[--noise STD] [--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback] [--no-settle]
-[--n-envs N] [--eval-episodes N] [--seeds 1 2 3] [--out results/adapt.json]`` (the ``adapt``
-options of the same names, for the ablations of docs/adapt.md; ``--replot results/adapt.json``
-redraws the figure of a saved result).
+Run: ``python benchmarks/adapt.py [--episodes 20000]
+[--shifts north-fast north-slow ego-close ego-fast] [--noise STD] [--noise-decay SHARE]
+[--rehearsal SHARE] [--no-rollback] [--no-settle] [--n-envs N] [--eval-episodes N]
+[--seeds 1 2 3] [--out results/adapt.json]`` (the ``adapt`` options of the same names, for the
+ablations of docs/adapt.md; ``--replot results/adapt.json`` redraws the figure of a saved
+result).
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ from typing import Any
 import _common
 
 SHIFTS = {
+    "ego-close": ("certified", ["env.scenarios.ego_start_distance_m=[22, 28]"]),
     "ego-fast": ("certified", ["env.scenarios.ego_speed_kmh=[28, 30]"]),
     "north-fast": ("certified", ["env.scenarios.north_speed_kmh=[38, 44]"]),
     "north-slow": ("certified", ["env.scenarios.north_speed_kmh=[6, 12]"]),

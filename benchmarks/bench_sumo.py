@@ -21,7 +21,8 @@ file and keeps the rest.
 
 Run: ``python benchmarks/bench_sumo.py [--json] [--episodes N] [--compare N] [--traffic]
 [--cross-only]``; writes ``benchmarks/results/sumo.json`` (``--cross-only`` re-measures 3.
-alone, e.g. after a shipped policy was retrained, and keeps the rest). Needs ``pip install
+alone, e.g. after a shipped policy was retrained, and keeps the rest; with ``--traffic``, the
+traffic part's 3.). Needs ``pip install
 'safeswitch[sumo]'``. The single-car run takes about 25 minutes, ``--traffic`` about 20 (two
 cores).
 """
@@ -208,14 +209,21 @@ def main() -> None:
     parser.add_argument(
         "--cross-only",
         action="store_true",
-        help="re-measure only the single-car cross-simulator comparison (3.), keep the rest",
+        help="re-measure only the cross-simulator comparison (3.; with --traffic, the traffic "
+        "part's), keep the rest",
     )
     args = parser.parse_args()  # fmt: skip
     previous = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
     if args.cross_only:
-        if args.traffic or "safety" not in previous:
-            parser.error("--cross-only needs a single-car results file and no --traffic")
-        result = {**previous, "cross_simulator": cross(args.compare or 200)}
+        part_name = "traffic" if args.traffic else "single-car"
+        measured = previous.get("traffic", {}) if args.traffic else previous
+        if "safety" not in measured:
+            parser.error(f"--cross-only needs a results file with the {part_name} part")
+        if args.traffic:
+            crossed = {**measured, "cross_simulator": cross(args.compare or 100, "medium")}
+            result = {**previous, "traffic": crossed}
+        else:
+            result = {**previous, "cross_simulator": cross(args.compare or 200)}
     elif args.traffic:
         episodes, compare = args.episodes or 12, args.compare or 100
         rows = traffic_safety(episodes)

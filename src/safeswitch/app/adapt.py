@@ -261,9 +261,9 @@ def adapt(
     env = VecNormalize.load(str(source / "vecnormalize.pkl"), learning.env)
     env.training = False  # the observation statistics stay the original's
     ppo = SwitchPPO.load(source / "model.zip", env=learner_env(env, config), device="cpu")
-    # Exploration as training left it: the annealed noise's final size, held (its schedule
-    # runs over one learn call; here progress would restart it at log_std_init).
-    # Or the size asked; a checkpoint keeps the size it had.
+    # Exploration as training left it: a learned noise as it ended, an annealed one at its
+    # final size, held (its schedule runs over one learn call; here progress would restart it
+    # at log_std_init). Or the size asked; a checkpoint keeps the size it had.
     size = math.log(noise) if noise is not None else ppo.log_std_final
     if not resume and size is not None:
         with torch.no_grad():
