@@ -316,7 +316,8 @@ def test_a_bad_setting_of_the_searchs_filter_is_refused_by_name():
 
 FINETUNE = {
     "timesteps": 4096, "n_envs": 16,
-    "policy": {"log_std_init": -2.0, "log_std_final": -2.0, "actor_learning_rate": 1e-4},
+    "policy": {"learn_log_std": False, "log_std_init": -2.0, "log_std_final": -2.0,
+               "actor_learning_rate": 1e-4},
     "constraints": {"comfort": {"start": 0}, "safety": {"start": 0}, "uncleared": {"start": 0}},
     "validation": {"start": 2048, "every": 2048},
 }  # fmt: skip
