@@ -10,9 +10,9 @@ import pytest
 
 from safeswitch.cli import main
 from safeswitch.deploy import export as export_module
-from safeswitch.deploy.export import ExportError, export, left_turn_action
+from safeswitch.deploy.export import ExportError, export, left_turn_action, left_turn_observation
 from safeswitch.deploy.onnx_policy import OPSET, policy_graph
-from safeswitch.leftturn.config import ControllerConfig
+from safeswitch.leftturn.config import ControllerConfig, EpisodeConfig
 from safeswitch.training.policies import load_policy
 from safeswitch.training.shipped import SHIPPED, SHIPPED_DIR
 
@@ -77,6 +77,14 @@ def test_a_speed_set_point_action_is_stated_as_one():
     assert "throttle = (a + 1) / 2" in left_turn_action(ControllerConfig())[0]["meaning"]
     pedals = left_turn_action(ControllerConfig(learned_brake=True))[0]["meaning"]
     assert "the brake -a" in pedals
+
+
+def test_the_observed_time_left_is_stated_as_the_last_input():
+    names = [entry["name"] for entry in left_turn_observation(EpisodeConfig())]
+    assert names == ["x_e", "y_e", "v_e", "x_n", "y_n", "v_n"]
+    timed = left_turn_observation(EpisodeConfig(observe_time_left=True, horizon_s=8.0))
+    assert [entry["name"] for entry in timed] == [*names, "t_left"]
+    assert timed[-1]["unit"] == "s" and "8 s horizon" in timed[-1]["meaning"]
 
 
 def test_a_failed_parity_check_writes_nothing(tmp_path, monkeypatch):

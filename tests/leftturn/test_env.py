@@ -340,3 +340,31 @@ def test_rollouts_ask_the_policy_once_per_decision():
 
     rollout(task, task.draw_scenarios(0, np.arange(3), np.zeros(3, int)), policy)
     assert asked == list(range(0, task.config.episode.horizon_ticks, 4))
+
+
+@pytest.mark.parametrize("traffic", [None, {"preset": "light", "observed": 2, "horizon_s": 2.0}])
+def test_the_time_left_is_the_last_observed_value_when_asked_for(traffic):
+    """``episode.observe_time_left`` appends the seconds left to the horizon, after the scene's
+    values (the traffic's too), within the observation space; the scene's values are those of
+    the same episode without it; the terminal observation holds 0 s left at the horizon."""
+    episode = {"horizon_s": 2.0, "decision_interval": 5, "learned_scope": "episode"}
+    timed = make_vec_env(3, seed=2, traffic=traffic, config={"episode": {
+        **episode, "observe_time_left": True}})  # fmt: skip
+    plain = make_vec_env(3, seed=2, traffic=traffic, config={"episode": episode})
+    width = plain.observation_space.shape[0]
+    assert timed.observation_space.shape == (width + 1,)
+    assert timed.observation_space.high[-1] == 2.0 and timed.observation_space.low[-1] == 0.0
+    obs, ref = timed.reset(), plain.reset()
+    np.testing.assert_array_equal(obs[:, :width], ref)
+    np.testing.assert_array_equal(obs[:, -1], 2.0)
+    action = np.full((3, 1), 0.3, dtype=np.float32)
+    for step in range(1, 20):
+        obs, _, dones, _ = timed.step(action)
+        ref, *_ = plain.step(action)
+        np.testing.assert_array_equal(obs[:, :width], ref)
+        assert all(timed.observation_space.contains(o) for o in obs) and not dones.any()
+        np.testing.assert_allclose(obs[:, -1], 2.0 - 0.1 * step, atol=1e-5)  # 0.1 s a step
+    obs, _, dones, infos = timed.step(action)  # the 20th decision: the horizon
+    assert dones.all() and all(infos[i]["TimeLimit.truncated"] for i in range(3))
+    assert [infos[i]["terminal_observation"][-1] for i in range(3)] == [0.0] * 3
+    np.testing.assert_array_equal(obs[:, -1], 2.0)  # the fresh episodes'

@@ -56,6 +56,14 @@ LEFT_TURN_OBSERVATION = [
 ]
 
 
+def left_turn_observation(episode: Any) -> list[dict[str, str]]:
+    """The left turn's observation as the manifest states it, for the scene's ``episode``."""
+    if not episode.observe_time_left:
+        return LEFT_TURN_OBSERVATION
+    left = f"time left to the episode's {episode.horizon_s:g} s horizon"
+    return [*LEFT_TURN_OBSERVATION, {"name": "t_left", "unit": "s", "meaning": left}]
+
+
 def left_turn_action(controllers: Any) -> list[dict[str, str]]:
     """The left turn's action as the manifest states it, for the scene's ``controllers``."""
     top = controllers.learned_speed_command_kmh
@@ -266,7 +274,9 @@ def export(
         scene_dict: dict[str, Any] = to_dict(scene)
         if config.traffic is not None:
             scene_dict = {"env": scene_dict, "traffic": to_dict(config.traffic_settings)}
-        observation_layout = LEFT_TURN_OBSERVATION if config.traffic is None else None
+        observation_layout = (
+            left_turn_observation(scene.episode) if config.traffic is None else None
+        )
         action_layout = left_turn_action(scene.controllers) if config.traffic is None else None
         logic: str | None = scene.switching
         decision_interval, dt = scene.episode.decision_interval, scene.episode.dt

@@ -539,6 +539,10 @@ class EpisodeConfig:
             (``guard:…:overrules_primary``) are where the paper logic alone would have stopped
             the ego in the north car's path; ending the episode there gives the policy the
             outcome it would meet deployed under ``paper``, without the crash.
+        observe_time_left: Append the time left in the episode [s] to the observation (ours;
+            off: the paper's state). The episode's horizon is fixed and an episode that has not
+            cleared by then counts as never cleared, so without it the policy cannot tell an
+            early wait from a late one.
     """
 
     dt: Annotated[float, Bounds(0, 0.1, low_open=True, unit="s")] = 0.02
@@ -548,6 +552,7 @@ class EpisodeConfig:
     conflict_margin_m: Annotated[float, Bounds(0, 2, unit="m")] = 0.3
     decision_interval: Annotated[int, Bounds(1, 50, unit="ticks")] = 1
     end_on_reasons: tuple[str, ...] = ()
+    observe_time_left: bool = False
 
     def __post_init__(self) -> None:
         check_bounds(self, "episode")

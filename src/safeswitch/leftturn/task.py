@@ -521,18 +521,44 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         return LearnedPedals(throttle, brake, over)
 
     @property
-    def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Lower and upper bounds of :meth:`observe`'s values."""
+    def scene_observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Lower and upper bounds of what the observation holds of the scene (here the paper's
+        six values; a task in traffic adds its other vehicles)."""
         return OBSERVATION_LOW, OBSERVATION_HIGH
+
+    @property
+    def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Lower and upper bounds of :meth:`observe`'s values: the scene's, then, with
+        ``episode.observe_time_left``, the time left [0, horizon] s."""
+        low, high = self.scene_observation_bounds
+        if self.config.episode.observe_time_left:
+            low = np.append(low, np.float32(0.0))
+            high = np.append(high, np.float32(self.config.episode.horizon_s))
+        return low, high
 
     def observe(self, state: TaskState) -> NDArray[np.float32]:
         """The paper's state ``s = (x_e, y_e, v_e, x_n, y_n, v_n)``, ``[B, 6]`` float32 (the
-        north car as the ego sees it)."""
+        north car as the ego sees it), completed by :meth:`complete_observation`."""
         v = state.world.vehicles
         out = np.empty((state.batch_size, 6), dtype=np.float32)
         for j, (field, slot) in enumerate(_OBSERVED):
             out[:, j] = getattr(v, field)[:, slot]
-        return self.seen_north(state, out)
+        return self.complete_observation(state, self.seen_north(state, out))
+
+    def complete_observation(
+        self, state: TaskState, observation: NDArray[np.float32]
+    ) -> NDArray[np.float32]:
+        """The observation from the plant's six values (as the ego sees them): the task's
+        :meth:`extend_observation`, then, with ``episode.observe_time_left``, the time left in
+        the episode [s] as the last value (ours, off by default: the horizon is part of the
+        state of a fixed-horizon task — Pardo et al., "Time Limits in Reinforcement Learning",
+        ICML 2018)."""
+        out = self.extend_observation(state, observation)
+        episode = self.config.episode
+        if not episode.observe_time_left:
+            return out
+        left = np.maximum(episode.horizon_ticks - state.tick, 0) * episode.dt
+        return np.concatenate([out, left.astype(np.float32)[:, None]], axis=1)
 
     def seen_north(self, state: TaskState, observation: NDArray[np.float32]) -> NDArray[np.float32]:
         """``observation`` with the north car's values as the ego sees them (in place; within
@@ -882,7 +908,9 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             others,
         )
         record = StepRecord(
-            observation=self.extend_observation(new_state, self.seen_north(new_state, observation)),
+            observation=self.complete_observation(
+                new_state, self.seen_north(new_state, observation)
+            ),
             reward=reward,
             terms=terms,
             terminated=terminated,

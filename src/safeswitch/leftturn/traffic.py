@@ -549,12 +549,9 @@ class LeftTurnTrafficTask(LeftTurnTask):
         )  # fmt: skip
         return out
 
-    def observe(self, state: TaskState) -> NDArray[np.float32]:
-        return self.extend_observation(state, super().observe(state))
-
     @property
-    def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        low, high = super().observation_bounds
+    def scene_observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        low, high = super().scene_observation_bounds
         return np.concatenate([low, self._observed_low]), np.concatenate(
             [high, self._observed_high]
         )
