@@ -209,31 +209,39 @@ def main() -> None:
         import json
 
         result = json.loads(RESULTS.read_text())
-    began = time.perf_counter()
     log = lambda line: print(line, file=sys.stderr)  # noqa: E731
     result.update(machine=_common.machine(), torch_threads=1, seed=SEED)
-    if "sweeps" in parts:
-        log("sweeps")
-        result["episodes_per_cell"] = args.episodes
-        result["sweeps"] = study(sweeps(), args.episodes, SEED, CONTROLLERS, log=log)
-    if "traffic" in parts:
-        log("traffic sweeps")
-        result["traffic_episodes_per_cell"] = args.traffic_episodes
-        result["traffic_sweeps"] = study(
-            sweeps(), args.traffic_episodes, SEED, TRAFFIC_CONTROLLERS, log=log
-        )
-    if "guarantee" in parts:
-        log("guarantee")
-        result["guarantee"] = guarantee(args.guarantee, max(1000, args.guarantee // 5),
-                                        args.traffic)  # fmt: skip
-    if "speed" in parts:
-        log("speed")
-        result["speed"] = speed(3, 1.5)
-    if "calibration" in parts:
-        result["calibration"] = coverage()
-    result[f"wall_time_s_{'_'.join(parts) if len(parts) < len(PARTS) else 'all'}"] = round(
-        time.perf_counter() - began, 1
-    )
+    # Each part's own wall time (the parts not run keep theirs, with the date they ran).
+    kept = result.get("wall_time_s")
+    timings = {k: v for k, v in kept.items() if k in PARTS} if isinstance(kept, dict) else {}
+    for part in PARTS:
+        if part not in parts:
+            continue
+        began = time.perf_counter()
+        if part == "sweeps":
+            log("sweeps")
+            result["episodes_per_cell"] = args.episodes
+            result["sweeps"] = study(sweeps(), args.episodes, SEED, CONTROLLERS, log=log)
+        elif part == "traffic":
+            log("traffic sweeps")
+            result["traffic_episodes_per_cell"] = args.traffic_episodes
+            result["traffic_sweeps"] = study(
+                sweeps(), args.traffic_episodes, SEED, TRAFFIC_CONTROLLERS, log=log
+            )
+        elif part == "guarantee":
+            log("guarantee")
+            result["guarantee"] = guarantee(args.guarantee, max(1000, args.guarantee // 5),
+                                            args.traffic)  # fmt: skip
+        elif part == "speed":
+            log("speed")
+            result["speed"] = speed(3, 1.5)
+        else:
+            result["calibration"] = coverage()
+        timings[part] = {
+            "seconds": round(time.perf_counter() - began, 1),
+            "date": time.strftime("%Y-%m-%d"),
+        }
+    result["wall_time_s"] = timings
     _common.publish(result, RESULTS, as_json=False)
     perception_figure(result["sweeps"], FIGURE, PAPER_SCENE)  # type: ignore[arg-type]
     perception_figure(result["traffic_sweeps"], TRAFFIC_FIGURE, TRAFFIC_SCENE)  # type: ignore[arg-type]
