@@ -368,3 +368,35 @@ def test_the_time_left_is_the_last_observed_value_when_asked_for(traffic):
     assert dones.all() and all(infos[i]["TimeLimit.truncated"] for i in range(3))
     assert [infos[i]["terminal_observation"][-1] for i in range(3)] == [0.0] * 3
     np.testing.assert_array_equal(obs[:, -1], 2.0)  # the fresh episodes'
+
+
+def test_the_horizon_terminates_only_when_asked_for_and_with_the_clock():
+    """``episode.horizon_terminates`` turns the horizon's truncation into a termination (no
+    ``TimeLimit.truncated``: nothing is bootstrapped after it) and changes nothing before it;
+    without the time left in the observation it is refused, naming the key."""
+    episode = {"horizon_s": 2.0, "decision_interval": 5, "learned_scope": "episode",
+               "observe_time_left": True}  # fmt: skip
+    ends = make_vec_env(3, seed=2, config={"episode": {**episode, "horizon_terminates": True}})
+    cuts = make_vec_env(3, seed=2, config={"episode": episode})
+    np.testing.assert_array_equal(ends.reset(), cuts.reset())
+    action = np.full((3, 1), 0.3, dtype=np.float32)
+    for _ in range(20):
+        obs, reward, dones, infos = ends.step(action)
+        ref, ref_reward, ref_dones, ref_infos = cuts.step(action)
+        np.testing.assert_array_equal(obs, ref)
+        np.testing.assert_array_equal(reward, ref_reward)
+        np.testing.assert_array_equal(dones, ref_dones)
+    assert dones.all()  # the 20th decision is the horizon
+    assert [i["TimeLimit.truncated"] for i in ref_infos] == [True] * 3
+    assert [i["TimeLimit.truncated"] for i in infos] == [False] * 3
+    assert ends.last_record.terminated.all() and not ends.last_record.truncated.any()
+    assert not ends.last_record.collision.any()
+    env = LeftTurnEnv(config={"episode": {**episode, "horizon_terminates": True}})
+    env.reset(seed=3)
+    for _ in range(19):
+        _, _, terminated, truncated, _ = env.step(np.array([0.3], dtype=np.float32))
+        assert not (terminated or truncated)
+    _, _, terminated, truncated, info = env.step(np.array([0.3], dtype=np.float32))
+    assert terminated and not truncated and not info["collision"]
+    with pytest.raises(ConfigError, match="episode.horizon_terminates .*observe_time_left"):
+        resolve_config({"episode": {"horizon_terminates": True}})

@@ -543,6 +543,13 @@ class EpisodeConfig:
             off: the paper's state). The episode's horizon is fixed and an episode that has not
             cleared by then counts as never cleared, so without it the policy cannot tell an
             early wait from a late one.
+        horizon_terminates: End the episode at its horizon as a termination (``terminated``,
+            no ``TimeLimit.truncated``: PPO bootstraps nothing after it) instead of a
+            truncation (ours; off: the horizon truncates). With the time left observed the
+            horizon is part of the task, and Pardo et al. ("Time Limits in Reinforcement
+            Learning", ICML 2018) show its last state should then be treated as terminal;
+            needs ``observe_time_left`` (without the clock the terminal would be aliased with
+            states that go on). The end of the route still truncates.
     """
 
     dt: Annotated[float, Bounds(0, 0.1, low_open=True, unit="s")] = 0.02
@@ -553,9 +560,14 @@ class EpisodeConfig:
     decision_interval: Annotated[int, Bounds(1, 50, unit="ticks")] = 1
     end_on_reasons: tuple[str, ...] = ()
     observe_time_left: bool = False
+    horizon_terminates: bool = False
 
     def __post_init__(self) -> None:
         check_bounds(self, "episode")
+        check(not self.horizon_terminates or self.observe_time_left, "episode",
+              "horizon_terminates", self.horizon_terminates,
+              "needs episode.observe_time_left (without the time left in the observation the "
+              "horizon's terminal state looks like the states that go on)")  # fmt: skip
 
     @property
     def horizon_ticks(self) -> int:

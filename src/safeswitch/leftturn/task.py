@@ -885,6 +885,9 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         if self._ends_episode is not None:
             ended = sup.safety_active & self._ends_episode[reason]
             terminated, truncated = terminated | ended, truncated & ~ended
+        if self.config.episode.horizon_terminates:
+            ended = truncated & (tick >= self.config.episode.horizon_ticks)
+            terminated, truncated = terminated | ended, truncated & ~ended
         perception = None
         if self.perception is not None:
             assert state.perception is not None

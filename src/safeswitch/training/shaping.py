@@ -48,7 +48,8 @@ class ProgressShaping(VecEnvWrapper):
     ``Φ(s') = 0``, as Ng et al. require for the optimal policies to stay unchanged; otherwise a
     collision would pay ``k`` per metre the ego had come, against the episodes that go on. At a
     time limit or the end of the route (truncation: PPO bootstraps the value of ``s'``) it is
-    the last state's potential.
+    the last state's potential; a horizon that terminates (``episode.horizon_terminates``) is
+    a termination like any other.
 
     Args:
         venv: The batched left-turn environment.
