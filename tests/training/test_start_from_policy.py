@@ -69,3 +69,33 @@ def test_a_policy_of_another_shape_is_refused_by_name(source, tmp_path):
 def test_starting_from_a_policy_and_cloning_exclude_each_other():
     with pytest.raises(ConfigError, match=r"warm_start.*policy"):
         from_dict(TrainConfig, SMALL | {"warm_start": {"policy": "certified", "episodes": 10}})
+
+
+def test_a_policy_that_observes_fewer_values_starts_a_wider_run_when_asked_for(source, tmp_path):
+    """``warm_start.extend_inputs``: the source's six values are the first of this run's seven
+    (the time left appended): its first layers read them as before and the new input with
+    weights that start at zero; its statistics are re-estimated on the run's states. Without
+    the option the source is refused by name."""
+    clock = {"episode": {**SMALL["env"]["episode"], "observe_time_left": True}}
+    wide = SMALL | {
+        "seed": 4,
+        "env": clock,
+        "warm_start": {"policy": str(source), "extend_inputs": True, "freeze_obs_stats": False},
+        "policy": {"actor_frozen_steps": 10_000, "learn_log_std": False},
+    }
+    run = tmp_path / "wide"
+    train(from_dict(TrainConfig, wide), run, progress_bar=False)
+    theirs, ours = load_policy(source), load_policy(run)
+    first = [p.model.policy.mlp_extractor.policy_net[0].weight.detach() for p in (theirs, ours)]
+    assert first[1].shape == (16, 7)
+    np.testing.assert_array_equal(first[1][:, :6], first[0])
+    np.testing.assert_array_equal(first[1][:, 6], 0.0)  # the actor was frozen: still zero
+    critic = ours.model.policy.mlp_extractor.value_net[0].weight.detach()
+    assert critic[:, 6].abs().max() > 0  # the critic learned to read the clock
+    # the clock's statistics move from 0 toward the run's mean time left (about 1 s of 2)
+    assert 0.3 < ours.normalizer.obs_rms.mean[6] < 1.5
+    with pytest.raises(ConfigError, match=r"warm_start\.policy=.*\(6,\) there, \(7,\) here"):
+        train(from_dict(TrainConfig, wide | {"warm_start": {"policy": str(source)}}),
+              tmp_path / "narrow", progress_bar=False)  # fmt: skip
+    with pytest.raises(ConfigError, match=r"warm_start\.extend_inputs .*freeze_obs_stats"):
+        from_dict(TrainConfig, SMALL | {"warm_start": {"policy": "x", "extend_inputs": True}})

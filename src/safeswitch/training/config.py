@@ -292,6 +292,14 @@ class WarmStartConfig:
             to inputs normalised with exactly these; left running, they drift with PPO's state
             distribution and move the clone's cut/yield decisions (measured: the clone with the
             statistics of a 1.2 M-step run went from 21 to 205 episodes with a safety action).
+        extend_inputs: ``policy`` may observe fewer values than this run, its observation
+            being the first values of this run's (ours; e.g. the single-car scene's policy
+            starting a run in traffic, whose observation is the paper's six values, then the
+            other vehicles'): the first layers' weights for the extra inputs start at zero, so
+            the network starts out computing what ``policy``'s did, and the observation
+            statistics start from ``policy``'s for its values and are re-estimated on this
+            run's states (needs ``freeze_obs_stats: false``; a curriculum from one scene to
+            another, no demonstrations).
     """
 
     episodes: Annotated[int, Bounds(0)] = 0
@@ -303,9 +311,14 @@ class WarmStartConfig:
     gap_planner: GapPlannerConfig = field(default_factory=GapPlannerConfig)
     policy: str | None = None
     freeze_obs_stats: bool = True
+    extend_inputs: bool = False
 
     def __post_init__(self) -> None:
         check_bounds(self, "warm_start")
+        check(not self.extend_inputs or (self.policy is not None and not self.freeze_obs_stats),
+              "warm_start", "extend_inputs", self.extend_inputs,
+              "needs a policy to start from and freeze_obs_stats: false (the extra inputs' "
+              "statistics are learned)")  # fmt: skip
         check(self.policy is None or not self.episodes, "warm_start", "policy", self.policy,
               "starts from a trained policy: leave episodes at 0 (no cloning)")  # fmt: skip
         check(self.teacher in TEACHERS, "warm_start", "teacher", self.teacher,

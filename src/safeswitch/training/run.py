@@ -470,12 +470,15 @@ class LeftTurnPlant(Plant):
         start = self.config.warm_start.policy
         if start is not None:
             shape = tuple(vec.observation_space.shape or ())
-            check_start_policy(start, tuple(self.config.ppo.net_arch), shape)
+            extend = self.config.warm_start.extend_inputs
+            check_start_policy(start, tuple(self.config.ppo.net_arch), shape, extend)
 
     def warm_start(self, model: SwitchPPO, env: VecNormalize, run: Path) -> bool:
         ws = self.config.warm_start
         if ws.policy is not None:
-            record = start_from_policy(model, env, ws.policy, ws.freeze_obs_stats)
+            record = start_from_policy(
+                model, env, ws.policy, ws.freeze_obs_stats, ws.extend_inputs
+            )
         elif ws.episodes > 0:
             record = warm_start(model, env, self.config)
         else:

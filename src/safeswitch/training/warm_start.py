@@ -187,11 +187,21 @@ def warm_start(model: SwitchPPO, env: VecNormalize, config: TrainConfig) -> dict
 
 
 def start_from_policy(
-    model: SwitchPPO, env: VecNormalize, source: str, freeze_obs_stats: bool
+    model: SwitchPPO,
+    env: VecNormalize,
+    source: str,
+    freeze_obs_stats: bool,
+    extend_inputs: bool = False,
 ) -> dict[str, Any]:
     """Start ``model`` from a trained policy (``warm_start.policy``): its network's weights
     (actor, critic and log std; the optimiser starts afresh) and its observation statistics
     into ``env`` (frozen if ``freeze_obs_stats``, as after a cloning).
+
+    With ``extend_inputs`` the source may observe the first ``d`` of this run's ``D`` values:
+    the first layers' weights for the other ``D - d`` inputs start at zero (the network's
+    outputs are the source's for every observation), and the statistics of all ``D`` start
+    from the source's (0 and 1 for the new ones) with a count of :data:`EXTENDED_STATS_COUNT`,
+    so that this run's states re-estimate them within its first rollouts.
 
     Raises:
         ConfigError: ``source`` did not normalise its observations, or is not a trained
@@ -208,17 +218,45 @@ def start_from_policy(
             "does (ppo.normalize_observations)"
         )
     theirs = trained.model.policy.state_dict()
-    model.policy.load_state_dict(theirs)  # its shape checked by check_start_policy first
     source_rms = trained.normalizer.obs_rms
     assert isinstance(source_rms, RunningMeanStd) and isinstance(env.obs_rms, RunningMeanStd)
-    rms = FrozenRunningMeanStd(shape=source_rms.mean.shape) if freeze_obs_stats else env.obs_rms
-    rms.mean, rms.var, rms.count = source_rms.mean.copy(), source_rms.var.copy(), source_rms.count
+    width, ours = source_rms.mean.shape[0], env.obs_rms.mean.shape[0]
+    if extend_inputs and width < ours:
+        theirs = extend_first_layers(theirs, model.policy.state_dict(), width)
+    model.policy.load_state_dict(theirs)  # its shape checked by check_start_policy first
+    rms = FrozenRunningMeanStd(shape=(ours,)) if freeze_obs_stats else env.obs_rms
+    mean, var = np.zeros(ours), np.ones(ours)
+    mean[:width], var[:width] = source_rms.mean, source_rms.var
+    count = source_rms.count if width == ours else min(source_rms.count, EXTENDED_STATS_COUNT)
+    rms.mean, rms.var, rms.count = mean, var, count
     env.obs_rms = rms
     return {
         "policy": str(trained.path),
         "parameters": int(sum(v.numel() for v in theirs.values())),
+        "inputs": {"source": int(width), "run": int(ours)},
         "wall_time_s": round(time.perf_counter() - began, 2),
     }
+
+
+#: The count the observation statistics restart from when a start policy's inputs are
+#: extended (``warm_start.extend_inputs``): about one rollout of 128 environments × 64 steps
+#: (8,192 states) weighs as much as what the source's statistics are then worth.
+EXTENDED_STATS_COUNT = 8192.0
+
+
+def extend_first_layers(
+    theirs: dict[str, torch.Tensor], ours: dict[str, torch.Tensor], width: int
+) -> dict[str, torch.Tensor]:
+    """``theirs`` (a policy's state dict observing ``width`` values) with every weight that
+    reads the observation widened to ``ours``'s inputs, the new columns zero."""
+    out = dict(theirs)
+    for key, weight in theirs.items():
+        target = ours[key]
+        if weight.ndim == 2 and weight.shape[1] == width and target.shape[1] > width:
+            wide = torch.zeros_like(target)
+            wide[:, :width] = weight
+            out[key] = wide
+    return out
 
 
 def _start_policy(source: str) -> Any:
@@ -236,9 +274,15 @@ def _start_policy(source: str) -> Any:
         raise ConfigError(f"warm_start.policy={source!r}: {error}") from error
 
 
-def check_start_policy(source: str, net_arch: tuple[int, ...], obs_shape: tuple[int, ...]) -> None:
+def check_start_policy(
+    source: str,
+    net_arch: tuple[int, ...],
+    obs_shape: tuple[int, ...],
+    extend_inputs: bool = False,
+) -> None:
     """Refuse, before a run directory is written, a ``warm_start.policy`` this run cannot
-    start from: none there, other hidden layers or another observation.
+    start from: none there, other hidden layers or another observation (with
+    ``extend_inputs``: one that is not at most as wide as this run's).
 
     Raises:
         ConfigError: Naming the value and what differs.
@@ -252,9 +296,14 @@ def check_start_policy(source: str, net_arch: tuple[int, ...], obs_shape: tuple[
         if isinstance(m, torch.nn.Linear)
     )
     shape = tuple(trained.model.observation_space.shape or ())
-    if layers != tuple(net_arch) or shape != tuple(obs_shape):
+    fits = shape == tuple(obs_shape) or (
+        extend_inputs and len(shape) == len(obs_shape) == 1 and shape[0] < obs_shape[0]
+    )
+    if layers != tuple(net_arch) or not fits:
         raise ConfigError(
             f"warm_start.policy={source!r}: its network is not this run's (hidden layers "
             f"{list(layers)} there, {list(net_arch)} here; observations {shape} there, "
-            f"{tuple(obs_shape)} here)"
+            f"{tuple(obs_shape)} here"
+            + ("" if extend_inputs else "; warm_start.extend_inputs starts from fewer")
+            + ")"
         )
