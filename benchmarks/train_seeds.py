@@ -26,7 +26,8 @@ evaluated on 1,000 scenes of each traffic family named, as ``safeswitch evaluate
 
 With ``--collect DIR`` nothing is trained: the rows are read from the runs an earlier
 ``--keep DIR`` kept (``DIR/seed_<seed>/metrics.json``), e.g. to add a field this script now
-reports to a table without training again.
+reports to a table without training again; ``--deploy`` and ``--traffic-eval`` then evaluate
+the kept runs' policies as after training.
 
 Run: ``python benchmarks/train_seeds.py [--config NAME] [--seeds 1 2 3] [--switching S]
 [--set KEY=VALUE ...] [--import MODULE ...] [--deploy LOGIC] [--parallel N] [--keep DIR |
@@ -95,7 +96,8 @@ def row(seed: int, metrics: dict[str, object]) -> dict[str, object]:
         }
     return {
         "seed": seed,
-        "warm_start_collisions": warm["collisions"] if isinstance(warm, dict) else None,
+        # a cloning's collisions; a run started from a trained policy records none
+        "warm_start_collisions": warm.get("collisions") if isinstance(warm, dict) else None,
         "timesteps": metrics["timesteps"],
         "wall_time_s": metrics["wall_time_s"],
         **_refined(metrics.get("refined")),
@@ -144,19 +146,29 @@ def one_seed(
         result = row(seed, metrics)
         if keep:
             result["run"] = str(run)
-        if deploy:
-            assert isinstance(config, TrainConfig)  # main() refuses --deploy on another plant
-            deployed = replace(config, deploy_switching=deploy)
-            e = evaluate_trained(load_policy(run), deployed, config.eval_episodes,
-                                 config.eval_seed)  # fmt: skip
-            result["deployed"] = {"switching": deploy, **{k: e[k] for k in EVALUATED}}
-        if families:
-            per_family = {}
-            for family in families:
-                e = evaluate("learned", str(run), "random", TRAFFIC_EPISODES, config.eval_seed,
-                             None, None, traffic=family)  # fmt: skip
-                per_family[family] = {k: e[k] for k in (*EVALUATED, "failures", "episodes")}
-            result["traffic"] = per_family
+        return {**result, **evaluated_further(config, run, deploy, families)}
+
+
+def evaluated_further(
+    config: TrainConfig | EnvTrainConfig, run: Path, deploy: str | None, families: tuple[str, ...]
+) -> dict[str, object]:
+    """The run's evaluations beyond its own: under ``deploy`` (``deployed``) and on 1,000
+    scenes of each traffic family of ``families`` (``traffic``), as ``safeswitch evaluate
+    --model RUN [--traffic FAMILY]`` does."""
+    result: dict[str, object] = {}
+    if deploy:
+        assert isinstance(config, TrainConfig)  # main() refuses --deploy on another plant
+        deployed = replace(config, deploy_switching=deploy)
+        e = evaluate_trained(load_policy(run), deployed, config.eval_episodes,
+                             config.eval_seed)  # fmt: skip
+        result["deployed"] = {"switching": deploy, **{k: e[k] for k in EVALUATED}}
+    if families:
+        per_family = {}
+        for family in families:
+            e = evaluate("learned", str(run), "random", TRAFFIC_EPISODES, config.eval_seed,
+                         None, None, traffic=family)  # fmt: skip
+            per_family[family] = {k: e[k] for k in (*EVALUATED, "failures", "episodes")}
+        result["traffic"] = per_family
     return result
 
 
@@ -211,12 +223,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--collect", type=Path, metavar="DIR",
         help="train nothing: read each seed's row from DIR/seed_<seed>/metrics.json (runs an "
-        "earlier --keep DIR kept)",
+        "earlier --keep DIR kept; with --deploy or --traffic-eval their policies are evaluated "
+        "as after training)",
     )  # fmt: skip
     args = parser.parse_args(argv)
-    if args.collect and (args.keep or args.deploy or args.traffic_eval):
-        parser.error("--collect reads kept runs: it trains and evaluates nothing, so it takes "
-                     "no --keep, --deploy or --traffic-eval")  # fmt: skip
+    if args.collect and args.keep:
+        parser.error("--collect reads kept runs: it trains nothing, so it takes no --keep")
     import_modules(args.modules)
     try:
         config = with_settings(load_any_config(args.config), args.set)
@@ -237,7 +249,12 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         parser.error(str(exc))
     if args.collect:
-        rows = [collected(args.collect / f"seed_{seed}", seed) for seed in args.seeds]
+        rows = []
+        for seed in args.seeds:
+            run = args.collect / f"seed_{seed}"
+            kept = collected(run, seed)  # refuses a missing run or another seed first
+            rows.append({**kept, **evaluated_further(config, run, args.deploy,
+                                                      tuple(args.traffic_eval))})  # fmt: skip
         for one in rows:
             print(json.dumps(one), flush=True)
     else:

@@ -19,14 +19,14 @@ def train_seeds(benchmark_module):
     return benchmark_module("train_seeds")
 
 
-def kept_run(folder, evaluation):
+def kept_run(folder, evaluation, warm_start=None):
     """A run as ``--keep`` leaves it: the shipped `certified` config (seed 1), a metrics.json."""
     folder.mkdir(parents=True)
     shutil.copyfile(run_config_path(resolve_model_dir("certified")), folder / "config.yaml")
     metrics = {
         "timesteps": 2_000_000, "wall_time_s": 200.0,
         "training": {"collision_episodes": 0, "safety_activation_episodes": 40, "episodes": 900},
-        "evaluation": evaluation,
+        "evaluation": evaluation, "warm_start": warm_start,
     }  # fmt: skip
     (folder / "metrics.json").write_text(json.dumps(metrics))
 
@@ -50,6 +50,38 @@ def test_collect_rebuilds_the_rows_of_kept_runs(train_seeds, tmp_path):
                       str(tmp_path / "older"), "--out", str(out)])  # fmt: skip
     (row,) = json.loads(out.read_text())["runs"]
     assert row["faster_than_oracle_either"] is None and row["collisions"] == 1
+
+
+@pytest.mark.parametrize(
+    ("warm_start", "collisions"),
+    [({"episodes": 400, "collisions": 2}, 2), ({"policy": "certified", "parameters": 9}, None)],
+)
+def test_a_row_states_a_cloning_s_collisions_and_none_for_a_started_policy(
+    train_seeds, tmp_path, warm_start, collisions
+):
+    """A run cloned from a teacher records the cloning's collisions; one started from a trained
+    policy (``warm_start.policy``) has none to record, and its row says so."""
+    kept_run(tmp_path / "runs" / "seed_1", {k: 0 for k in train_seeds.EVALUATED}, warm_start)
+    out = tmp_path / "table.json"
+    train_seeds.main(["--config", "certified", "--seeds", "1", "--collect",
+                      str(tmp_path / "runs"), "--out", str(out)])  # fmt: skip
+    (row,) = json.loads(out.read_text())["runs"]
+    assert row["warm_start_collisions"] == collisions
+
+
+def test_collect_evaluates_the_kept_policies_when_asked_for(train_seeds, tmp_path):
+    """``--collect DIR --deploy LOGIC``: the kept run's policy (here the shipped `certified`
+    one, copied) is evaluated under that logic as after training, on the recipe's scenarios."""
+    run = tmp_path / "runs" / "seed_1"
+    shutil.copytree(resolve_model_dir("certified"), run)
+    out = tmp_path / "table.json"
+    argv = ["--config", "certified", "--seeds", "1", "--collect", str(tmp_path / "runs"),
+            "--set", "eval_episodes=50", "--deploy", "none", "--out", str(out)]  # fmt: skip
+    assert train_seeds.main(argv) == 0
+    (row,) = json.loads(out.read_text())["runs"]
+    deployed = row["deployed"]  # evaluated now, on 50 scenarios, with no logic to act
+    assert deployed["switching"] == "none" and deployed["safety_activation_episodes"] == 0
+    assert deployed["cleared_episodes"] <= 50 < row["cleared_episodes"]  # the kept 1,000's
 
 
 def test_collect_refuses_a_missing_run_or_another_seed(train_seeds, tmp_path):
