@@ -398,5 +398,5 @@ def test_the_horizon_terminates_only_when_asked_for_and_with_the_clock():
         assert not (terminated or truncated)
     _, _, terminated, truncated, info = env.step(np.array([0.3], dtype=np.float32))
     assert terminated and not truncated and not info["collision"]
-    with pytest.raises(ConfigError, match="episode.horizon_terminates .*observe_time_left"):
+    with pytest.raises(ConfigError, match=r"episode\.horizon_terminates .*observe_time_left"):
         resolve_config({"episode": {"horizon_terminates": True}})

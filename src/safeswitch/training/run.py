@@ -476,9 +476,7 @@ class LeftTurnPlant(Plant):
     def warm_start(self, model: SwitchPPO, env: VecNormalize, run: Path) -> bool:
         ws = self.config.warm_start
         if ws.policy is not None:
-            record = start_from_policy(
-                model, env, ws.policy, ws.freeze_obs_stats, ws.extend_inputs
-            )
+            record = start_from_policy(model, env, ws.policy, ws.freeze_obs_stats, ws.extend_inputs)
         elif ws.episodes > 0:
             record = warm_start(model, env, self.config)
         else:
