@@ -198,10 +198,11 @@ def start_from_policy(
     into ``env`` (frozen if ``freeze_obs_stats``, as after a cloning).
 
     With ``extend_inputs`` the source may observe the first ``d`` of this run's ``D`` values:
-    the first layers' weights for the other ``D - d`` inputs start at zero (the network's
-    outputs are the source's for every observation), and the statistics of all ``D`` start
-    from the source's (0 and 1 for the new ones) with a count of :data:`EXTENDED_STATS_COUNT`,
-    so that this run's states re-estimate them within its first rollouts.
+    the first layers' weights for the other ``D - d`` inputs start at zero (normalised with
+    the source's statistics, every observation gets the source's outputs), and the statistics
+    of all ``D`` start from the source's (0 and 1 for the new ones) with a count of
+    :data:`EXTENDED_STATS_COUNT`, so that this run's states re-estimate them within its first
+    rollouts.
 
     Raises:
         ConfigError: ``source`` did not normalise its observations, or is not a trained
@@ -304,6 +305,11 @@ def check_start_policy(
             f"warm_start.policy={source!r}: its network is not this run's (hidden layers "
             f"{list(layers)} there, {list(net_arch)} here; observations {shape} there, "
             f"{tuple(obs_shape)} here"
-            + ("" if extend_inputs else "; warm_start.extend_inputs starts from fewer")
+            + (
+                ""
+                if extend_inputs
+                else "; warm_start.extend_inputs takes a policy that "
+                "observes the first of this run's values"
+            )
             + ")"
         )
