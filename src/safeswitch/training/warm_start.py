@@ -301,15 +301,12 @@ def check_start_policy(
         extend_inputs and len(shape) == len(obs_shape) == 1 and shape[0] < obs_shape[0]
     )
     if layers != tuple(net_arch) or not fits:
+        hint = "" if extend_inputs else (
+            "; warm_start.extend_inputs takes a policy that observes the first of this run's "
+            "values"
+        )  # fmt: skip
         raise ConfigError(
             f"warm_start.policy={source!r}: its network is not this run's (hidden layers "
             f"{list(layers)} there, {list(net_arch)} here; observations {shape} there, "
-            f"{tuple(obs_shape)} here"
-            + (
-                ""
-                if extend_inputs
-                else "; warm_start.extend_inputs takes a policy that "
-                "observes the first of this run's values"
-            )
-            + ")"
+            f"{tuple(obs_shape)} here{hint})"
         )
