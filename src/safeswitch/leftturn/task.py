@@ -403,6 +403,24 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             )
         return np.isin(np.array(self.reasons), ends) if ends else None
 
+    def _ended_as_terminal(
+        self,
+        safety_active: BoolArray,
+        reason: NDArray[np.int8],
+        truncated: BoolArray,
+        tick: NDArray[np.int64],
+    ) -> BoolArray | None:
+        """Per episode: the step ends it as a termination the plant's own rules do not — a
+        safety action of a reason in ``episode.end_on_reasons``, or its horizon with
+        ``episode.horizon_terminates`` (``None``: neither option is on)."""
+        ended = None
+        if self._ends_episode is not None:
+            ended = safety_active & self._ends_episode[reason]
+        if self.config.episode.horizon_terminates:
+            at_horizon = truncated & (tick >= self.config.episode.horizon_ticks)
+            ended = at_horizon if ended is None else ended | at_horizon
+        return ended
+
     def check_logic(self) -> None:
         """Build the switching logic and check ``episode.end_on_reasons`` against its reasons
         (run by the constructor, after the scene is built)."""
@@ -882,11 +900,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         terms = dict(zip(REWARD_TERMS, terms_out, strict=True))
         collision, terminated, truncated = book.collision, book.terminated, book.truncated
         ego_cleared, lost_control = book.ego_cleared, book.lost_control
-        if self._ends_episode is not None:
-            ended = sup.safety_active & self._ends_episode[reason]
-            terminated, truncated = terminated | ended, truncated & ~ended
-        if self.config.episode.horizon_terminates:
-            ended = truncated & (tick >= self.config.episode.horizon_ticks)
+        ended = self._ended_as_terminal(sup.safety_active, reason, truncated, tick)
+        if ended is not None:
             terminated, truncated = terminated | ended, truncated & ~ended
         perception = None
         if self.perception is not None:
