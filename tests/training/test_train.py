@@ -146,8 +146,10 @@ def test_bench_json_reports_positive_throughput(capsys):
         "env_steps_per_s",
     ):
         assert figures[key] > 0
-    # Batching pays: a 4,096-env step is far cheaper per environment than the single Env's.
-    assert figures["vec_env_steps_per_s_4096"] > 50 * figures["env_steps_per_s"]
+    # Batching pays: a 4,096-env step is far cheaper per environment than the single Env's
+    # (over 100 times on an idle machine, `safeswitch bench`). Windows of 0.05 s on a loaded
+    # machine measured 42 times; an unbatched step would be about once. The bound is 10 times.
+    assert figures["vec_env_steps_per_s_4096"] > 10 * figures["env_steps_per_s"]
 
 
 def test_resuming_a_run_interrupted_before_its_first_checkpoint_says_what_to_do(tmp_path):
