@@ -35,8 +35,11 @@ def main() -> None:
                          "certified" if model is None else None, None, traffic=traffic,
                          settings=ZONES if model is None else ())  # fmt: skip
             assert s["collisions"] == 0, (name, family, s["collisions"])
-            print(f"| {name} | {family} | {s['safety_activation_episodes']} | "
-                  f"{s['cleared_episodes']} | {s['mean_efficiency']:.3f} |", flush=True)
+            print(
+                f"| {name} | {family} | {s['safety_activation_episodes']} | "
+                f"{s['cleared_episodes']} | {s['mean_efficiency']:.3f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":
