@@ -14,8 +14,10 @@ drivers more than with the flows, it has learned to wait for a driver who gives 
 import sys
 
 from safeswitch.app.evaluate import evaluate
+from safeswitch.training.config import load_config
 
-ZONES = ("env.certified.ego_max_lateral_m=0.45", "env.certified.zone_margin_m=0.9")
+#: The recipe the policies were trained by; the gap planner drives under its filter's zones.
+RECIPE = "experimental/traffic_certified_time_left_terminal_g997"
 FAMILIES = {
     "train": {"preset": "train"},
     "train flows, test courtesy": {"preset": "train", "non_yielding_share": [0.5, 1.0]},
@@ -25,6 +27,9 @@ FAMILIES = {
 
 
 def main() -> None:
+    zones = load_config(RECIPE).env.certified
+    settings = (f"env.certified.ego_max_lateral_m={zones.ego_max_lateral_m}",
+                f"env.certified.zone_margin_m={zones.zone_margin_m}")  # fmt: skip
     controllers = [("gap planner", "gap_planner", None)]
     controllers += [(f"policy {run}", "learned", run) for run in sys.argv[1:]]
     print("| controller | family | safety episodes | cleared | efficiency |")
@@ -33,7 +38,7 @@ def main() -> None:
         for family, traffic in FAMILIES.items():
             s = evaluate(controller, model, "random", 1000, 1_000_003,
                          "certified" if model is None else None, None, traffic=traffic,
-                         settings=ZONES if model is None else ())  # fmt: skip
+                         settings=settings if model is None else ())  # fmt: skip
             assert s["collisions"] == 0, (name, family, s["collisions"])
             print(
                 f"| {name} | {family} | {s['safety_activation_episodes']} | "
