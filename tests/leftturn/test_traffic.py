@@ -17,6 +17,7 @@ from safeswitch.leftturn.logics.certified import certified_logic
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.traffic import (
+    BACKUP_FEATURES,
     CONFLICT_FEATURES,
     MARGIN_FEATURES,
     OBSERVED_FEATURES,
@@ -250,13 +251,14 @@ def _earliest_entry(progress, speed, enter, leave, accel, top):
     return t_top + (distance - d_top) / top
 
 
-@pytest.mark.parametrize("observe", ["conflicts", "margins"])
+@pytest.mark.parametrize("observe", ["conflicts", "margins", "backups"])
 def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances(observe):
     """``observe: conflicts``: each slot is a vehicle whose route crosses the ego's and that
     neither it nor the ego has got past, with its distances to its zone and the ego's to its
     own, soonest to reach its zone first; every conflict not shown comes later. ``margins``
     adds the certified filter's reckoning for each: the vehicle's earliest entry into its zone
-    and the time left over when the ego clears its own at full throttle."""
+    and the time left over when the ego clears its own at full throttle; ``backups`` also the
+    room a full brake from now leaves before the ego's zone."""
     k = 3
     config = {"switching": "certified", "episode": {"learned_scope": "episode"}}
     traffic = {"preset": "heavy", "observe": observe, "observed": k}
@@ -264,12 +266,13 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
     scenes = task.draw_scenarios(5, np.arange(16), np.zeros(16, dtype=np.int64))
     state = task.initial(scenes)
     low, high = task.observation_bounds
-    f = len(CONFLICT_FEATURES if observe == "conflicts" else MARGIN_FEATURES)
+    f = len({"conflicts": CONFLICT_FEATURES, "margins": MARGIN_FEATURES,
+             "backups": BACKUP_FEATURES}[observe])  # fmt: skip
     cert = task.config.certified
     accel, top = cert.other_max_accel, cert.other_max_speed_kmh / 3.6
     filter_ = certified_logic(task)
     factor, margin = cert.progress_factor, cert.time_margin_s
-    margins_seen = []
+    margins_seen, rooms_seen = [], []
     checked = 0
     for tick in range(400):
         if tick % 40 == 0:
@@ -287,17 +290,22 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
                         s_j = v.other_progress[b, j]
                         features = [1.0, zone[0] - s_j, zone[1] - s_j, v.other_speed[b, j],
                                     ego[0] - s_e, ego[1] - s_e]  # fmt: skip
-                        if observe == "margins":
+                        pedals = (v.ego_speed[b : b + 1], v.ego_throttle[b : b + 1],
+                                  v.ego_brake[b : b + 1])  # fmt: skip
+                        jump = filter_.bounds.c.progress_jump
+                        if observe != "conflicts":
                             arrive = _earliest_entry(s_j, v.other_speed[b, j], *zone, accel, top)
-                            jump = filter_.bounds.c.progress_jump
                             clear = filter_.clear_time(
-                                np.array([factor * max(ego[1] - s_e + jump, 0.0)]),
-                                v.ego_speed[b : b + 1], v.ego_throttle[b : b + 1],
-                                v.ego_brake[b : b + 1],
-                            )[0]  # fmt: skip
+                                np.array([factor * max(ego[1] - s_e + jump, 0.0)]), *pedals
+                            )[0]
                             slack = arrive - margin - clear
                             features += [min(arrive, 30.0), float(np.clip(slack, -30, 30))]
                             margins_seen.append(slack)
+                        if observe == "backups":
+                            stop = filter_.stop_distance(*pedals)[0]
+                            room = (ego[0] - s_e - jump) / factor - stop
+                            features.append(float(np.clip(room, -250, 250)))
+                            rooms_seen.append(room)
                         rows.append((soon, features))
                 rows.sort(key=lambda r: r[0])
                 slots = obs[b, 6:].reshape(k, f)
@@ -308,8 +316,10 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
                 checked += shown
         state, _ = task.step(state, np.full(16, 0.2))
     assert checked > 50
-    if observe == "margins":  # both signs occur: gaps full throttle would and would not take
+    if observe != "conflicts":  # both signs occur: gaps full throttle would and would not take
         assert min(margins_seen) < 0 < max(margins_seen)
+    if observe == "backups":  # and zones a full brake would and would not stop before
+        assert min(rooms_seen) < 0 < max(rooms_seen)
 
 
 def test_traffic_vec_env_resets_and_is_seeded():

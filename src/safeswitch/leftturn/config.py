@@ -426,7 +426,9 @@ class TrafficConfig:
             ours, :data:`~safeswitch.leftturn.traffic.CONFLICT_FEATURES`) or ``margins`` (the
             same vehicles with two more values each, what the certified filter reckons for
             them: the earliest they can enter their zone and its certificate's slack against
-            them, in seconds; ours, :data:`~safeswitch.leftturn.traffic.MARGIN_FEATURES`).
+            them, in seconds; ours, :data:`~safeswitch.leftturn.traffic.MARGIN_FEATURES`) or
+            ``backups`` (``margins`` and, per vehicle, the stop backup's room before the ego's
+            zone in metres; ours, :data:`~safeswitch.leftturn.traffic.BACKUP_FEATURES`).
     """
 
     main_flow_veh_h: Annotated[tuple[float, float], Bounds(0, 3000, unit="veh/h")] = (
@@ -447,7 +449,7 @@ class TrafficConfig:
     horizon_s: Annotated[float | None, Bounds(1, 120, unit="s")] = 30.0
     max_vehicles: Annotated[int, Bounds(1, 32)] = 12
     observed: Annotated[int, Bounds(0)] = 4
-    observe: Literal["nearest", "conflicts", "margins"] = "nearest"
+    observe: Literal["nearest", "conflicts", "margins", "backups"] = "nearest"
 
     def __post_init__(self) -> None:
         o = "traffic"
@@ -464,7 +466,7 @@ class TrafficConfig:
 
 
 #: Values of ``traffic.observe``.
-OBSERVATIONS = ("nearest", "conflicts", "margins")
+OBSERVATIONS = ("nearest", "conflicts", "margins", "backups")
 
 #: Named traffic settings: densities from light to heavy, and a train/test split of the space
 #: (the test family is denser and less courteous than anything trained on).

@@ -84,9 +84,20 @@ CONFLICT_FEATURES = ("present", "to_zone", "to_zone_end", "speed", "ego_to_zone"
 MARGIN_FEATURES = (*CONFLICT_FEATURES, "arrival_s", "slack_s")
 #: The cap on :data:`MARGIN_FEATURES`' times [s].
 MARGIN_CAP_S = 30.0
+#: With ``traffic.observe: backups``: :data:`MARGIN_FEATURES`, then the stop backup's room before
+#: the ego's zone with the vehicle [m]: the distance to its entry as the certificate counts it
+#: less the full brake's stopping distance from the current speed and pedals, so negative once
+#: braking now would not stop before it (capped at :data:`ROOM_CAP_M`). Of the two backups the
+#: margins show only the clear one's; this is how long the ego may keep its speed before the
+#: filter would have to brake (the pedals' lag is not otherwise in the observation).
+BACKUP_FEATURES = (*MARGIN_FEATURES, "stop_room_m")
+#: The cap on :data:`BACKUP_FEATURES`' room [m].
+ROOM_CAP_M = 250.0
 #: The features per observed vehicle of each ``traffic.observe``.
 FEATURES = {"nearest": OBSERVED_FEATURES, "conflicts": CONFLICT_FEATURES,
-            "margins": MARGIN_FEATURES}  # fmt: skip
+            "margins": MARGIN_FEATURES, "backups": BACKUP_FEATURES}  # fmt: skip
+#: The ``traffic.observe`` values in conflict coordinates.
+_CONFLICT_OBSERVATIONS = ("conflicts", "margins", "backups")
 #: Candidates drawn per approach before the nearest ``max_vehicles`` are kept.
 _PER_LEG = 8
 #: Uniforms per candidate: headway, turn, desired speed, yielding.
@@ -185,10 +196,12 @@ class LeftTurnTrafficTask(LeftTurnTask):
                                    crossing[:, 1])  # fmt: skip
         low: list[float]
         high: list[float]
-        if traffic.observe in ("conflicts", "margins"):
+        if traffic.observe in _CONFLICT_OBSERVATIONS:
             low, high = [0, -50, -50, 0, -250, -250], [1, 250, 250, 60, 250, 250]
-            if traffic.observe == "margins":
+            if traffic.observe != "conflicts":
                 low, high = [*low, 0, -MARGIN_CAP_S], [*high, MARGIN_CAP_S, MARGIN_CAP_S]
+            if traffic.observe == "backups":
+                low, high = [*low, -ROOM_CAP_M], [*high, ROOM_CAP_M]
         else:
             low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
@@ -198,7 +211,7 @@ class LeftTurnTrafficTask(LeftTurnTask):
     def _margins(self) -> CertifiedSwitching | None:
         """The certified filter whose reckoning ``observe: margins`` shows, whatever logic the
         task runs (the observation belongs to the policy), built from the finished scene."""
-        return certified_logic(self) if self.traffic.observe == "margins" else None
+        return certified_logic(self) if self.traffic.observe in ("margins", "backups") else None
 
     # -- scenarios and the start ------------------------------------------------------------
 
@@ -522,13 +535,15 @@ class LeftTurnTrafficTask(LeftTurnTask):
         width = len(FEATURES[observe])
         out = np.zeros((observation.shape[0], 6 + width * k), dtype=np.float32)
         out[:, :6] = observation
-        if observe in ("conflicts", "margins"):
+        if observe in _CONFLICT_OBSERVATIONS:
             v = self.view(state)
             extra = np.zeros((*v.present.shape, width - len(CONFLICT_FEATURES)))
             if self._margins is not None:
-                arrival, slack = self._margins.margins(v)
+                arrival, slack, room = self._margins.margins(v)
                 extra[..., 0] = np.minimum(arrival, MARGIN_CAP_S)
                 extra[..., 1] = np.clip(slack, -MARGIN_CAP_S, MARGIN_CAP_S)
+                if observe == "backups":
+                    extra[..., 2] = np.clip(room, -ROOM_CAP_M, ROOM_CAP_M)
             _soonest_conflicts(
                 v.present, v.ego_progress, v.ego_cert_zone, v.other_progress,
                 v.other_cert_zone, v.other_speed, extra, k, out,

@@ -645,20 +645,29 @@ def _decide(
 
 
 @jit
-def _margins(v: ConflictView, t: Bounds, arrival: FloatArray, slack: FloatArray) -> None:
+def _margins(
+    v: ConflictView, t: Bounds, arrival: FloatArray, slack: FloatArray, room: FloatArray
+) -> None:
     """Fill :meth:`CertifiedSwitching.margins` (``inf`` where there is no conflict)."""
-    present = v.present
+    present, c = v.present, t.c
     for b in range(present.shape[0]):
+        s, speed = v.ego_progress[b], v.ego_speed[b]
+        throttle, brake = v.ego_throttle[b], v.ego_brake[b]
+        stop = math.nan  # computed once per episode, where some conflict needs it
         for j in range(present.shape[1]):
             if not present[b, j]:
                 continue
-            arrive = _seen_arrival(v, b, j, t.c)
+            arrive = _seen_arrival(v, b, j, c)
             arrival[b, j] = arrive
             if not math.isinf(arrive):
                 slack[b, j] = _clear_slack(
-                    v.ego_progress[b], v.ego_cert_zone[b, j, 1], arrive, v.ego_speed[b],
-                    v.ego_throttle[b], v.ego_brake[b], t,
-                )  # fmt: skip
+                    s, v.ego_cert_zone[b, j, 1], arrive, speed, throttle, brake, t
+                )
+                if math.isnan(stop):
+                    stop = _stop_distance(speed, throttle, brake, t)
+                # As _safe's stop backup counts the room, against this zone alone.
+                ahead = (v.ego_cert_zone[b, j, 0] - s - c.progress_jump) / c.progress_factor
+                room[b, j] = ahead - stop
 
 
 @jit
@@ -897,16 +906,20 @@ class CertifiedSwitching:
         _predict_all(view, np.asarray(pedals, dtype=np.float64), self._c, self._plant, out)
         return out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4]
 
-    def margins(self, view: ConflictView) -> tuple[FloatArray, FloatArray]:
+    def margins(self, view: ConflictView) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Per conflict ``[B, C]``: the earliest time the vehicle can enter its zone within the
-        assumptions [s] (0 inside, ``inf`` once it has left or where there is no conflict), and
+        assumptions [s] (0 inside, ``inf`` once it has left or where there is no conflict);
         the certificate's slack for it [s]: that time less the margin and the clear backup's
         time to leave the ego's zone from now (negative: full throttle now would not clear it
-        in time)."""
+        in time); and the stop backup's room before the ego's zone [m]: the distance the
+        certificate counts to its entry less the full brake's stopping distance from the
+        current speed and pedals (negative: braking now would not stop before it; ``inf``
+        where the slack is)."""
         arrival = np.full(view.present.shape, np.inf)
         slack = np.full(view.present.shape, np.inf)
-        _margins(view, self.bounds, arrival, slack)
-        return arrival, slack
+        room = np.full(view.present.shape, np.inf)
+        _margins(view, self.bounds, arrival, slack, room)
+        return arrival, slack, room
 
     def decide(self, state: ConflictView, learned: FloatArray, safe: FloatArray) -> Decision:
         batch = learned.shape[0]
