@@ -209,8 +209,9 @@ class LeftTurnTrafficTask(LeftTurnTask):
 
     @cached_property
     def _margins(self) -> CertifiedSwitching | None:
-        """The certified filter whose reckoning ``observe: margins`` shows, whatever logic the
-        task runs (the observation belongs to the policy), built from the finished scene."""
+        """The certified filter whose reckoning ``observe: margins`` or ``backups`` shows,
+        whatever logic the task runs (the observation belongs to the policy), built from the
+        finished scene."""
         return certified_logic(self) if self.traffic.observe in ("margins", "backups") else None
 
     # -- scenarios and the start ------------------------------------------------------------
