@@ -322,6 +322,67 @@ def test_the_conflict_observation_holds_the_soonest_conflicts_in_route_distances
         assert min(rooms_seen) < 0 < max(rooms_seen)
 
 
+def _write_go_model(path, width, seed=0):
+    rng = np.random.default_rng(seed)
+    np.savez(
+        path, mean=rng.normal(size=width), std=rng.uniform(1, 5, width),
+        w0=rng.normal(size=(width, 8)), b0=rng.normal(size=8), w1=rng.normal(size=(8, 1)),
+        b1=rng.normal(size=1),
+    )  # fmt: skip
+    return str(path)
+
+
+def test_a_go_model_ends_the_observation_with_its_probability(tmp_path):
+    """``traffic.go_model``: the observation is the plain one and then the model's probability
+    on it, in [0, 1], within the space's bounds, on every step and in any other traffic an
+    evaluation picks (the model belongs to the policy)."""
+    traffic = {"preset": "medium", "observe": "margins"}
+    plain = build_task(None, {"episode": {"observe_time_left": True}}, traffic=traffic)
+    width = plain.observation_bounds[0].shape[0]
+    model = _write_go_model(tmp_path / "go.npz", width)
+    task = build_task(None, {"episode": {"observe_time_left": True}},
+                      traffic={**traffic, "go_model": model})  # fmt: skip
+    low, high = task.observation_bounds
+    assert low.shape == (width + 1,) and (low[-1], high[-1]) == (0.0, 1.0)
+    ids = np.arange(64)
+    scenes = task.draw_scenarios(5, ids, np.zeros_like(ids))
+    state, before = task.initial(scenes), plain.initial(scenes)
+    probabilities = []
+    for _ in range(40):
+        obs, expected = task.observe(state), plain.observe(before)
+        np.testing.assert_array_equal(obs[:, :-1], expected)
+        by_hand = expected.astype(np.float64)
+        m = np.load(model)
+        h = np.tanh((by_hand - m["mean"]) / m["std"] @ m["w0"] + m["b0"])
+        np.testing.assert_allclose(obs[:, -1], 1 / (1 + np.exp(-(h @ m["w1"] + m["b1"])[:, 0])),
+                                   rtol=1e-4, atol=1e-5)  # fmt: skip
+        assert ((obs >= low) & (obs <= high)).all()
+        probabilities.append(obs[:, -1])
+        state, _ = task.step(state, np.full(64, 0.4))
+        before, _ = plain.step(before, np.full(64, 0.4))
+    assert np.ptp(np.concatenate(probabilities)) > 0.01  # it reads the state, not a constant
+    from dataclasses import replace
+
+    from safeswitch.leftturn.config import POLICY_OBSERVATION
+
+    trained = traffic_config({**traffic, "go_model": model})
+    other = replace(traffic_config("test"), **{k: getattr(trained, k) for k in POLICY_OBSERVATION})
+    assert other.go_model == model and other.observe == "margins"
+
+
+def test_a_go_model_of_another_width_or_no_model_is_refused(tmp_path):
+    traffic = {"preset": "light", "observe": "margins"}
+    width = build_task(None, None, traffic=traffic).observation_bounds[0].shape[0]
+    wrong = _write_go_model(tmp_path / "wide.npz", width + 1)
+    with pytest.raises(ConfigError, match=f"width {width + 1}.*have {width}"):
+        build_task(None, None, traffic={**traffic, "go_model": wrong})
+    np.savez(tmp_path / "other.npz", weights=np.zeros(3))
+    with pytest.raises(ConfigError, match=r"other\.npz.*not a go model"):
+        build_task(None, None, traffic={**traffic, "go_model": str(tmp_path / "other.npz")})
+    with pytest.raises(ConfigError, match=r"missing\.npz"):
+        traffic_config({**traffic, "go_model": str(tmp_path / "missing.npz")})
+
+
 def test_traffic_vec_env_resets_and_is_seeded():
     def run(seed):
         env = make_vec_env(8, traffic="medium", switching="certified", seed=seed)

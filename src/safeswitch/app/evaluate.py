@@ -26,6 +26,7 @@ from safeswitch.evaluation.rollout import Policy
 from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.io import prepare_output_dir, write_json
 from safeswitch.leftturn.config import (
+    POLICY_OBSERVATION,
     SCENARIO_NAMES,
     LeftTurnConfig,
     TrafficConfig,
@@ -126,9 +127,9 @@ def traffic_setup(
 ) -> tuple[TrafficConfig | None, str | None]:
     """The traffic to evaluate in and its label: ``traffic`` (a preset's name, or ``none`` for
     the paper's scene), else the traffic a trained policy was trained in (none for the
-    baselines). A policy trained in traffic keeps what it observes (``observe``,
-    ``observed``) in any other traffic: the observation belongs to the policy, not to the
-    scene."""
+    baselines). A policy trained in traffic keeps what it observes
+    (:data:`~safeswitch.leftturn.config.POLICY_OBSERVATION`) in any other traffic: the
+    observation belongs to the policy, not to the scene."""
     trained = None
     if controller == "learned" and model is not None:
         from safeswitch.training.policies import load_policy
@@ -141,7 +142,8 @@ def traffic_setup(
         if settings is not None and trained is not None:
             seen = trained.traffic_settings
             assert seen is not None
-            settings = replace(settings, observe=seen.observe, observed=seen.observed)
+            kept = {k: getattr(seen, k) for k in POLICY_OBSERVATION}
+            settings = replace(settings, **kept)
         return settings, None if settings is None else traffic
     if trained is not None:
         return trained.traffic_settings, str(trained.traffic)

@@ -10,6 +10,7 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass, field, fields
+from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal
 
 from safeswitch.core.config import Bounds, ConfigError, check, check_bounds, from_dict, to_dict
@@ -429,6 +430,12 @@ class TrafficConfig:
             them, in seconds; ours, :data:`~safeswitch.leftturn.traffic.MARGIN_FEATURES`) or
             ``backups`` (``margins`` and, per vehicle, the stop backup's room before the ego's
             zone in metres; ours, :data:`~safeswitch.leftturn.traffic.BACKUP_FEATURES`).
+        go_model: A learned go predictor, an ``.npz`` written by
+            ``experiments/go_predictor.py`` (:class:`~safeswitch.leftturn.traffic.GoModel`):
+            its probability that the fast drive from the current state gets past every
+            conflict zone without the certified filter acting is appended to the observation,
+            after everything else (ours; ``None``: none). Like ``observe``, it belongs to the
+            policy: an evaluation in other traffic keeps it.
     """
 
     main_flow_veh_h: Annotated[tuple[float, float], Bounds(0, 3000, unit="veh/h")] = (
@@ -450,9 +457,14 @@ class TrafficConfig:
     max_vehicles: Annotated[int, Bounds(1, 32)] = 12
     observed: Annotated[int, Bounds(0)] = 4
     observe: Literal["nearest", "conflicts", "margins", "backups"] = "nearest"
+    go_model: str | None = None
 
     def __post_init__(self) -> None:
         o = "traffic"
+        if self.go_model is not None:
+            check(isinstance(self.go_model, str) and Path(self.go_model).is_file(), o,
+                  "go_model", self.go_model, "must be null or the path of an existing .npz "
+                  "(experiments/go_predictor.py writes one)")  # fmt: skip
         check_bounds(self, o)
         check(
             len(self.turn_shares) == 3 and min(self.turn_shares) >= 0
@@ -467,6 +479,10 @@ class TrafficConfig:
 
 #: Values of ``traffic.observe``.
 OBSERVATIONS = ("nearest", "conflicts", "margins", "backups")
+
+#: The :class:`TrafficConfig` settings that shape a policy's observation: an evaluation in other
+#: traffic keeps the trained policy's.
+POLICY_OBSERVATION = ("observe", "observed", "go_model")
 
 #: Named traffic settings: densities from light to heavy, and a train/test split of the space
 #: (the test family is denser and less courteous than anything trained on).
