@@ -1,0 +1,52 @@
+"""How good a go decision the learned go predictor makes by itself (issue #39;
+docs/learning_experiments.md, "A learned go predictor in the observation").
+
+A one-off probe: the gap planner under `certified` (the from-scratch recipes' narrower zones) on
+the 1,000 `test` scenes of seed 1000003, once with its own go check (a forward simulation that
+knows every vehicle's future) and once with that check replaced by the learned predictor's
+verdict on the observation (`traffic.go_model`, probability above a threshold), the planner's
+wait and its drive otherwise the same. If the rule with the predictor comes near the planner,
+the predictor holds the go decision and what a policy given it lacks is learning to use it.
+Run: ``python experiments/probe_go_rule.py [experimental/traffic_certified_go_model]``.
+"""
+
+import sys
+from dataclasses import replace
+
+from safeswitch.evaluation.evaluate import run_controller, scenario_chunks, summary_against_oracle
+from safeswitch.evaluation.traffic_planner import GapPlanner
+from safeswitch.leftturn.config import POLICY_OBSERVATION, traffic_config
+from safeswitch.leftturn.make import build_task
+from safeswitch.training.config import load_config
+
+
+class PredictedGo(GapPlanner):
+    """The gap planner whose go check is the learned predictor's probability > ``threshold``."""
+
+    def __init__(self, task, threshold):
+        super().__init__(task)
+        self.task, self.threshold = task, threshold
+
+    def goes(self, state, going=None):
+        return self.task.observe(state)[:, -1] > self.threshold
+
+
+def main() -> None:
+    name = sys.argv[1] if len(sys.argv) > 1 else "experimental/traffic_certified_go_model"
+    config = load_config(name)
+    trained = traffic_config(config.traffic)
+    test = replace(traffic_config("test"), **{k: getattr(trained, k) for k in POLICY_OBSERVATION})
+    task = build_task(None, replace(config.env, switching="certified"), traffic=test)
+    (_, scenes), = scenario_chunks(task, "random", 1000, 1_000_003)
+    rules = [("gap planner (its simulated go check)", GapPlanner(task))]
+    rules += [(f"learned predictor > {t}", PredictedGo(task, t)) for t in (0.3, 0.5, 0.7)]
+    for name, planner in rules:
+        result, plan = run_controller(task, planner, scenes, trace=False)
+        s = summary_against_oracle(result, plan, task.config.episode.horizon_s)
+        print(f"{name}: collisions {s['collisions']}, safety episodes "
+              f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, "
+              f"efficiency {s['mean_efficiency']:.3f}")
+
+
+if __name__ == "__main__":
+    main()
