@@ -6,6 +6,7 @@ import json
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import yaml
@@ -66,6 +67,10 @@ def test_packaged_configs_by_name_and_the_default_is_the_papers_recipe(tmp_path,
     for name in packaged_config_names():  # every packaged recipe is valid, experiments too
         assert load_any_config(name).timesteps > 0, name
     assert load_config("experimental/scratch_shaped").shaping.progress_shaping == 5.0
+    # a file a recipe names (traffic.go_model) is read beside the recipe, from any directory
+    go = load_config("experimental/traffic_certified_go_model").traffic
+    assert isinstance(go, dict) and Path(go["go_model"]).is_absolute()
+    assert Path(go["go_model"]).parent.name == "experiments" and Path(go["go_model"]).is_file()
 
 
 def test_a_config_with_a_base_is_its_base_with_the_values_it_names(tmp_path):

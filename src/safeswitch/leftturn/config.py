@@ -434,8 +434,9 @@ class TrafficConfig:
             ``experiments/go_predictor.py`` (:class:`~safeswitch.leftturn.traffic.GoModel`):
             its probability that the fast drive from the current state gets past every
             conflict zone without the certified filter acting is appended to the observation,
-            after everything else (ours; ``None``: none). Like ``observe``, it belongs to the
-            policy: an evaluation in other traffic keeps it.
+            after everything else (ours; ``None``: none). In a configuration file a relative
+            path is read beside the file (else from the working directory). Like
+            ``observe``, it belongs to the policy: an evaluation in other traffic keeps it.
     """
 
     main_flow_veh_h: Annotated[tuple[float, float], Bounds(0, 3000, unit="veh/h")] = (

@@ -880,6 +880,23 @@ def _read_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
+#: Settings that name a file, as (section, key): a relative path is read beside the
+#: configuration file that names it when a file is there, else from the working directory
+#: (as ``base``), so that a recipe and its file load from any directory.
+FILE_SETTINGS = (("traffic", "go_model"),)
+
+
+def _files_beside(data: dict[str, Any], path: Path) -> dict[str, Any]:
+    """``data`` with each :data:`FILE_SETTINGS` path found beside ``path`` made absolute."""
+    for section, key in FILE_SETTINGS:
+        inner = data.get(section)
+        if isinstance(inner, dict) and isinstance(inner.get(key), str):
+            beside = path.parent / inner[key]
+            if not Path(inner[key]).is_absolute() and beside.is_file():
+                data = {**data, section: {**inner, key: str(beside.resolve())}}
+    return data
+
+
 #: The key with which a configuration names the one it changes (see :func:`read_config`).
 BASE_KEY = "base"
 
@@ -891,7 +908,9 @@ def read_config(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, An
     or a path, relative to the file that names it or to the working directory) takes every
     value of that one, and this file's values replace its values mapping by mapping — a
     nested mapping changes only the keys it names, anything else (a number, a list, ``null``,
-    an empty mapping) replaces the base's value whole. Bases may have bases.
+    an empty mapping) replaces the base's value whole. Bases may have bases. A setting that
+    names a file (:data:`FILE_SETTINGS`, e.g. ``traffic.go_model``) is read the same way:
+    beside the file that names it, else from the working directory.
 
     Raises:
         ConfigError: ``base`` is not a string, names no configuration, or the chain of bases
@@ -900,7 +919,7 @@ def read_config(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, An
     path = Path(path)
     # each file in the layout of today before the merge: a file written before the ``ppo``
     # split may start from one written after it
-    data = move_keys(_read_yaml(path), MOVED_FROM_PPO, str(path))
+    data = _files_beside(move_keys(_read_yaml(path), MOVED_FROM_PPO, str(path)), path)
     base = data.pop(BASE_KEY, None)
     if base is None:
         return data
