@@ -9,7 +9,9 @@ given it as one more observed value:
 1. **States.** Random drivers (no planner, no demonstrations: each episode holds a random
    pedal, redrawn with probability 0.3 at each 0.3 s decision, around a random per-episode
    bias) drive training-distribution scenes of a seed no run trains on; every decision of an
-   episode still before its first conflict zone is a sample.
+   episode still before its first conflict zone is a sample. ``--drivers MODEL`` samples
+   instead the states of drivers that go on a predictor's verdict (a threshold and a pedal
+   noise drawn per episode): a DAgger-like round for the predictor, still no action labels.
 2. **Labels.** From each such state the fast drive (the speed limit plus the tolerated
    speeding, the lateral comfort limit in the turn:
    :class:`~safeswitch.evaluation.planner.FastDrive`) is simulated on a copy of the scene
@@ -35,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from io import BytesIO
 from pathlib import Path
 
 import numpy as np
@@ -44,13 +47,37 @@ from safeswitch.evaluation.rollout import rollout
 from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.io import write_bytes_atomic
 from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.traffic import GoModel
 from safeswitch.training.config import load_config
 
 CONFIG = "experimental/traffic_certified_time_left_terminal_g997"
 
 
-def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Observations, labels and episode ids of random drivers' decisions before the junction."""
+class PredictedGo(GapPlanner):
+    """The gap planner whose go check is a learned predictor's probability above
+    ``threshold`` (a number, or one per episode): its wait and its drive unchanged.
+
+    Args:
+        task: The task in traffic.
+        threshold: The probability above which it goes.
+        probability: The predictor on the task's observation (default: the observation's
+            last value, the task's own ``traffic.go_model``).
+    """
+
+    def __init__(self, task, threshold, probability=None):
+        super().__init__(task)
+        self.task, self.threshold = task, threshold
+        self.probability = probability or (lambda obs: obs[:, -1])
+
+    def goes(self, state, going=None):
+        return self.probability(self.task.observe(state)) > self.threshold
+
+
+def samples(
+    config: str, seed: int, episodes: int, model: Path | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Observations, labels and episode ids of the decisions before the junction: of random
+    drivers, or (``model``) of drivers that go on that predictor's verdict."""
     cfg = load_config(config)
     task = build_task(None, cfg.env, traffic=cfg.traffic)
     planner = GapPlanner(task)
@@ -60,6 +87,11 @@ def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, np.ndarr
     bias = rng.uniform(-0.6, 1.0, episodes)
     spread = rng.uniform(0.1, 0.8, episodes)
     action = np.clip(bias + spread * rng.standard_normal(episodes), -1, 1)
+    rule = None
+    if model is not None:  # the predictor's own drivers: a threshold and a pedal noise each
+        width = task.observation_bounds[0].shape[0]
+        rule = PredictedGo(task, rng.uniform(0.2, 0.8, episodes), GoModel(str(model), width))
+        noise = rng.uniform(0.0, 0.4, episodes) * (rng.random(episodes) < 0.5)
     live = np.ones(episodes, dtype=bool)
     obs_rows: list[np.ndarray] = []
     labels: list[np.ndarray] = []
@@ -73,6 +105,9 @@ def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, np.ndarr
             obs_rows.append(obs[rows].copy())
             labels.append(ok)
             which.append(rows)
+        if rule is not None:
+            pedal = rule(obs, state, tick) + noise * rng.standard_normal(episodes)
+            return np.clip(pedal, -1.0, 1.0)
         redraw = rng.random(episodes) < 0.3
         fresh = np.clip(bias + spread * rng.standard_normal(episodes), -1, 1)
         action = np.where(redraw, fresh, action)
@@ -145,6 +180,9 @@ def main() -> None:
     parser.add_argument("--batches", type=int, default=2)
     parser.add_argument("--epochs", type=int, default=30)
     parser.add_argument("--hidden", type=int, default=64, help="units per hidden layer")
+    parser.add_argument("--drivers", type=Path, default=None, metavar="MODEL",
+                        help="sample the states of drivers that go on this predictor's verdict "
+                             "(a threshold and a pedal noise drawn per episode), not random ones")
     parser.add_argument("--data", type=Path, nargs="*", default=[],
                         help="sample files (.npz) to reuse if they all exist, else one to write")
     parser.add_argument("--out", type=Path, required=True, help="the model's .npz")
@@ -152,32 +190,42 @@ def main() -> None:
     torch.set_num_threads(1)
     start = time.time()
     seeds = [args.seed + 100 * b for b in range(args.batches)]
+    drivers = str(args.drivers) if args.drivers else "random"
     if args.data and all(p.is_file() for p in args.data):
         loaded = [np.load(p) for p in args.data]
         x = np.concatenate([d["x"] for d in loaded])
         y = np.concatenate([d["y"] for d in loaded])
         offsets = np.cumsum([0] + [int(d["g"].max()) + 1 for d in loaded[:-1]])
         g = np.concatenate([d["g"] + o for d, o in zip(loaded, offsets, strict=True)])
+        # Where the samples came from is the files' record, not this command line's.
+        sources = [
+            {"file": str(p), "scene_seeds": d["seeds"].tolist(), "drivers": str(d["drivers"])}
+            if "seeds" in d.files
+            else {"file": str(p), "scene_seeds": None, "drivers": "not recorded"}
+            for p, d in zip(args.data, loaded, strict=True)
+        ]
     else:
-        parts = [samples(args.config, seed, args.episodes) for seed in seeds]
+        parts = [samples(args.config, seed, args.episodes, args.drivers) for seed in seeds]
         x = np.concatenate([p[0] for p in parts])
         y = np.concatenate([p[1] for p in parts])
         g = np.concatenate([p[2] + b * args.episodes for b, p in enumerate(parts)])
         if args.data:
-            np.savez_compressed(args.data[0], x=x, y=y, g=g)
+            buffer = BytesIO()
+            np.savez_compressed(buffer, x=x, y=y, g=g, seeds=seeds, drivers=drivers)
+            write_bytes_atomic(args.data[0], buffer.getvalue())
+        sources = [{"file": str(args.data[0]) if args.data else None, "scene_seeds": seeds,
+                    "drivers": drivers}]  # fmt: skip
     sampled = time.time() - start
     model = fit(x, y, g, args.epochs, args.seed, args.hidden)
-    from io import BytesIO
-
     buffer = BytesIO()
     np.savez(buffer, **model["weights"])
     write_bytes_atomic(args.out, buffer.getvalue())
-    report = {"config": args.config, "scene_seeds": seeds, "episodes": args.episodes * args.batches,
-              "hidden": args.hidden, "epochs": args.epochs,
-              "sampling_s": round(sampled, 1), "samples_from": [str(p) for p in args.data],
+    report = {"config": args.config, "samples": sources, "episodes": int(g.max()) + 1,
+              "hidden": args.hidden, "epochs": args.epochs, "sampling_s": round(sampled, 1),
               "scores": model["scores"]}  # fmt: skip
-    print(json.dumps(report, indent=2))
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=2) + "\n")
+    text = json.dumps(report, indent=2) + "\n"
+    print(text, end="")
+    write_bytes_atomic(args.out.with_suffix(".json"), text.encode())
 
 
 if __name__ == "__main__":

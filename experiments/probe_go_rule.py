@@ -13,22 +13,13 @@ Run: ``python experiments/probe_go_rule.py [experimental/traffic_certified_go_mo
 import sys
 from dataclasses import replace
 
+from go_predictor import PredictedGo
+
 from safeswitch.evaluation.evaluate import run_controller, scenario_chunks, summary_against_oracle
 from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.leftturn.config import POLICY_OBSERVATION, traffic_config
 from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import load_config
-
-
-class PredictedGo(GapPlanner):
-    """The gap planner whose go check is the learned predictor's probability > ``threshold``."""
-
-    def __init__(self, task, threshold):
-        super().__init__(task)
-        self.task, self.threshold = task, threshold
-
-    def goes(self, state, going=None):
-        return self.task.observe(state)[:, -1] > self.threshold
 
 
 def main() -> None:
