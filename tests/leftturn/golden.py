@@ -1,6 +1,6 @@
 """Per-tick decisions of the left-turn task on the README's scenarios, digested per episode.
 
-``python tests/leftturn/golden.py`` writes ``tests/data/leftturn_golden.npz``; ``test_golden.py``
+``python -m tests.leftturn.golden`` writes ``tests/data/leftturn_golden.npz``; ``test_golden.py``
 replays the same runs on the current code and requires every digest to be equal bit for bit: a
 refactoring must not change a single decision.
 
@@ -9,6 +9,12 @@ ran its switching through ``safeswitch.core``) and gated every change up to the 
 (issue #37); ``leftturn_golden.npz`` was written after it. The older record still gates the
 one-kernel logics: with the curve certificate switched off, every decision is what 01d647c
 made, except in the episodes where the ego's tyres slid (``test_golden.py``).
+
+The learned runs drive their policies through ``portable.py`` (numpy, no BLAS), not torch:
+torch's products differ in their last bits between CPUs, and a record must hold on every
+machine. Both records' learned runs were written that way on 2026-12-03 (the pre-friction one
+by ``record_pre_friction.py`` on a checkout of 08b80e9, whose decisions are 01d647c's); the
+other runs are as first recorded.
 
 Each run is a controller and a switching logic on 300 random scenarios (seed 1000003, the
 README's evaluation seed). Per episode and tick the executed throttle and brake, the safety
@@ -22,11 +28,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from safeswitch.evaluation.adversaries import bang_bang, constant, uniform
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.task import LeftTurnTask
-from safeswitch.training.policies import load_policy
+from safeswitch.training.policies import TrainedPolicy, load_policy
+from tests.leftturn.portable import mean_action, normalised
 
 PATH = Path(__file__).resolve().parent.parent / "data" / "leftturn_golden.npz"
 PRE_FRICTION = PATH.with_name("leftturn_golden_pre_friction.npz")
@@ -48,13 +56,9 @@ def runs():
     episode = {"episode": {"learned_scope": "episode"}}
 
     def learned(policy):
-        # SB3's own predict, as when the runs were recorded: the golden runs pin the task's
-        # decisions, not the inference path (TrainedPolicy.act computes the same actions up to
-        # the last bit of a float32 tanh; tests/training/test_policies.py checks that).
-        def act(obs, state, tick):
-            actions, _ = policy.model.predict(policy.normalise(obs), deterministic=True)
-            return np.asarray(actions, dtype=np.float64).reshape(obs.shape[0])
-
+        # computed the same on every CPU (portable.py), not through torch's MKL products:
+        # the golden runs pin the task's decisions, not the inference path
+        act = portable_driver(portable_parameters(policy))
         return lambda: act
 
     return [
@@ -69,6 +73,43 @@ def runs():
         ("bang_bang_none", resolve_config(episode, switching="none"),
          lambda: bang_bang(np.random.default_rng(3))),
     ]  # fmt: skip
+
+
+def portable_parameters(policy: TrainedPolicy) -> dict[str, np.ndarray]:
+    """The actor of ``policy`` (a plain tanh MLP, as the golden policies are) and its
+    observation statistics as float64 arrays: ``w0, b0, w1, b1, …``, ``mean``, ``var``,
+    ``clip``, ``epsilon``, ``low``, ``high`` (what :func:`portable_driver` reads)."""
+    net = policy.model.policy
+    modules = [*net.mlp_extractor.policy_net, net.action_net]
+    linear = [m for m in modules if isinstance(m, torch.nn.Linear)]
+    assert all(isinstance(m, (torch.nn.Linear, torch.nn.Tanh)) for m in modules), modules
+    assert len(modules) == 2 * len(linear) - 1, "a tanh after every hidden layer"
+    norm = policy.normalizer
+    assert norm is not None and norm.norm_obs, "the golden policies normalise observations"
+    out = {
+        "mean": np.asarray(norm.obs_rms.mean, dtype=np.float64),
+        "var": np.asarray(norm.obs_rms.var, dtype=np.float64),
+        "clip": np.float64(norm.clip_obs),
+        "epsilon": np.float64(norm.epsilon),
+        "low": np.float64(net.action_space.low[0]),
+        "high": np.float64(net.action_space.high[0]),
+    }
+    for i, layer in enumerate(linear):
+        out[f"w{i}"] = layer.weight.detach().numpy().astype(np.float64)
+        out[f"b{i}"] = layer.bias.detach().numpy().astype(np.float64)
+    return out
+
+
+def portable_driver(p: dict[str, np.ndarray]):
+    """The golden runs' learned controller from :func:`portable_parameters`' arrays."""
+    count = sum(1 for key in p if key.startswith("w"))
+    layers = [(p[f"w{i}"], p[f"b{i}"]) for i in range(count)]
+
+    def act(obs, state, tick):
+        x = normalised(obs, p["mean"], p["var"], float(p["clip"]), float(p["epsilon"]))
+        return mean_action(layers, x, float(p["low"]), float(p["high"]))
+
+    return act
 
 
 def digest(config, make_policy, task=None) -> np.ndarray:
