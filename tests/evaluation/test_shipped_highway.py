@@ -93,8 +93,27 @@ def test_the_fast_deterministic_path_acts_as_sb3_predict(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(NAMES))
 def test_the_evaluation_in_metrics_is_reproduced(capsys, name):
+    """The whole evaluation, measured again. On a CPU like the one it was recorded on, it is
+    the recorded one bit for bit; on another, torch's matrix products (MKL, whose kernels
+    follow the instruction set) differ in their last bits and highway-env's traffic carries
+    the difference on (seen on an AMX machine: 71 safety steps against 70, 7,350 steps against
+    7,346). So the claims hold exactly — no crash under the switch, never above the speed
+    limit — and every count stays close to the recorded one."""
     recorded = metrics(name)["evaluation"]
     summary = evaluate(capsys, name, recorded["episodes"])
-    for key in ("failures", "steps", "safety_activation_steps", "safety_reasons", "cost_steps"):
-        assert summary[key] == recorded[key], key
-    assert summary["mean_return"] == pytest.approx(recorded["mean_return"], rel=1e-9)
+    assert summary["episodes"] == recorded["episodes"]
+    if NAMES[name] == "certified":
+        assert summary["failures"] == recorded["failures"] == 0
+    else:  # without the switch it crashes, about as often
+        assert summary["failures"] > 0 and abs(summary["failures"] - recorded["failures"]) <= 2
+    assert summary["cost_steps"]["speeding"] == recorded["cost_steps"]["speeding"] == 0
+    assert summary["steps"] == pytest.approx(recorded["steps"], rel=0.01)
+
+    def close(now, then, what):
+        assert abs(now - then) <= max(3, 0.05 * then), (what, now, then)
+
+    close(summary["safety_activation_steps"], recorded["safety_activation_steps"], "safety")
+    assert set(summary["safety_reasons"]) <= set(recorded["safety_reasons"])
+    for cost, then in recorded["cost_steps"].items():
+        close(summary["cost_steps"][cost], then, cost)
+    assert summary["mean_return"] == pytest.approx(recorded["mean_return"], rel=0.02)
