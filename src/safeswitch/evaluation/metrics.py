@@ -15,6 +15,9 @@ Fields:
         episodes (``null`` if none cleared).
     comfort_violation_steps: Ticks beyond a comfort limit (|a_lon| > 5 or |a_lat| > 3 m/s²).
     comfort_violation_fraction: The same as a share of all ticks.
+    comfort_violation_episodes: Episodes with at least one such tick (a policy can keep the
+        share of ticks small while breaking a limit briefly in many episodes; ``null`` for a
+        campaign merged from shards written before it was counted).
     stops: Episodes in which the ego came to a full stop (speed below 0.1 m/s).
     speeding_episodes: Episodes in which the ego drove faster than the tolerated speed (the
         highest at which ``R_v`` is at its best: the speed limit plus 5 km/h, 30 km/h; the
@@ -125,6 +128,7 @@ class SummaryAccumulator:
         "safety_activation_steps",
         "cleared_episodes",
         "comfort_violation_steps",
+        "comfort_violation_episodes",
         "stops",
         "speeding_episodes",
         "speeding_steps",
@@ -152,6 +156,9 @@ class SummaryAccumulator:
         self.term_sums: dict[str, ExactSum] = {}
         self.maxima = dict.fromkeys(self._MAXIMA, -math.inf)
         self.with_oracle = False
+        #: Counts some merged shard did not hold (written before they were counted): the
+        #: summary gives them as ``None`` rather than a total that leaves those shards out.
+        self.unknown: set[str] = set()
 
     def add(
         self,
@@ -170,6 +177,7 @@ class SummaryAccumulator:
         c["safety_activation_steps"] += int(r.safety_steps.sum())
         c["cleared_episodes"] += int(cleared.sum())
         c["comfort_violation_steps"] += int(r.comfort_violation_steps.sum())
+        c["comfort_violation_episodes"] += int((r.comfort_violation_steps > 0).sum())
         c["stops"] += int((r.min_speed < STOP_SPEED).sum())
         c["speeding_episodes"] += int((r.speeding_steps > 0).sum())
         c["speeding_steps"] += int(r.speeding_steps.sum())
@@ -225,6 +233,7 @@ class SummaryAccumulator:
         for key in self._MAXIMA:
             self.maxima[key] = max(self.maxima[key], other.maxima[key])
         self.with_oracle |= other.with_oracle
+        self.unknown |= other.unknown
 
     def state(self) -> dict[str, Any]:
         """Everything the accumulator holds, as plain JSON-able data (:meth:`from_state`
@@ -235,12 +244,16 @@ class SummaryAccumulator:
             "term_sums": {k: list(v.partials) for k, v in self.term_sums.items()},
             "maxima": {k: (None if v == -math.inf else v) for k, v in self.maxima.items()},
             "with_oracle": self.with_oracle,
+            "unknown": sorted(self.unknown),
         }
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> SummaryAccumulator:
         accumulator = cls()
         accumulator.counts.update(state["counts"])
+        accumulator.unknown = set(state.get("unknown", ())) | (
+            set(cls._COUNTS) - set(state["counts"])
+        )
         # Lists of floats whose exact sum is the total: partials, or (a shard written before
         # partials were kept) one sum per chunk.
         accumulator.sums.update({k: ExactSum(v) for k, v in state["sums"].items()})
@@ -273,6 +286,11 @@ class SummaryAccumulator:
             "mean_time_to_clear_s": mean("time_to_clear", c["cleared_episodes"]),
             "comfort_violation_steps": c["comfort_violation_steps"],
             "comfort_violation_fraction": c["comfort_violation_steps"] / max(c["ticks"], 1),
+            "comfort_violation_episodes": (
+                None
+                if "comfort_violation_episodes" in self.unknown
+                else c["comfort_violation_episodes"]
+            ),
             "stops": c["stops"],
             "speeding_episodes": c["speeding_episodes"],
             "speeding_steps": c["speeding_steps"],

@@ -88,6 +88,11 @@ def _comfort(s: Summary) -> Check:
     return Check("comfort", share <= 0.005, f"{share:.2%} of ticks", "exceeded on ≤ 0.5 % of ticks")
 
 
+def _in_episodes(n: int | None) -> str:
+    """`` (in N episodes)`` where the count is known."""
+    return "" if n is None else f" (in {_episodes(n)})"
+
+
 def _speed(s: Summary) -> Check:
     n, top = s["speeding_episodes"], s.get("max_speed_kmh")
     value = f"{_episodes(n)} above 30 km/h" + (f" (top {top:.1f} km/h)" if top else "")
@@ -133,7 +138,8 @@ def headline(summary: Summary) -> list[str]:
         f"lost control {s.get('lost_control_episodes', 0):,}) in {_episodes(s['episodes'])}",
         f"{marks['safety action']} safety action: {_episodes(s['safety_activation_episodes'])}",
         f"{marks['speed']} speeding: " + _speed(s).value,
-        f"{marks['comfort']} comfort exceeded on {s['comfort_violation_fraction']:.2%} of ticks",
+        f"{marks['comfort']} comfort exceeded on {s['comfort_violation_fraction']:.2%} of ticks"
+        + _in_episodes(s.get("comfort_violation_episodes")),
     ]
     clear = s.get("mean_time_to_clear_s")
     clear_text = "never cleared" if clear is None else f"time to clear {clear:.2f} s"
