@@ -34,7 +34,7 @@ from safeswitch.evaluation.adversaries import bang_bang, constant, uniform
 from safeswitch.leftturn.config import resolve_config
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.training.policies import TrainedPolicy, load_policy
-from tests.leftturn.portable import mean_action, normalised
+from tests.leftturn.portable import portable_driver
 
 PATH = Path(__file__).resolve().parent.parent / "data" / "leftturn_golden.npz"
 PRE_FRICTION = PATH.with_name("leftturn_golden_pre_friction.npz")
@@ -78,7 +78,7 @@ def runs():
 def portable_parameters(policy: TrainedPolicy) -> dict[str, np.ndarray]:
     """The actor of ``policy`` (a plain tanh MLP, as the golden policies are) and its
     observation statistics as float64 arrays: ``w0, b0, w1, b1, …``, ``mean``, ``var``,
-    ``clip``, ``epsilon``, ``low``, ``high`` (what :func:`portable_driver` reads)."""
+    ``clip``, ``epsilon``, ``low``, ``high`` (what ``portable.portable_driver`` reads)."""
     net = policy.model.policy
     modules = [*net.mlp_extractor.policy_net, net.action_net]
     linear = [m for m in modules if isinstance(m, torch.nn.Linear)]
@@ -98,18 +98,6 @@ def portable_parameters(policy: TrainedPolicy) -> dict[str, np.ndarray]:
         out[f"w{i}"] = layer.weight.detach().numpy().astype(np.float64)
         out[f"b{i}"] = layer.bias.detach().numpy().astype(np.float64)
     return out
-
-
-def portable_driver(p: dict[str, np.ndarray]):
-    """The golden runs' learned controller from :func:`portable_parameters`' arrays."""
-    count = sum(1 for key in p if key.startswith("w"))
-    layers = [(p[f"w{i}"], p[f"b{i}"]) for i in range(count)]
-
-    def act(obs, state, tick):
-        x = normalised(obs, p["mean"], p["var"], float(p["clip"]), float(p["epsilon"]))
-        return mean_action(layers, x, float(p["low"]), float(p["high"]))
-
-    return act
 
 
 def digest(config, make_policy, task=None) -> np.ndarray:

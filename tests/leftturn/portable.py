@@ -16,7 +16,8 @@ This module imports only numpy so that the recording of ``leftturn_golden_pre_fr
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,3 +50,20 @@ def mean_action(
         x = np.tanh(y) if i < len(layers) - 1 else y
     mean = np.clip(x[:, 0], low, high)
     return np.rint(mean * GRID) / GRID
+
+
+def portable_driver(p: Mapping[str, Any]) -> Callable[[Any, Any, int], NDArray[np.float64]]:
+    """A rollout policy ``(obs, state, tick) -> actions`` from an actor's float64 arrays:
+    ``w0, b0, w1, b1, …`` (weight ``[out, in]`` and bias per layer), the observation
+    statistics ``mean``, ``var``, ``clip``, ``epsilon`` and the action bounds ``low``,
+    ``high`` (``golden.portable_parameters`` writes them)."""
+    count = sum(1 for key in p if key.startswith("w"))
+    layers = [(np.asarray(p[f"w{i}"]), np.asarray(p[f"b{i}"])) for i in range(count)]
+    mean, var = np.asarray(p["mean"]), np.asarray(p["var"])
+    clip, epsilon = float(p["clip"]), float(p["epsilon"])
+    low, high = float(p["low"]), float(p["high"])
+
+    def act(obs: Any, state: Any, tick: int) -> NDArray[np.float64]:
+        return mean_action(layers, normalised(obs, mean, var, clip, epsilon), low, high)
+
+    return act

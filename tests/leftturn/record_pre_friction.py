@@ -35,7 +35,8 @@ LEARNED = {  # run -> (golden policy, the run's episode overrides, switching)
 #: A run whose driver never changed: the old checkout must reproduce it bit for bit.
 WITNESS = "rule_paper"
 
-# Runs in the old checkout's interpreter: only its safeswitch, numpy and portable.py.
+# Runs in the old checkout's interpreter: its safeswitch and its golden digest, numpy, and
+# portable.py loaded by path.
 _OLD = r"""
 import importlib.metadata, importlib.util, sys, tomllib
 import numpy as np
@@ -49,37 +50,21 @@ registry._entry_points = {
     for name, value in group.items()
 }
 from safeswitch.leftturn.config import resolve_config
-from safeswitch.leftturn.task import LeftTurnTask
+from tests.leftturn.golden import digest  # the old checkout's
 
 spec = importlib.util.spec_from_file_location("portable", sys.argv[1])
 portable = importlib.util.module_from_spec(spec); spec.loader.exec_module(portable)
 params, out = np.load(sys.argv[2]), sys.argv[3]
-COLUMNS = ("throttle", "brake", "safety_active", "reason", "reward", "ego_speed", "separation")
 RUNS = %(runs)r
 
-def digest(config, act):  # 08b80e9's golden digest
-    task = LeftTurnTask(config)
-    n = 300
-    state = task.initial(task.draw_scenarios(1_000_003, np.arange(n), np.zeros(n, dtype=np.int64)))
-    result = np.zeros((n, len(COLUMNS)))
-    observation = task.observe(state)
-    for tick in range(config.episode.horizon_ticks):
-        state, record = task.step(state, act(observation))
-        observation = record.observation
-        for j, name in enumerate(COLUMNS):
-            result[:, j] += (tick + 1) * np.asarray(getattr(record, name), dtype=np.float64)
-    return result
-
 def driver(prefix):
-    p = {k[len(prefix):]: params[k] for k in params.files if k.startswith(prefix)}
-    layers = [(p[f"w{i}"], p[f"b{i}"]) for i in range(sum(k.startswith("w") for k in p))]
-    def act(obs):
-        x = portable.normalised(obs, p["mean"], p["var"], float(p["clip"]), float(p["epsilon"]))
-        return portable.mean_action(layers, x, float(p["low"]), float(p["high"]))
-    return act
+    act = portable.portable_driver(
+        {k[len(prefix):]: params[k] for k in params.files if k.startswith(prefix)}
+    )
+    return lambda: (lambda obs, state=None, tick=0: act(obs, state, tick))
 
 data = {%(witness)r: digest(resolve_config({"episode": {"learned_scope": "never"}}),
-                            lambda obs: np.zeros(len(obs)))}
+                            lambda: lambda obs, state=None, tick=0: np.zeros(len(obs)))}
 for name, (policy, overrides, switching) in RUNS.items():
     data[name] = digest(resolve_config(overrides, switching=switching), driver(policy + "/"))
 np.savez(out, **data)
@@ -98,7 +83,7 @@ def main(argv: list[str]) -> int:
                 params[f"{name}/{key}"] = value
         np.savez(Path(tmp) / "params.npz", **params)
         script = _OLD % {"runs": LEARNED, "witness": WITNESS}
-        env = {**os.environ, "PYTHONPATH": str(old / "src")}
+        env = {**os.environ, "PYTHONPATH": f"{old / 'src'}{os.pathsep}{old}"}
         subprocess.run(
             [sys.executable, "-c", script, str(Path(__file__).with_name("portable.py")),
              str(Path(tmp) / "params.npz"), str(Path(tmp) / "out.npz"), str(old)],

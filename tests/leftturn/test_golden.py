@@ -13,11 +13,10 @@ from tests.leftturn.golden import (
     PRE_FRICTION,
     digest,
     digest_and_slides,
-    portable_driver,
     portable_parameters,
     runs,
 )  # fmt: skip
-from tests.leftturn.portable import GRID
+from tests.leftturn.portable import GRID, portable_driver
 
 
 @pytest.fixture(scope="module")
