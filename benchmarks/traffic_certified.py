@@ -34,8 +34,8 @@ FAMILIES = ("train", "test")
 DENSITIES = ("light", "medium", "heavy")
 FIELDS = (
     "switching", "episodes", "collisions", "failures", "safety_activation_episodes",
-    "cleared_episodes", "stops", "comfort_violation_fraction", "speeding_episodes",
-    "max_speed_kmh", "mean_efficiency", "mean_time_to_clear_s",
+    "cleared_episodes", "stops", "comfort_violation_fraction", "comfort_violation_episodes",
+    "speeding_episodes", "max_speed_kmh", "mean_efficiency", "mean_time_to_clear_s",
 )  # fmt: skip
 
 
