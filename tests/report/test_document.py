@@ -1,7 +1,12 @@
 """The report's tables mark a failure — a loss of control as much as a collision — the way
 they mark a collision."""
 
-from safeswitch.report.document import reckless_table, sumo_table, traffic_table
+from safeswitch.report.document import (
+    comparison_table,
+    reckless_table,
+    sumo_table,
+    traffic_table,
+)
 
 
 def row(collisions, lost):
@@ -37,3 +42,27 @@ def test_traffic_and_simulator_rows_are_marked_for_a_loss_of_control_alone():
         {"controller": "rule", "sim": "embedded", **row(0, 0)},
     ]}}  # fmt: skip
     assert sumo_table(sumo).alert == [True, False]
+
+
+def test_every_driving_table_shows_comfort_in_ticks_and_episodes_and_marks_an_excess():
+    def comfort(share, episodes):
+        return {**row(0, 0), "comfort_violation_fraction": share,
+                "comfort_violation_episodes": episodes}  # fmt: skip
+
+    traffic = traffic_table({"traffic": {"rows": [
+        {"preset": "test", "controller": "learned", "switching": "certified",
+         **comfort(0.0057, 205)},
+        {"preset": "test", "controller": "gap", "switching": "certified", **comfort(0.0049, 40)},
+        {"preset": "test", "controller": "old", "switching": "certified",
+         **row(0, 0), "comfort_violation_fraction": 0.001},  # written before episodes counted
+    ]}})  # fmt: skip
+    ticks = traffic.header.index("comfort exceeded (ticks)")
+    episodes = traffic.header.index("comfort exceeded (episodes)")
+    assert [r[ticks] for r in traffic.rows] == ["0.57%", "0.49%", "0.10%"]
+    assert [r[episodes] for r in traffic.rows] == ["205", "40", "–"]
+    assert [b[ticks] for b in traffic.bad] == [True, False, False]  # over the 0.5 % budget
+    assert not any(b[episodes] for b in traffic.bad)  # a count of episodes has no budget
+    assert traffic.alert == [False, False, False]  # red cells, not a failed row
+
+    compared = comparison_table({"controllers": {"ppo": {"random": comfort(0.001, 17)}}})
+    assert compared.rows[0][compared.header.index("comfort exceeded (episodes)")] == "17"

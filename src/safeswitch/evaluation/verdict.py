@@ -83,9 +83,14 @@ def _safety(s: Summary) -> Check:
     return Check("safety action", ok, f"{_share(n, total)} episodes", "≤ 2 % of episodes")
 
 
+#: The share of ticks over a comfort limit a shipped policy may have (issue #39's targets).
+COMFORT_BUDGET = 0.005
+
+
 def _comfort(s: Summary) -> Check:
     share = s["comfort_violation_fraction"]
-    return Check("comfort", share <= 0.005, f"{share:.2%} of ticks", "exceeded on ≤ 0.5 % of ticks")
+    ok = share <= COMFORT_BUDGET
+    return Check("comfort", ok, f"{share:.2%} of ticks", "exceeded on ≤ 0.5 % of ticks")
 
 
 def _in_episodes(n: int | None) -> str:

@@ -16,7 +16,7 @@ from typing import Any
 
 import jinja2
 
-from safeswitch.evaluation.verdict import verdict
+from safeswitch.evaluation.verdict import COMFORT_BUDGET, verdict
 from safeswitch.leftturn.config import SCENARIO_NAMES
 from safeswitch.training.shipped import MISSING_TARGETS, SHIPPED_DIR
 
@@ -30,6 +30,7 @@ COMPARISON = (
     ("lost_control_episodes", "lost control", "{:d}"),
     ("safety_activation_episodes", "safety episodes", "{:d}"),
     ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("comfort_violation_episodes", "comfort exceeded (episodes)", "{:d}"),
     ("speeding_episodes", "speeding", "{:d}"),
     ("max_speed_kmh", "top speed [km/h]", "{:.1f}"),
     ("stops", "full stops", "{:d}"),
@@ -49,6 +50,8 @@ TRAFFIC = (
     ("failures", "failures", "{:d}"),
     ("collisions", "collisions", "{:d}"),
     ("safety_activation_episodes", "safety episodes", "{:d}"),
+    ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("comfort_violation_episodes", "comfort exceeded (episodes)", "{:d}"),
     ("speeding_episodes", "speeding", "{:d}"),
     ("max_speed_kmh", "top speed [km/h]", "{:.1f}"),
     ("cleared_episodes", "cleared", "{:d}"),
@@ -84,9 +87,9 @@ DEFINITIONS = (
         "proposal — the paper's s*",
     ),
     (
-        "comfort exceeded (ticks)",
+        "comfort exceeded (ticks / episodes)",
         "share of ticks with |a_lon| > {lon:g} m/s² or |a_lat| > {lat:g} m/s² (the paper's "
-        "comfort limits)",
+        "comfort limits) / episodes with at least one such tick",
     ),
     ("full stops", "episodes in which the ego's speed fell below 0.1 m/s"),
     (
@@ -168,8 +171,16 @@ def _columns(
     """A summary's cells for ``columns``, and which show a violation (``lead`` text cells
     first, never flagged)."""
     cells = [_cell(r.get(k), f, k) for k, _, f in columns]
-    bad = [False] * lead + [k in MUST_BE_ZERO and bool(r.get(k)) for k, _, _ in columns]
+    bad = [False] * lead + [_breaks(k, r.get(k)) for k, _, _ in columns]
     return cells, bad
+
+
+def _breaks(key: str, value: Any) -> bool:
+    """Whether a cell's value breaks a target: a count of :data:`MUST_BE_ZERO` above 0, or
+    comfort exceeded on more ticks than the targets allow."""
+    if key == "comfort_violation_fraction":
+        return value is not None and value > COMFORT_BUDGET
+    return key in MUST_BE_ZERO and bool(value)
 
 
 def comparison_table(summary: dict[str, Any]) -> Table:
@@ -303,6 +314,7 @@ PERCEPTION = (
     ("safety_activation_episodes", "safety episodes", "{:d}"),
     ("speeding_episodes", "speeding", "{:d}"),
     ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("comfort_violation_episodes", "comfort exceeded (episodes)", "{:d}"),
     ("cleared_episodes", "cleared", "{:d}"),
     ("mean_efficiency", "efficiency", "{:.3f}"),
 )
@@ -326,6 +338,7 @@ SIMULATORS = (
     ("cleared_episodes", "cleared", "{:d}"),
     ("mean_time_to_clear_s", "time to clear [s]", "{:.2f}"),
     ("comfort_violation_fraction", "comfort exceeded (ticks)", "{:.2%}"),
+    ("comfort_violation_episodes", "comfort exceeded (episodes)", "{:d}"),
     ("mean_efficiency", "efficiency", "{:.3f}"),
     ("sumo_collision_episodes", "SUMO's collisions", "{:d}"),
     ("assumption_break_episodes", "assumptions broken", "{:d}"),
