@@ -101,7 +101,8 @@ def rollout(
     for tick in range(config.episode.horizon_ticks):
         if tick % interval == 0:  # the learned controller decides every decision_interval ticks
             actions = policy(observation, state, tick)
-        state, record = task.step(state, actions)
+        # The observation only before a decision (in traffic most of a tick's cost).
+        state, record = task.step(state, actions, observe=(tick + 1) % interval == 0)
         # Ended episodes keep stepping (no reset) but no longer count.
         stats.update(record, config, live)
         invalid += live & (record.reason == invalid_code)
@@ -115,7 +116,8 @@ def rollout(
         if on_tick is not None:
             on_tick(state, record, tick)
         live &= ~(record.terminated | record.truncated)
-        observation = record.observation
+        if record.observation is not None:
+            observation = record.observation
         if not live.any():
             break
     return RolloutResult(

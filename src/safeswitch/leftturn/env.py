@@ -149,7 +149,7 @@ class LeftTurnEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         info = step_info(record, 0, self.task.reasons)
         info["costs"] = dict(zip(PUBLISHED_COSTS, costs, strict=True))
         return (
-            record.observation[0],
+            record.observed[0],
             float(record.reward[0]),
             bool(record.terminated[0]),
             bool(record.truncated[0]),

@@ -213,7 +213,8 @@ class StepRecord:
     """Everything that happened on one tick, each field ``[B]`` (``observation``: ``[B, 6]``).
 
     Attributes:
-        observation: The state after the tick (x_e, y_e, v_e, x_n, y_n, v_n), float32.
+        observation: The state after the tick (x_e, y_e, v_e, x_n, y_n, v_n), float32;
+            ``None`` where :meth:`LeftTurnTask.step` was asked not to observe it.
         reward: Sum of the reward terms (plus the collision penalty, if configured).
         terms: The five reward terms of Eq. 5, keyed by :data:`REWARD_TERMS`.
         terminated: The episode ended in a failure: a collision or a loss of control.
@@ -246,7 +247,7 @@ class StepRecord:
         ego_cleared: The ego has left its conflict zone.
     """
 
-    observation: NDArray[np.float32]
+    observation: NDArray[np.float32] | None
     reward: FloatArray
     terms: dict[str, FloatArray]
     terminated: BoolArray
@@ -272,6 +273,17 @@ class StepRecord:
     separation: FloatArray
     outcome: NDArray[np.int8]
     ego_cleared: BoolArray
+
+    @property
+    def observed(self) -> NDArray[np.float32]:
+        """The observation, which :meth:`LeftTurnTask.hold` always takes.
+
+        Raises:
+            RuntimeError: The tick was stepped without it (``step(..., observe=False)``).
+        """
+        if self.observation is None:
+            raise RuntimeError("this tick was stepped with observe=False: it has no observation")
+        return self.observation
 
 
 class _SceneThenLogic(type):
@@ -675,7 +687,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         hold = np.zeros(state.batch_size)
         for tick in range(self.config.episode.horizon_ticks + 1):
             if tick:
-                state, _ = self.step(state, hold)
+                state, _ = self.step(state, hold, observe=False)
             yield state
 
     def without_ego(self, scenarios: Scenarios) -> WithoutEgo:
@@ -747,18 +759,19 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         they held on any of them; the rest is the last tick's (the ending one for an episode
         that ended). ``on_tick(record, live)`` sees every tick with the episodes still live."""
         ticks = self.config.episode.decision_interval
-        state, record = self.step(state, action)
         live = np.ones(state.batch_size, dtype=np.bool_)
+        state, record = self.step(state, action, observe=True if ticks == 1 else live)
         if on_tick is not None:
             on_tick(record, live)
         if ticks == 1:
             return state, record
         merged = replace(record, terms=dict(record.terms))
         live = live & ~(record.terminated | record.truncated)
-        for _ in range(ticks - 1):
+        for k in range(ticks - 1):
             if not live.any():
                 break
-            state, record = self.step(state, action)
+            # The observation only where the decision ends: the last tick, or an episode's end.
+            state, record = self.step(state, action, observe=True if k == ticks - 2 else live)
             if on_tick is not None:
                 on_tick(record, live)
             merge_tick(merged, record, live)
@@ -852,13 +865,20 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         learned_brake = np.zeros(batch) if pedals.brake is None else pedals.brake
         return Switched(learned_throttle, out, sup, clipped, learned_brake)
 
-    def step(self, state: TaskState, action: FloatArray) -> tuple[TaskState, StepRecord]:
+    def step(
+        self, state: TaskState, action: FloatArray, observe: bool | BoolArray = True
+    ) -> tuple[TaskState, StepRecord]:
         """Advance every episode by one tick.
 
         Args:
             state: Current state (not modified).
             action: Learned actions in [-1, 1], shape ``[B]`` or ``[B, 1]``; out-of-range values
                 are clipped, NaN/inf ones are never executed.
+            observe: Whether the record carries the observation after the tick: ``True``;
+                ``False``: not (``record.observation`` is ``None``: nobody reads it before the
+                next tick, e.g. while the learned action is held); a boolean array ``[B]``
+                (the episodes still live): only if one of them ended on this tick, whose last
+                observation it is. In traffic the observation is most of a tick's cost.
 
         Returns:
             The next state and the record of the tick. Episodes that ended are not reset here.
@@ -925,9 +945,13 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             ),
             others,
         )
+        if not isinstance(observe, bool):
+            observe = bool(((terminated | truncated) & observe).any())
         record = StepRecord(
-            observation=self.complete_observation(
-                new_state, self.seen_north(new_state, observation)
+            observation=(
+                self.complete_observation(new_state, self.seen_north(new_state, observation))
+                if observe
+                else None
             ),
             reward=reward,
             terms=terms,
@@ -977,6 +1001,11 @@ def merge_tick(merged: StepRecord, record: StepRecord, live: BoolArray) -> None:
         if f.name in (*_SUMMED, *_ANY, "terms"):
             continue
         new, old = getattr(record, f.name), getattr(merged, f.name)
+        if new is None:  # an observation not taken: the merged one stands
+            continue
+        if old is None:  # none taken before: every episode was live until now
+            setattr(merged, f.name, new)
+            continue
         mask = live[:, None] if new.ndim == 2 else live
         setattr(merged, f.name, np.where(mask, new, old))
 

@@ -230,7 +230,7 @@ class LeftTurnVecEnv(VecEnv):
             record = self._cut_first_episodes(record)
         self.ego_progress_after_step = self._state.world.progress[:, 0].copy()
         done = record.terminated | record.truncated
-        observation = record.observation
+        observation = record.observed
         ended = np.flatnonzero(done)
         terminal = observation[ended].copy()
         episode: dict[str, NDArray[Any]] = {}

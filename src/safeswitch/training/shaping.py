@@ -332,7 +332,7 @@ class CounterfactualPenalty(VecEnvWrapper):
         live = np.ones(state.batch_size, dtype=bool)
         north_clear = self.shadow.conflict.zone_b[1]
         for _ in range(self.ticks):
-            state, record = self.shadow.step(state, action)
+            state, record = self.shadow.step(state, action, observe=False)
             collided |= record.collision & live
             passed = state.world.progress[:, 1] > north_clear  # the north car has left its zone
             live &= ~(record.terminated | record.truncated | record.ego_cleared | passed)
