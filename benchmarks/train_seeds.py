@@ -61,7 +61,8 @@ RESULTS = Path(__file__).parent / "results"
 TRAFFIC_EPISODES = 1000
 #: What each evaluation reports (``safeswitch evaluate``'s fields).
 EVALUATED = (
-    "collisions", "safety_activation_episodes", "comfort_violation_fraction", "stops",
+    "collisions", "safety_activation_episodes", "comfort_violation_fraction",
+    "comfort_violation_episodes", "stops",
     "cut_episodes", "cleared_episodes", "mean_efficiency", "speeding_episodes", "max_speed_kmh",
     "faster_than_oracle_episodes", "faster_than_oracle_speeding", "faster_than_oracle_comfort",
     "faster_than_oracle_either",

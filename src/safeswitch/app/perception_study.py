@@ -63,6 +63,7 @@ REFERENCE = {"position_error_m": 1.0, "speed_error_mps": 1.0, "latency_s": 0.2}
 KEPT = (
     "episodes", "failures", "collisions", "lost_control_episodes", "safety_activation_episodes",
     "cleared_episodes", "mean_efficiency", "speeding_episodes", "comfort_violation_fraction",
+    "comfort_violation_episodes",
 )  # fmt: skip
 
 
