@@ -54,3 +54,21 @@ def publish(result: dict[str, object], out: Path | None, as_json: bool) -> bool:
 def emit(result: dict[str, object], as_json: bool) -> None:
     if as_json:
         print(json.dumps(result, indent=2))
+
+
+def export_revision(root: Path, revision: str, folder: Path, paths: tuple[str, ...]) -> Path:
+    """``paths`` (e.g. ``src``) of the git ``revision`` of the checkout at ``root``, unpacked
+    into ``folder``; returns ``folder``."""
+    import subprocess
+    import tarfile
+
+    archive = folder / "tree.tar"
+    with open(archive, "wb") as handle:
+        subprocess.run(
+            ["git", "-C", str(root), "archive", "--format=tar", revision, *paths],
+            stdout=handle,
+            check=True,
+        )
+    with tarfile.open(archive) as tar:
+        tar.extractall(folder, filter="data")
+    return folder

@@ -19,7 +19,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 from pathlib import Path
 
@@ -66,16 +65,7 @@ def measure(src: Path, switching: str, seconds: float, sizes: tuple[int, ...]) -
 
 def export(revision: str, folder: Path) -> Path:
     """``src/`` of a git revision, unpacked into ``folder``."""
-    archive = folder / "src.tar"
-    with open(archive, "wb") as handle:
-        subprocess.run(
-            ["git", "-C", str(ROOT), "archive", "--format=tar", revision, "src"],
-            stdout=handle,
-            check=True,
-        )
-    with tarfile.open(archive) as tar:
-        tar.extractall(folder, filter="data")
-    return folder / "src"
+    return _common.export_revision(ROOT, revision, folder, ("src",)) / "src"
 
 
 def compare(revision: str, switching: str, seconds: float, rounds: int) -> dict[str, object]:

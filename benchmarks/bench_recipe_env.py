@@ -29,7 +29,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 from pathlib import Path
 
@@ -82,20 +81,6 @@ def measure(tree: Path, recipe: str, seconds: float, episodes: int) -> dict[str,
     return dict(json.loads(done.stdout.strip().splitlines()[-1]))
 
 
-def export(revision: str, folder: Path) -> Path:
-    """``src/`` and ``experiments/`` of a git revision, unpacked into ``folder``."""
-    archive = folder / "tree.tar"
-    with open(archive, "wb") as handle:
-        subprocess.run(
-            ["git", "-C", str(ROOT), "archive", "--format=tar", revision, "src", "experiments"],
-            stdout=handle,
-            check=True,
-        )
-    with tarfile.open(archive) as tar:
-        tar.extractall(folder, filter="data")
-    return folder
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="experimental/traffic_certified_go_model_dagger_wide")
@@ -110,7 +95,8 @@ def main(argv: list[str] | None = None) -> int:
         capture_output=True, text=True, check=True,
     ).stdout.strip()  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
-        trees = {"this checkout": ROOT, revision: export(revision, Path(tmp))}
+        exported = _common.export_revision(ROOT, revision, Path(tmp), ("src", "experiments"))
+        trees = {"this checkout": ROOT, revision: exported}
         for tree in trees.values():  # compile and cache numba's machine code first
             measure(tree, args.config, 0.2, 4)
         runs: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
