@@ -14,7 +14,7 @@ from safeswitch.leftturn.task import LeftTurnTask, StepRecord
 from .test_traffic import _write_go_model
 
 #: Traffic with every per-tick observation cost: the filter's margins, the clock, a go model;
-#: no switching logic and a short horizon, so that episodes end on every tick of a decision.
+#: no switching logic (collisions) and a short horizon, so that episodes end inside a held decision.
 SCENE = {"switching": "none", "episode": {"decision_interval": 15, "observe_time_left": True}}
 TRAFFIC = {"preset": "heavy", "observe": "margins", "horizon_s": 7.3}  # 365 ticks: mid-hold
 

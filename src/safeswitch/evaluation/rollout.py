@@ -82,7 +82,8 @@ def rollout(
         scenarios: One scenario per episode ``[B]``.
         policy: The learned controller (or adversary).
         on_tick: Called after every tick with the new state, the record and the tick index
-            (e.g. to break an assumption mid-episode, or to log).
+            (e.g. to break an assumption mid-episode, or to log); the record's observation is
+            there only on the tick before a decision (``None`` on the others).
     """
     config: LeftTurnConfig = task.config
     state = task.initial(scenarios)
