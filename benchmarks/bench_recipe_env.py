@@ -85,9 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="experimental/traffic_certified_go_model_dagger_wide")
     parser.add_argument("--against", default="HEAD", metavar="REV")
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--episodes", type=int, default=64, help="scenes per rollout")
-    parser.add_argument("--seconds", type=float, default=3.0, help="timing of the VecEnv")
+    parser.add_argument("--seconds", type=float, default=5.0, help="timing of the VecEnv")
     parser.add_argument("--out", type=Path, help="the result's JSON (default: results/)")
     args = parser.parse_args(argv)
     revision = subprocess.run(
