@@ -41,14 +41,16 @@ def make(n, switching="guarded", horizon_s=4.0, interval=1, **constraints):
 
 def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_per_episode():
     """With a decision per tick the costs of a step are what its ``info`` reports — a tick over
-    a comfort limit, a tick over the tolerated speed, the episode's first safety action, the
-    ego not yet clear, an episode that ends uncleared — and PPO's reward is the paper's minus
+    a comfort limit, the episode's first such tick, a tick over the tolerated speed, the
+    episode's first safety action, the ego not yet clear, an episode that ends uncleared — and
+    PPO's reward is the paper's minus
     each cost times its multiplier. What the wrapper measures over the ended episodes equals
     the episode summaries the environment itself reports."""
     base, env = make(
         24,
         horizon_s=8.0,
         comfort={"budget": 0.01, "initial_multiplier": 3.0, **FIXED},
+        comfort_episodes={"budget": 0.1, "initial_multiplier": 11.0, **FIXED},
         speeding={"budget": 0.01, "initial_multiplier": 2.0, **FIXED},
         safety={"budget": 0.01, "initial_multiplier": 20.0, **FIXED},
         clear_time={"budget": 3.0, "initial_multiplier": 0.5, **FIXED},
@@ -57,7 +59,7 @@ def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_pe
     limits = base.config.rewards
     env.reset()
     rng = np.random.default_rng(1)
-    episodes, seen = [], np.zeros(24, dtype=bool)
+    episodes, seen, uncomfortable = [], np.zeros(24, dtype=bool), np.zeros(24, dtype=bool)
     for step in range(600):
         if step % 10 == 0:  # bang-bang throttle: comfort breaks, both logics act, some speed
             action = rng.choice([-1.0, 1.0], (24, 1), p=[0.3, 0.7])
@@ -70,13 +72,15 @@ def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_pe
         safety = np.array([i["safety_active"] for i in infos])
         first_safety = safety & ~seen
         seen |= safety
+        first_comfort = comfort & ~uncomfortable
+        uncomfortable |= comfort
         uncleared = ~base.last_record.ego_cleared
         ended_uncleared = done & uncleared
         expected = paper - 3.0 * comfort - 2.0 * fast - 20.0 * first_safety - 0.5 * uncleared
-        expected -= 7.0 * ended_uncleared
+        expected -= 7.0 * ended_uncleared + 11.0 * first_comfort
         np.testing.assert_allclose(reward, expected, atol=1e-3)
         episodes += [infos[int(i)]["episode"] for i in np.flatnonzero(done)]
-        seen[done] = False
+        seen[done] = uncomfortable[done] = False
     measured = env.measured()
     ticks = sum(e["l"] for e in episodes)
     assert measured["comfort"] == pytest.approx(
@@ -86,6 +90,9 @@ def test_each_cost_is_counted_per_tick_charged_at_its_multiplier_and_measured_pe
     assert all(
         (e["speeding_steps"] > 0) == (e["max_speed"] > 30.1 / 3.6) for e in episodes
     )  # the episode summary's two speeding figures agree
+    with_comfort = sum(e["comfort_violation_steps"] > 0 for e in episodes)
+    assert measured["comfort_episodes"] == pytest.approx(with_comfort / len(episodes))
+    assert measured["comfort_episodes"] > 2 * measured["comfort"]  # episodes, not ticks
     with_safety = sum(e["safety_steps"] > 0 for e in episodes)
     assert measured["safety"] == pytest.approx(with_safety / len(episodes))
     # the time to clear: the tick on which the ego cleared (it is not charged), or the horizon

@@ -137,7 +137,8 @@ def canned(**given):
     return {
         "episodes": 100, "ticks": 60_000, "mean_return": 0.0, "collisions": 0,
         "safety_activation_episodes": 0, "safety_activation_steps": 0,
-        "comfort_violation_steps": 0, "cleared_episodes": 100, "mean_time_to_clear_s": 8.0,
+        "comfort_violation_steps": 0, "comfort_violation_episodes": 0,
+        "cleared_episodes": 100, "mean_time_to_clear_s": 8.0,
         "speeding_steps": 0, "speeding_episodes": 0,
     } | given  # fmt: skip
 
@@ -190,6 +191,13 @@ def test_constraints_then_return_puts_the_limits_first_then_the_time_then_the_re
     slow = canned(mean_return=10.0)
     assert constraint_key(speedy, fast, 12.0) < constraint_key(speedy, slow, 12.0)
     assert constraint_key(config, fast, 12.0) > constraint_key(config, slow, 12.0)
+    # a limit broken briefly in 10 % of the episodes (0.1 % of ticks), against a budget of 5 %
+    # of episodes, ranks with the limits too: the share of ticks alone lets it through
+    careful = from_dict(TrainConfig, {**to_dict(config), "constraints": {
+        **to_dict(config)["constraints"], "comfort_episodes": {"budget": 0.05}}})  # fmt: skip
+    brief = canned(mean_return=2000.0, comfort_violation_steps=60, comfort_violation_episodes=10)
+    assert constraint_key(careful, brief, 12.0) < constraint_key(careful, slow, 12.0)
+    assert constraint_key(config, brief, 12.0) > constraint_key(config, slow, 12.0)
     times = [float(r["clear_time_s"]) for r in rows(tmp_path)]
     assert times[2] == pytest.approx(0.95 * 7.0 + 0.05 * 12.0)
 

@@ -506,8 +506,8 @@ class ConstraintConfig:
 
     Attributes:
         budget: What the constraint allows: a share of ticks (``comfort``, ``speeding``,
-            ``overrule``), a share of episodes (``safety``, ``uncleared``) or a mean time to
-            clear [s] (``clear_time``), > 0.
+            ``overrule``), a share of episodes (``comfort_episodes``, ``safety``,
+            ``uncleared``) or a mean time to clear [s] (``clear_time``), > 0.
         integral_gain: Added to the multiplier's integral term per rollout per unit of
             relative excess (``measured / budget − 1``) [reward per unit of the cost].
         proportional_gain: Multiplier per unit of the rollout's relative excess.
@@ -554,6 +554,9 @@ class ConstraintsConfig:
 
     Attributes:
         comfort: Ticks over a comfort limit, as a share of ticks.
+        comfort_episodes: Episodes with a tick over a comfort limit, as a share of episodes
+            (ours): a share of ticks hides a policy that breaks a limit briefly in many
+            episodes — in traffic 0.1-0.3 % of ticks were 15-23 % of the scenes.
         speeding: Ticks faster than the tolerated speed (``R_v``'s best, 30 km/h by default),
             as a share of ticks.
         safety: Episodes with a safety action (of ``reasons``), as a share of episodes.
@@ -567,6 +570,7 @@ class ConstraintsConfig:
     """
 
     comfort: ConstraintConfig | None = None
+    comfort_episodes: ConstraintConfig | None = None
     speeding: ConstraintConfig | None = None
     safety: ConstraintConfig | None = None
     overrule: ConstraintConfig | None = None
@@ -574,12 +578,12 @@ class ConstraintsConfig:
     uncleared: ConstraintConfig | None = None
 
     def __post_init__(self) -> None:
-        for name in ("comfort", "speeding", "clear_time", "uncleared"):
+        for name in ("comfort", "comfort_episodes", "speeding", "clear_time", "uncleared"):
             given = getattr(self, name)
             if given is not None:
                 check(not given.reasons, f"constraints.{name}", "reasons", given.reasons,
                       "are for the safety constraint only")  # fmt: skip
-        for name in ("comfort", "speeding", "safety", "overrule", "uncleared"):
+        for name in ("comfort", "comfort_episodes", "speeding", "safety", "overrule", "uncleared"):
             given = getattr(self, name)
             if given is not None:
                 check(given.budget < 1, f"constraints.{name}", "budget", given.budget,
@@ -587,7 +591,8 @@ class ConstraintsConfig:
 
     def active(self) -> dict[str, ConstraintConfig]:
         """The constraints that are on, by cost name."""
-        named = {"comfort": self.comfort, "speeding": self.speeding, "safety": self.safety,
+        named = {"comfort": self.comfort, "comfort_episodes": self.comfort_episodes,
+                 "speeding": self.speeding, "safety": self.safety,
                  "overrule": self.overrule, "clear_time": self.clear_time,
                  "uncleared": self.uncleared}  # fmt: skip
         return {name: c for name, c in named.items() if c is not None}

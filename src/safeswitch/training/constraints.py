@@ -25,6 +25,9 @@ ended since the last update (pooled until there are enough of them; see
 
 * ``comfort`` — the tick exceeded a comfort limit (the evaluation's comfort violation);
   measured as a share of the episodes' ticks.
+* ``comfort_episodes`` — the episode's first tick over a comfort limit; measured as the share
+  of episodes with one (the evaluation's ``comfort_violation_episodes``). A share of ticks
+  hides a policy that breaks a limit for a few ticks in many episodes.
 * ``speeding`` — the ego was faster than the tolerated speed on the tick (the highest speed at
   which ``R_v`` is at its best, 30 km/h by default: the evaluation's ``speeding_steps``); a
   share of ticks. ``R_v`` alone still pays +0.5 at 32.5 km/h, and a time constraint can buy
@@ -78,6 +81,10 @@ from safeswitch.training.shaping import left_turn_beneath
 #: The relative excess of one rollout is clipped to ``[-1, MAX_EXCESS]``.
 MAX_EXCESS = 4.0
 
+#: The left turn's costs charged once per episode, on its first tick that has them: their
+#: constraints count episodes.
+EPISODE_COSTS = ("safety", "comfort_episodes")
+
 
 @dataclass
 class Multiplier:
@@ -89,7 +96,7 @@ class Multiplier:
         proportional_gain: Multiplier per unit of the current rollout's relative excess.
         maximum: The multiplier's (and the integral's) upper bound.
         value: The multiplier ``λ`` now [reward per unit of the cost: a tick, or an episode
-            for ``safety`` and ``uncleared``].
+            for ``safety``, ``comfort_episodes`` and ``uncleared``].
         integral: The integral term now.
     """
 
@@ -278,14 +285,18 @@ class ConstraintCosts(CostPool, VecEnvWrapper):
         self.horizon_ticks = round(episode.horizon_s / episode.dt)
         n = self.num_envs
         self._cleared = np.zeros(n, dtype=bool)
-        self._safety_seen = np.zeros(n, dtype=bool)
+        #: Per cost counted in episodes, whether the running episode has already paid it.
+        self._seen = {
+            name: np.zeros(n, dtype=bool) for name in EPISODE_COSTS if name in self.multipliers
+        }
         self._counted = np.ones(n, dtype=bool)
 
     def reset(self) -> VecEnvObs:
         observation = self.venv.reset()
         self.clear_episodes()
         self._cleared[:] = False
-        self._safety_seen[:] = False
+        for seen in self._seen.values():
+            seen[:] = False
         self._counted[:] = not self.base.stagger
         return observation
 
@@ -294,13 +305,15 @@ class ConstraintCosts(CostPool, VecEnvWrapper):
         costs = self.costs_of_step(done)
         penalty, ended = self.charge(costs, self.base.costs_in_step.ticks, done, self._counted)
         self._cleared[ended] = False
-        self._safety_seen[ended] = False
+        for seen in self._seen.values():
+            seen[ended] = False
         self._counted[ended] = True
         return observation, (reward - penalty).astype(np.float32), done, infos
 
     def costs_of_step(self, done: NDArray[np.bool_]) -> dict[str, NDArray[np.float64]]:
         """Per constraint, its cost in the last step per environment ``[B]`` (ticks; for
-        ``safety`` and ``uncleared`` episodes); ``done``: the episodes that step ended."""
+        :data:`EPISODE_COSTS` and ``uncleared`` episodes); ``done``: the episodes that step
+        ended."""
         counts = self.base.costs_in_step
         record = self.base.last_record
         assert record is not None
@@ -309,16 +322,18 @@ class ConstraintCosts(CostPool, VecEnvWrapper):
             out["uncleared"] = (done & ~record.ego_cleared).astype(np.float64)
         if "comfort" in self.multipliers:
             out["comfort"] = counts.comfort.astype(np.float64)
+        if "comfort_episodes" in self.multipliers:
+            out["comfort_episodes"] = counts.comfort.astype(np.float64)
         if "speeding" in self.multipliers:
             out["speeding"] = counts.speeding.astype(np.float64)
         if "safety" in self.multipliers and "safety" not in self._reasons:
             out["safety"] = counts.safety.astype(np.float64)
         for name, codes in self._reasons.items():
             out[name] = self.base.reason_ticks_in_step[:, codes].sum(axis=1).astype(np.float64)
-        if "safety" in out:  # an episode's first safety action is its cost: it counts episodes
-            acted = out["safety"] > 0
-            out["safety"] = (acted & ~self._safety_seen).astype(np.float64)
-            self._safety_seen |= acted
+        for name, seen in self._seen.items():  # an episode's first such tick is its cost
+            acted = out[name] > 0
+            out[name] = (acted & ~seen).astype(np.float64)
+            seen |= acted
         if "clear_time" in self.multipliers:
             self._cleared |= record.ego_cleared
             rest = np.maximum(self.horizon_ticks - self._length - counts.ticks, 0)
@@ -328,14 +343,14 @@ class ConstraintCosts(CostPool, VecEnvWrapper):
 
     def measured(self) -> dict[str, float] | None:
         """What the pooled episodes measured per constraint, in its budget's unit (a share of
-        ticks; for ``safety`` a share of episodes; for ``clear_time`` the mean time to clear
-        [s]; for ``uncleared`` a share of episodes); ``None`` while fewer than ``min_episodes``
+        ticks; for :data:`EPISODE_COSTS` and ``uncleared`` a share of episodes; for
+        ``clear_time`` the mean time to clear [s]); ``None`` while fewer than ``min_episodes``
         have ended."""
         out = self.pooled_means()  # per tick
         if out is None:
             return None
         episodes = self._pooled_episodes
-        for name in ("safety", "uncleared"):
+        for name in (*EPISODE_COSTS, "uncleared"):
             if name in out:
                 out[name] = self._pooled[name] / episodes
         if "clear_time" in out:

@@ -296,16 +296,17 @@ class ValidationSet:
 def constraint_measures(summary: dict[str, Any], horizon_s: float) -> dict[str, float]:
     """What each constraint of :mod:`safeswitch.training.constraints` measures, from an
     evaluation's summary (the deterministic policy's): the share of ticks over a comfort limit,
-    the share of ticks faster than the tolerated speed, the share of episodes with a safety
-    action (any reason: validation runs under one logic), the mean time to clear [s] with an
-    episode that never clears counted at the horizon, and the share of episodes that never
-    clear."""
+    the share of episodes with such a tick, the share of ticks faster than the tolerated speed,
+    the share of episodes with a safety action (any reason: validation runs under one logic),
+    the mean time to clear [s] with an episode that never clears counted at the horizon, and
+    the share of episodes that never clear."""
     ticks = max(float(summary["ticks"]), 1.0)
     episodes = max(float(summary["episodes"]), 1.0)
     cleared = float(summary["cleared_episodes"])
     cleared_time = float(summary["mean_time_to_clear_s"]) if cleared else 0.0
     return {
         "comfort": float(summary["comfort_violation_steps"]) / ticks,
+        "comfort_episodes": float(summary["comfort_violation_episodes"]) / episodes,
         "speeding": float(summary["speeding_steps"]) / ticks,
         "safety": float(summary["safety_activation_episodes"]) / episodes,
         "clear_time": (cleared * cleared_time + (episodes - cleared) * horizon_s) / episodes,
@@ -317,8 +318,8 @@ def constraint_key(
     config: TrainConfig, summary: dict[str, Any], horizon_s: float
 ) -> tuple[float, float, float]:
     """``constraints_then_return``'s order, to maximise: the safety constraints first (minus
-    the summed excess ``max(0, measured / budget − 1)`` of ``comfort``, ``speeding`` and
-    ``safety``, each
+    the summed excess ``max(0, measured / budget − 1)`` of ``comfort``, ``comfort_episodes``,
+    ``speeding`` and ``safety``, each
     against its ``validation_budget``, by default its training budget), then the task's (the
     summed excess of ``clear_time`` and ``uncleared``), then the mean return — the constrained
     problem's priorities: a policy that keeps its limits before a faster one, a faster one
@@ -330,7 +331,7 @@ def constraint_key(
 
 
 #: The constraints a policy keeps before it is fast (``constraints_then_return``'s first term).
-SAFETY_CONSTRAINTS = ("comfort", "speeding", "safety")
+SAFETY_CONSTRAINTS = ("comfort", "comfort_episodes", "speeding", "safety")
 
 
 def constraint_excess(
