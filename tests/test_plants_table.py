@@ -74,3 +74,20 @@ def test_one_density_over_the_budget_or_one_failure_misses_the_row(plants, tmp_p
 
 def test_no_results_no_row(plants):
     assert plants.traffic() is None
+
+
+def test_the_shipped_table_has_one_row_per_plant_each_from_the_full_table(
+    benchmark_module, capsys
+):
+    """``--shipped`` (the README's table) keeps exactly one recipe per plant — the one its
+    shipped policies or the pipeline's defaults come from — out of the full table's rows."""
+    plants = benchmark_module("plants")
+    plants.main(["--json"])
+    every = json.loads(capsys.readouterr().out)
+    plants.main(["--json", "--shipped"])
+    shipped = json.loads(capsys.readouterr().out)
+    names = [row["plant"] for row in shipped]
+    assert len(names) == len(set(names)) == len({row["plant"] for row in every})
+    assert all(row in every for row in shipped) and len(shipped) < len(every)
+    highway = next(row for row in shipped if row["plant"] == "highway-env")
+    assert "as shipped" in highway["method"]
