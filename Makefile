@@ -52,8 +52,8 @@ bench: venv numba-cache
 	$(PY) benchmarks/bench_env.py
 
 lint: venv
-	$(VENV)/bin/ruff check src tests benchmarks docs/hooks.py
-	$(VENV)/bin/ruff format --check src tests benchmarks docs/hooks.py
+	$(VENV)/bin/ruff check src tests benchmarks experiments docs/hooks.py
+	$(VENV)/bin/ruff format --check src tests benchmarks experiments docs/hooks.py
 	$(VENV)/bin/mypy
 
 # The documentation site in site/; any warning (a broken link, a docstring it cannot read) fails.

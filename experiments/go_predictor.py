@@ -174,17 +174,31 @@ def fit(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default=CONFIG)
-    parser.add_argument("--seed", type=int, default=7001,
-                        help="of the scenes and drivers of the first batch (batch b: seed + 100 b)")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=7001,
+        help="of the scenes and drivers of the first batch (batch b: seed + 100 b)",
+    )
     parser.add_argument("--episodes", type=int, default=1024, help="per batch")
     parser.add_argument("--batches", type=int, default=2)
     parser.add_argument("--epochs", type=int, default=30)
     parser.add_argument("--hidden", type=int, default=64, help="units per hidden layer")
-    parser.add_argument("--drivers", type=Path, default=None, metavar="MODEL",
-                        help="sample the states of drivers that go on this predictor's verdict "
-                             "(a threshold and a pedal noise drawn per episode), not random ones")
-    parser.add_argument("--data", type=Path, nargs="*", default=[],
-                        help="sample files (.npz) to reuse if they all exist, else one to write")
+    parser.add_argument(
+        "--drivers",
+        type=Path,
+        default=None,
+        metavar="MODEL",
+        help="sample the states of drivers that go on this predictor's verdict "
+        "(a threshold and a pedal noise drawn per episode), not random ones",
+    )
+    parser.add_argument(
+        "--data",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="sample files (.npz) to reuse if they all exist, else one to write",
+    )
     parser.add_argument("--out", type=Path, required=True, help="the model's .npz")
     args = parser.parse_args()
     torch.set_num_threads(1)

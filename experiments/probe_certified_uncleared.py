@@ -41,7 +41,9 @@ def main() -> None:
     never = np.flatnonzero(np.isnan(np.asarray(result.time_to_clear, dtype=float)))
     v = np.array(speed)  # [ticks, B]
     dt = config.episode.dt
-    print("scenario  north behind [s]  north [km/h]  oracle clears [s]  stopped [s]  goes again [s]")
+    print(
+        "scenario  north behind [s]  north [km/h]  oracle clears [s]  stopped [s]  goes again [s]"
+    )
     for i in never:
         still = np.flatnonzero(v[:, i] < 0.1)
         still = still[still > 50]

@@ -28,15 +28,17 @@ def main() -> None:
     trained = traffic_config(config.traffic)
     test = replace(traffic_config("test"), **{k: getattr(trained, k) for k in POLICY_OBSERVATION})
     task = build_task(None, replace(config.env, switching="certified"), traffic=test)
-    (_, scenes), = scenario_chunks(task, "random", 1000, 1_000_003)
+    ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
     rules = [("gap planner (its simulated go check)", GapPlanner(task))]
     rules += [(f"learned predictor > {t}", PredictedGo(task, t)) for t in (0.3, 0.5, 0.7)]
     for name, planner in rules:
         result, plan = run_controller(task, planner, scenes, trace=False)
         s = summary_against_oracle(result, plan, task.config.episode.horizon_s)
-        print(f"{name}: collisions {s['collisions']}, safety episodes "
-              f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, "
-              f"efficiency {s['mean_efficiency']:.3f}")
+        print(
+            f"{name}: collisions {s['collisions']}, safety episodes "
+            f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, "
+            f"efficiency {s['mean_efficiency']:.3f}"
+        )
 
 
 if __name__ == "__main__":

@@ -33,22 +33,28 @@ def main() -> None:
         policy = episodes(Path(tmp) / "policy", "learned", sys.argv[1])
     for name, frame in (("gap planner", planner), ("policy", policy)):
         t = frame["time_to_clear_s"]
-        print(f"{name}: cleared {t.notna().sum()}, within 12 s {(t <= 12).sum()}, "
-              f"after {(t > 12).sum()}; safety episodes {(frame['safety_steps'] > 0).sum()}")
+        print(
+            f"{name}: cleared {t.notna().sum()}, within 12 s {(t <= 12).sum()}, "
+            f"after {(t > 12).sum()}; safety episodes {(frame['safety_steps'] > 0).sum()}"
+        )
     early = planner["time_to_clear_s"] <= 12
     lost = early & policy["time_to_clear_s"].isna()
     both = early & policy["time_to_clear_s"].notna()
     late = (policy["time_to_clear_s"] - planner["time_to_clear_s"])[both]
-    print(f"the gap planner clears {early.sum()} within 12 s; the policy clears {both.sum()} of "
-          f"them ({late.mean():.2f} s later on average) and never clears {lost.sum()}")
-    print(f"in those {lost.sum()}: the policy stopped (under 1 km/h) in "
-          f"{(policy['min_speed_kmh'][lost] < 1).sum()}, needed the filter in "
-          f"{(policy['safety_steps'][lost] > 0).sum()}, drove at most "
-          f"{policy['max_speed_kmh'][lost].mean():.1f} km/h on average; the gap planner cleared "
-          f"them at {planner['time_to_clear_s'][lost].mean():.1f} s on average "
-          f"({(planner['outcome'][lost] == 'cut').sum()} in front of the conflicting vehicle, "
-          f"{(planner['outcome'][lost] == 'yield').sum()} behind it), "
-          f"the filter in {(planner['safety_steps'][lost] > 0).sum()}")
+    print(
+        f"the gap planner clears {early.sum()} within 12 s; the policy clears {both.sum()} of "
+        f"them ({late.mean():.2f} s later on average) and never clears {lost.sum()}"
+    )
+    print(
+        f"in those {lost.sum()}: the policy stopped (under 1 km/h) in "
+        f"{(policy['min_speed_kmh'][lost] < 1).sum()}, needed the filter in "
+        f"{(policy['safety_steps'][lost] > 0).sum()}, drove at most "
+        f"{policy['max_speed_kmh'][lost].mean():.1f} km/h on average; the gap planner cleared "
+        f"them at {planner['time_to_clear_s'][lost].mean():.1f} s on average "
+        f"({(planner['outcome'][lost] == 'cut').sum()} in front of the conflicting vehicle, "
+        f"{(planner['outcome'][lost] == 'yield').sum()} behind it), "
+        f"the filter in {(planner['safety_steps'][lost] > 0).sum()}"
+    )
 
 
 if __name__ == "__main__":
