@@ -76,9 +76,7 @@ def test_no_results_no_row(plants):
     assert plants.traffic() is None
 
 
-def test_the_shipped_table_has_one_row_per_plant_each_from_the_full_table(
-    benchmark_module, capsys
-):
+def test_the_shipped_table_has_one_row_per_plant_from_the_full_table(benchmark_module, capsys):
     """``--shipped`` (the README's table) keeps exactly one recipe per plant — the one its
     shipped policies or the pipeline's defaults come from — out of the full table's rows."""
     plants = benchmark_module("plants")
