@@ -39,11 +39,11 @@ def test_settings_change_exactly_the_keys_named_and_are_validated():
 def test_train_writes_its_settings_into_the_run_and_refuses_bad_ones(tmp_path, capsys):
     run = tmp_path / "run"
     args = ["train", "--timesteps", "256", "--n-envs", "2", "--out", str(run), "--no-progress",
-            "--set", "eval_episodes=4", "--set", "env.scenarios.north_speed_kmh=[40, 45]",
+            "--set", "eval_episodes=4", "--set", "env.scenarios.north_speed_kmh=[40, 44]",
             "--set", "ppo.n_steps=128"]  # fmt: skip
     assert main(args) == 0
     saved = yaml.safe_load((run / "config.yaml").read_text())
-    assert saved["env"]["scenarios"]["north_speed_kmh"] == [40.0, 45.0]
+    assert saved["env"]["scenarios"]["north_speed_kmh"] == [40.0, 44.0]
     assert saved["eval_episodes"] == 4
     assert json.loads((run / "metrics.json").read_text())["evaluation"]["episodes"] == 4
     capsys.readouterr()
@@ -63,29 +63,37 @@ def test_train_writes_its_settings_into_the_run_and_refuses_bad_ones(tmp_path, c
 def test_evaluate_drives_the_scene_the_settings_describe(tmp_path, capsys):
     out = tmp_path / "eval"
     args = ["evaluate", "--controller", "rule", "--episodes", "20", "--out", str(out),
-            "--set", "env.scenarios.north_speed_kmh=[44, 45]", "--json"]  # fmt: skip
+            "--set", "env.scenarios.north_speed_kmh=[43, 44]", "--json"]  # fmt: skip
     assert main(args) == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["settings"] == ["env.scenarios.north_speed_kmh=[44, 45]"]
+    assert summary["settings"] == ["env.scenarios.north_speed_kmh=[43, 44]"]
     with open(out / "episodes.csv", newline="") as handle:
         speeds = [float(r["north_speed_kmh"]) for r in csv.DictReader(handle)]
-    assert len(speeds) == 20 and all(44.0 <= v <= 45.0 for v in speeds)
+    assert len(speeds) == 20 and all(43.0 <= v <= 44.0 for v in speeds)
     assert main(["evaluate", "--controller", "rule", "--set", "ppo.gamma=0.9"]) == 2
     assert "env.KEY=VALUE" in error_line(capsys)
+    # a scene whose north car would start off its road is refused before anything runs
+    far = tmp_path / "far"
+    args = ["evaluate", "--controller", "rule", "--out", str(far),
+            "--set", "env.scenarios.north_speed_kmh=[40, 50]"]  # fmt: skip
+    assert main(args) == 2
+    line = error_line(capsys)
+    assert "north car at up to 50 km/h" in line and "north_speed_kmh's upper end" in line
+    assert not far.exists()
 
 
 def test_campaign_cells_run_in_the_scene_the_settings_describe(tmp_path, capsys):
     pq = pytest.importorskip("pyarrow.parquet")
     folder = tmp_path / "c"
     args = ["campaign", "--controller", "rule", "--episodes", "30", "--workers", "0",
-            "--set", "env.scenarios.north_speed_kmh=[44, 45]", "--out", str(folder),
+            "--set", "env.scenarios.north_speed_kmh=[43, 44]", "--out", str(folder),
             "--no-progress", "--json"]  # fmt: skip
     assert main(args) == 0
     table = pq.read_table(next((folder / "shards" / "rule").glob("*.parquet")))
     speeds = [float(v) for v in table.column("north_speed_kmh").to_pylist()]
-    assert len(speeds) == 30 and all(44.0 <= v <= 45.0 for v in speeds)
+    assert len(speeds) == 30 and all(43.0 <= v <= 44.0 for v in speeds)
     capsys.readouterr()
-    other = [*args[:-6], "--set", "env.scenarios.north_speed_kmh=[30, 45]", "--out",
+    other = [*args[:-6], "--set", "env.scenarios.north_speed_kmh=[30, 44]", "--out",
              str(folder), "--resume", "--no-progress"]  # fmt: skip
     assert main(other) == 2
     assert "different campaign" in error_line(capsys)

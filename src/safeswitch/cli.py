@@ -772,7 +772,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--set", action="append", metavar="KEY=VALUE",
         help="change one configuration setting (repeatable): a dotted key and a YAML value, "
-        "e.g. env.scenarios.north_speed_kmh=[30,45] or ppo.gamma=0.995; checked like a file",
+        "e.g. env.scenarios.north_speed_kmh=[30,44] or ppo.gamma=0.995; checked like a file",
     )  # fmt: skip
     _perception(train)
     train.add_argument("--torch-threads", type=at_least(1), help="CPU threads for torch")
@@ -806,7 +806,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--set", action="append", metavar="KEY=VALUE",
         help="change the scene (repeatable): env.KEY=VALUE with a dotted key of the left "
-        "turn's configuration and a YAML value, e.g. env.scenarios.north_speed_kmh=[30,45]",
+        "turn's configuration and a YAML value, e.g. env.scenarios.north_speed_kmh=[30,44]",
     )  # fmt: skip
     _perception(ev)
     ev.add_argument(
@@ -869,7 +869,7 @@ def build_parser() -> argparse.ArgumentParser:
     camp.add_argument(
         "--set", action="append", metavar="KEY=VALUE",
         help="change the scene of every cell (repeatable): env.KEY=VALUE, e.g. "
-        "env.scenarios.north_speed_kmh=[30,45]",
+        "env.scenarios.north_speed_kmh=[30,44]",
     )  # fmt: skip
     _perception(camp)
     camp.add_argument("--episodes", type=at_least(1), default=100_000, help="random scenarios")
@@ -935,7 +935,7 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     adp.add_argument(
         "--set", action="append", metavar="KEY=VALUE",
-        help="the shift (repeatable): env.KEY=VALUE, e.g. env.scenarios.north_speed_kmh=[40,50]",
+        help="the shift (repeatable): env.KEY=VALUE, e.g. env.scenarios.north_speed_kmh=[38,44]",
     )  # fmt: skip
     _perception(adp)
     adp.add_argument("--episodes", type=at_least(1), default=10_000, help="deployment episodes")

@@ -138,3 +138,41 @@ def test_rehearsing_environments_draw_the_other_distribution_and_the_rest_are_un
     assert (got[:, :4] >= 38).all() and (got[:, 4:] <= 32).all()
     with pytest.raises(ValueError, match=r"count must be in 0…6, got 7"):
         mixed.rehearse(original, 7)
+
+
+@pytest.mark.parametrize(
+    "given",
+    [
+        {"north_speed_kmh": (40.0, 50.0)},
+        {"arrival_offset_s": (-3.0, 12.0)},
+        {"focus_share": 0.2, "focus_arrival_offset_s": (1.0, 9.0), "north_speed_kmh": (30, 40)},
+    ],
+)
+def test_a_distribution_that_starts_the_north_car_off_its_route_is_refused_with_what_fits(given):
+    """Before any episode, naming the values; each suggested bound is accepted and draws every
+    north car on its route."""
+    scenarios = ScenarioConfig(**given)
+    with pytest.raises(ConfigError, match="starts up to .* before the conflict point") as error:
+        build_task(None, LeftTurnConfig(scenarios=scenarios))
+    text = str(error.value)
+    speed = float(text.split("upper end to at most ")[1].split(" km/h")[0])
+    offset = float(text.split("arrival_offset_s's to at most ")[1].split(" s")[0])
+    slower = dataclasses.replace(
+        scenarios, north_speed_kmh=(min(scenarios.north_speed_kmh[0], speed), speed)
+    )
+    sooner = dataclasses.replace(
+        scenarios,
+        arrival_offset_s=(min(scenarios.arrival_offset_s[0], offset), offset),
+        focus_arrival_offset_s=(min(scenarios.focus_arrival_offset_s[0], offset), offset),
+    )
+    for fits in (slower, sooner):
+        task = build_task(None, LeftTurnConfig(scenarios=fits))
+        state = task.initial(task.scenario_set(3, 2_000))  # the farthest draws start on the route
+        assert len(state.tick) == 2_000
+
+
+def test_a_named_scenario_is_not_held_to_the_random_distribution():
+    """With a named scenario the random distribution is never drawn, so it is not checked."""
+    far = ScenarioConfig(north_speed_kmh=(40.0, 50.0))
+    task = build_task(None, LeftTurnConfig(scenarios=far, scenario="cut"))
+    assert task.initial(task.named("cut", 3)).tick.shape == (3,)

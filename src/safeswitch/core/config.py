@@ -181,7 +181,7 @@ def parse_setting(spec: str, option: str = "--set", prefix: str = "") -> tuple[s
     if not sep or not key.strip() or not text.strip():
         raise ConfigError(
             f"{option} {prefix + spec!r}: expected KEY=VALUE (a dotted configuration key, e.g. "
-            "env.scenarios.north_speed_kmh=[30,45])"
+            "env.scenarios.north_speed_kmh=[30,44])"
         )
     try:
         return key.strip(), yaml.safe_load(text)

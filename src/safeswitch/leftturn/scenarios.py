@@ -134,6 +134,20 @@ def sample_scenarios(config: ScenarioConfig, uniforms: FloatArray) -> Scenarios:
     )
 
 
+def farthest_starts(config: ScenarioConfig, speed_limit: float) -> tuple[float, float, float]:
+    """How far before the conflict point the distribution can start each car: the ego's
+    farthest path distance [m], the north car's [m] and the latest arrival offset it draws [s]
+    (the focused range's too when ``focus_share`` is set). The north car starts farthest out
+    at its highest speed, the ego's farthest start and the latest arrival (see
+    :meth:`Scenarios.north_start_distance`)."""
+    ego = config.ego_start_distance_m[1]
+    offset = config.arrival_offset_s[1]
+    if config.focus_share > 0:
+        offset = max(offset, config.focus_arrival_offset_s[1])
+    north = config.north_speed_kmh[1] / 3.6 * (ego / speed_limit + offset)
+    return ego, max(north, 0.0), offset
+
+
 def named_scenarios(name: str, batch: int) -> Scenarios:
     """``batch`` copies of a named scenario (``"cut"``, ``"yield1"`` or ``"yield2"``)."""
     if name not in NAMED_SCENARIOS:

@@ -27,6 +27,7 @@ the batch size, so the Gymnasium ``Env`` is fast too.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, fields, replace
 from functools import cached_property
@@ -36,16 +37,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from safeswitch.core.arrays import clamp, columns, jit, plain, put_rows, take_rows
+from safeswitch.core.config import ConfigError
 from safeswitch.core.pid import PIDState, pid_tick
 from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import Supervision, SwitchingLogic, reason_names, supervise
-from safeswitch.leftturn.config import LeftTurnConfig
+from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig
 from safeswitch.leftturn.perception import Perception, PerceptionState, Sighted, episode_keys
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
     Scenarios,
     counter_uniforms,
+    farthest_starts,
     named_scenarios,
     sample_scenarios,
     scenario_uniforms,
@@ -330,6 +333,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             self.conflict.s_point_a, self.conflict.zone_a, cert.zone_a, self.conflict.s_point_b,
             self.conflict.zone_b, cert.zone_b, config.episode.approach_distance_m,
         )  # fmt: skip
+        if config.scenario is None:
+            self.check_scenarios(config.scenarios)
         #: The ego's sensor and tracker of the other vehicles (``None``: perfect perception).
         self.perception: Perception | None = None
         if not config.perception.perfect:
@@ -449,6 +454,36 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             return named_scenarios(self.config.scenario, len(env_ids))
         draws = counter_uniforms(seed, env_ids, episodes, scenario_uniforms(self.config.scenarios))
         return sample_scenarios(self.config.scenarios, draws)
+
+    def check_scenarios(self, scenarios: ScenarioConfig) -> None:
+        """Refuse a scenario distribution that would start a car before the start of its
+        route, before any episode runs.
+
+        Raises:
+            ConfigError: Naming the values that do not fit and the largest that would.
+        """
+        v_lim = self.config.controllers.speed_limit
+        ego, north, offset = farthest_starts(scenarios, v_lim)
+        ego_room, north_room = self.conflict.s_point_a, self.conflict.s_point_b
+        if ego > ego_room:
+            raise ConfigError(
+                f"scenarios.ego_start_distance_m: up to {ego:g} m, but the ego's route starts "
+                f"{ego_room:.1f} m before the conflict point (geometry.approach_length "
+                f"{self.config.geometry.approach_length:g} m)"
+            )
+        if north > north_room:
+            speed = scenarios.north_speed_kmh[1]
+            ego_arrival = ego / v_lim
+            fits_speed = math.floor(north_room / (ego_arrival + offset) * 3.6 * 10) / 10
+            fits_offset = math.floor((north_room / (speed / 3.6) - ego_arrival) * 10) / 10
+            raise ConfigError(
+                f"scenarios: the north car at up to {speed:g} km/h, arriving up to {offset:g} s "
+                f"after the ego (arrival_offset_s; the ego starting up to {ego:g} m out at the "
+                f"{v_lim * 3.6:g} km/h limit), starts up to {north:.1f} m before the conflict "
+                f"point, but its route starts {north_room:.1f} m before it: lower "
+                f"north_speed_kmh's upper end to at most {fits_speed:g} km/h or "
+                f"arrival_offset_s's to at most {fits_offset:g} s"
+            )
 
     def named(self, name: str, batch: int, seed: int = 0) -> Scenarios:
         """A named scenario of the paper (``cut``, ``yield1``, ``yield2``) ``batch`` times; a
