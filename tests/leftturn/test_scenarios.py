@@ -152,7 +152,7 @@ def test_a_distribution_that_starts_the_north_car_off_its_route_is_refused_with_
     """Before any episode, naming the values; each suggested bound is accepted and draws every
     north car on its route."""
     scenarios = ScenarioConfig(**given)
-    with pytest.raises(ConfigError, match="starts up to .* before the conflict point") as error:
+    with pytest.raises(ConfigError, match=r"starts up to .* before the conflict point") as error:
         build_task(None, LeftTurnConfig(scenarios=scenarios))
     text = str(error.value)
     speed = float(text.split("upper end to at most ")[1].split(" km/h")[0])
