@@ -2,6 +2,7 @@
 
 import csv
 
+import numpy as np
 import pytest
 from PIL import Image
 
@@ -94,3 +95,42 @@ def test_any_other_plants_log_is_drawn_with_its_declared_failures_marked(tmp_pat
     training_curves(path, tmp_path / "curves.png", title="plant")
     with Image.open(tmp_path / "curves.png") as image:
         assert image.size[0] < 800 < image.size[1]  # three panels, one above the other
+
+
+def selected_pixels(png):
+    """Pixels of the selection line's green (antialiased: green well above red and blue; no
+    curve is drawn in a green)."""
+    rgb = np.asarray(Image.open(png).convert("RGB"), dtype=int)
+    return np.argwhere(rgb[:, :, 1] - np.maximum(rgb[:, :, 0], rgb[:, :, 2]) > 40)
+
+
+def test_the_curves_mark_the_policy_the_run_kept(tmp_path):
+    """The curves run to the end of training; a run that chose its policy on validation says
+    where that policy is: a vertical line at its step across the panels, and only then."""
+    rows = [rollout(1000 * (k + 1), 1500.0 + k) for k in range(20)]
+    path = tmp_path / "progress.csv"
+    write_progress(path, rows)
+    training_curves(path, tmp_path / "plain.png")
+    training_curves(path, tmp_path / "kept.png", selected=6000)
+    assert len(selected_pixels(tmp_path / "plain.png")) == 0
+    marked = selected_pixels(tmp_path / "kept.png")
+    columns = np.unique(marked[:, 1])
+    height = Image.open(tmp_path / "kept.png").size[1]
+    assert len(columns) < 60  # a vertical line (and its legend entry), not a curve
+    assert np.ptp(marked[:, 0]) > height / 2  # down through the panels
+
+
+def test_a_run_draws_the_line_at_the_policy_its_metrics_say_it_kept(tmp_path):
+    import json
+
+    from safeswitch.app.train import kept_step
+
+    assert kept_step(tmp_path) is None  # no metrics.json yet
+    (tmp_path / "metrics.json").write_text(json.dumps({"selected": None}))
+    assert kept_step(tmp_path) is None  # no validation
+    kept = {"selected": {"best_timesteps": 81920}, "refined": {"selected_iteration": 0}}
+    (tmp_path / "metrics.json").write_text(json.dumps(kept))
+    assert kept_step(tmp_path) == 81920
+    kept["refined"]["selected_iteration"] = 2  # the refinement replaced PPO's policy
+    (tmp_path / "metrics.json").write_text(json.dumps(kept))
+    assert kept_step(tmp_path) is None

@@ -26,6 +26,7 @@ import numpy as np
 
 from safeswitch.app.evaluate import controller_setup
 from safeswitch.app.perception_study import REFERENCE, study, together
+from safeswitch.app.train import kept_step
 from safeswitch.evaluation.adversaries import constant
 from safeswitch.evaluation.evaluate import (
     episodes_csv,
@@ -238,7 +239,8 @@ def _training_curves(model_dir: str, label: str, folder: Path) -> dict[str, Any]
     progress = Path(model_dir) / "progress.csv"
     if not progress.is_file():
         return None
-    training_curves(progress, folder / "figures" / "training_curves.png")
+    figure = folder / "figures" / "training_curves.png"
+    training_curves(progress, figure, selected=kept_step(Path(model_dir)))
     return {"label": label, "story": training_story(progress)}
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -40,5 +41,20 @@ def plot_run(run: Path) -> Path:
         env = config.env
         title = f"switching={env.switching}, R_ADAS {'on' if env.adas_penalty else 'off'}"
     out = run / "training_curves.png"
-    training_curves(run / "progress.csv", out, title=title)
+    training_curves(run / "progress.csv", out, title=title, selected=kept_step(run))
     return out
+
+
+def kept_step(run: Path) -> int | None:
+    """The time step of the PPO policy the run kept after validating (``metrics.json``), or
+    ``None``: no validation chose one, or a later stage (the search-guided refinement)
+    replaced it."""
+    path = run / "metrics.json"
+    if not path.is_file():
+        return None
+    metrics = json.loads(path.read_text(encoding="utf-8"))
+    selected, refined = metrics.get("selected") or {}, metrics.get("refined") or {}
+    if refined.get("selected_iteration"):
+        return None
+    step = selected.get("best_timesteps")
+    return None if step is None else int(step)

@@ -71,14 +71,22 @@ def _collision_steps(rows: list[dict[str, str]], key: str) -> list[tuple[int, in
     return out
 
 
-def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = "") -> None:
+#: The colour of the line at the policy a run kept (tab:green; no curve is drawn in it).
+SELECTED_COLOR = "#2ca02c"
+
+
+def training_curves(
+    progress_csv: str | Path, out_png: str | Path, title: str = "", selected: int | None = None
+) -> None:
     """The left turn's log: eight panels against timesteps — the episode return and each
     reward term's per-episode sum (not normalised; the paper's Fig. 5), then the share of
     episodes that cut in front and the share with a safety action, each averaged over a
     rollout's finished episodes. Any other plant's log: its return, the share of steps with
     the Safety controller and the share of episodes that failed. Every rollout in which
     training collided (failed) is marked along the return panel's foot (a red tick) and the
-    total is in the title."""
+    total is in the title. ``selected``: the time step of the policy the run kept (chosen on
+    its validation scenarios), a dashed green line across every panel — the curves go on to
+    the end of the run, the policy does not."""
     with open(progress_csv, encoding="utf-8") as handle:
         logged = list(csv.DictReader(handle))
     key = _total_key(logged)
@@ -108,7 +116,12 @@ def training_curves(progress_csv: str | Path, out_png: str | Path, title: str = 
         ax.plot([step for step, _ in collisions], [0.03] * len(collisions), "|", color="red",
                 ms=10, transform=ax.get_xaxis_transform(),
                 label=f"{what} in training ({total})")  # fmt: skip
-        ax.legend(fontsize=8, loc="lower right")
+    if selected is not None:
+        for ax in axes:
+            ax.axvline(selected, color=SELECTED_COLOR, ls="--", lw=1.2)
+        axes[0].lines[-1].set_label(f"the policy kept, chosen on validation ({selected:,})")
+    if collisions or selected is not None:
+        axes[0].legend(fontsize=8, loc="lower right")
     title = (title + "; " if title else "") + f"{what}s in training: {total}"
     for ax in grid[-1]:
         ax.set_xlabel("time steps")
