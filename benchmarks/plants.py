@@ -165,6 +165,8 @@ def traffic(config: str = "traffic_certified") -> Row | None:
         if taught
         else "PPO with R_ADAS from a random start"
     )
+    if recipe.constraints.active() and recipe.validation.every:
+        method += " (constrained, its policy chosen on validation scenes)"
     return {
         "plant": "traffic from every leg, `certified`",
         "method": f"{method}, `configs/{config}.yaml`",

@@ -173,18 +173,26 @@ def evaluated_further(
     return result
 
 
-def collected(run: Path, seed: int) -> dict[str, object]:
+def collected(
+    run: Path, seed: int, config: TrainConfig | EnvTrainConfig | None = None
+) -> dict[str, object]:
     """The row of a run kept earlier (``--keep``), from its ``metrics.json``.
 
     Raises:
-        SystemExit: the run has no ``metrics.json`` or was trained with another seed.
+        SystemExit: the run has no ``metrics.json``, was trained with another seed or (given
+            ``config``) with another configuration than ``config`` with that seed.
     """
     path = run / "metrics.json"
     if not path.is_file():
         raise SystemExit(f"--collect: {path} does not exist (a run kept with --keep?)")
     metrics = json.loads(path.read_text(encoding="utf-8"))
-    if load_any_config(run / "config.yaml").seed != seed:
+    trained = load_any_config(run / "config.yaml")
+    if trained.seed != seed:
         raise SystemExit(f"--collect: {run} was not trained with seed {seed}")
+    # what --set may change of a kept run: how it is evaluated now, not how it was trained
+    evaluation = {"eval_episodes": trained.eval_episodes, "eval_seed": trained.eval_seed}
+    if config is not None and trained != replace(config, seed=seed, **evaluation):
+        raise SystemExit(f"--collect: {run} was trained with another configuration than --config")
     return {**row(seed, metrics), "run": str(run)}
 
 
@@ -253,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = []
         for seed in args.seeds:
             run = args.collect / f"seed_{seed}"
-            kept = collected(run, seed)  # refuses a missing run or another seed first
+            kept = collected(run, seed, config)  # refuses a missing or another run first
             rows.append({**kept, **evaluated_further(config, run, args.deploy,
                                                       tuple(args.traffic_eval))})  # fmt: skip
         for one in rows:

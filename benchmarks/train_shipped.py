@@ -60,7 +60,7 @@ def policy_readme(
         warm_note += (
             "\n\nIn traffic from every leg. On the denser, ruder `test` family: "
             "`python benchmarks/traffic_certified.py`\n"
-            "(`benchmarks/results/traffic_certified.json`) and the README's traffic section."
+            "(`benchmarks/results/traffic_certified.json`) and docs/traffic.md."
         )
     return f"""# Shipped policy `{name}`
 

@@ -1,6 +1,6 @@
 """``benchmarks/train_seeds.py --collect``: a table rebuilt from kept runs holds exactly what
 their ``metrics.json`` recorded — and the fields the script reports now — and refuses a run
-that is missing or was trained with another seed."""
+that is missing or was trained with another seed or another configuration."""
 
 import importlib.util
 import json
@@ -84,7 +84,7 @@ def test_collect_evaluates_the_kept_policies_when_asked_for(train_seeds, tmp_pat
     assert deployed["cleared_episodes"] <= 50 < row["cleared_episodes"]  # the kept 1,000's
 
 
-def test_collect_refuses_a_missing_run_or_another_seed(train_seeds, tmp_path):
+def test_collect_refuses_a_missing_run_another_seed_or_another_recipe(train_seeds, tmp_path):
     kept_run(tmp_path / "runs" / "seed_2", {k: 0 for k in train_seeds.EVALUATED})  # seed 1's
     base = ["--config", "certified", "--collect", str(tmp_path / "runs"), "--out",
             str(tmp_path / "t.json")]  # fmt: skip
@@ -94,6 +94,12 @@ def test_collect_refuses_a_missing_run_or_another_seed(train_seeds, tmp_path):
         train_seeds.main([*base, "--seeds", "2"])
     with pytest.raises(SystemExit):
         train_seeds.main([*base, "--seeds", "1", "--keep", str(tmp_path / "k")])
+    # a run of another recipe, or of this one with another training setting, is not its row
+    kept_run(tmp_path / "runs" / "seed_1", {k: 0 for k in train_seeds.EVALUATED})
+    with pytest.raises(SystemExit, match="another configuration than --config"):
+        train_seeds.main([*base, "--seeds", "1", "--config", "paper"])
+    with pytest.raises(SystemExit, match="another configuration than --config"):
+        train_seeds.main([*base, "--seeds", "1", "--set", "ppo.gamma=0.9"])
     assert not (tmp_path / "t.json").exists()
 
 

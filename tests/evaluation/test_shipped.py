@@ -266,7 +266,6 @@ def test_the_certified_traffic_policy_never_collides_and_rarely_needs_the_filter
     assert ours["collisions"] == 0 and ours["failures"] == 0
     assert ours["safety_activation_episodes"] <= 50
     assert rule["safety_activation_episodes"] > 500
-    assert ours["comfort_violation_fraction"] <= 0.01
 
 
 @pytest.mark.slow
@@ -303,10 +302,10 @@ def test_the_certified_traffic_policy_is_as_efficient_as_the_gap_planner(traffic
 
 
 @pytest.mark.slow
-@missing("traffic_certified")
 def test_the_certified_traffic_policy_keeps_the_comfort_limits(traffic_runs):
     """A shipped policy keeps a careful driver's comfort limits as the left turn's rows count
-    them (exceeded on at most 0.5 % of ticks), whether or not its row names them."""
+    them (exceeded on at most 0.5 % of ticks), whether or not its row names them; the policy
+    shipped before 2026-12-04 did not (0.57 % of the ticks)."""
     assert traffic_runs["certified"]["comfort_violation_fraction"] <= 0.005
 
 

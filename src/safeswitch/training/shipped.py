@@ -37,11 +37,10 @@ MISSING_TARGETS = {
     ),
     "traffic_certified": (
         "a clone of the gap planner, not PPO from a random start (which clears fewer test "
-        "scenes, docs/learning_experiments.md); it needs the filter in 58 of 1,000 "
-        "test-family scenes (issue #39 asks <= 5 %; 4.8-8.6 % across the densities) and "
-        "reaches 0.366 of the oracle, its teacher 0.384 under the same filter; it exceeds a "
-        "comfort limit on 0.57 % of ticks, in 205 of the 1,000 scenes (the left turn's rows "
-        "allow 0.5 %) (benchmarks/traffic_certified.py, docs/traffic.md)"
+        "scenes, docs/learning_experiments.md); it needs the filter in 57 of 1,000 "
+        "test-family scenes (issue #39 asks <= 5 %; 4.5-7.2 % across the densities) and "
+        "reaches 0.366 of the oracle, its teacher 0.384 under the same filter "
+        "(benchmarks/traffic_certified.py, docs/traffic.md)"
     ),
     "highway_certified": (
         "the Safety controller acts on 0.93 % of its 50 evaluation episodes' steps, above the "
