@@ -176,3 +176,9 @@ def test_a_named_scenario_is_not_held_to_the_random_distribution():
     far = ScenarioConfig(north_speed_kmh=(40.0, 50.0))
     task = build_task(None, LeftTurnConfig(scenarios=far, scenario="cut"))
     assert task.initial(task.named("cut", 3)).tick.shape == (3,)
+
+
+def test_an_ego_that_would_start_off_its_route_is_refused_by_name():
+    far = ScenarioConfig(ego_start_distance_m=(32.0, 140.0))
+    with pytest.raises(ConfigError, match=r"ego_start_distance_m: up to 140 m, but the ego's"):
+        build_task(None, LeftTurnConfig(scenarios=far))
