@@ -144,8 +144,13 @@ def farthest_starts(config: ScenarioConfig, speed_limit: float) -> tuple[float, 
     offset = config.arrival_offset_s[1]
     if config.focus_share > 0:
         offset = max(offset, config.focus_arrival_offset_s[1])
-    north = config.north_speed_kmh[1] / 3.6 * (ego / speed_limit + offset)
-    return ego, max(north, 0.0), offset
+    farthest = Scenarios(
+        ego_start_distance=np.array([ego]),
+        ego_speed=np.array([config.ego_speed_kmh[1] / 3.6]),
+        north_speed=np.array([config.north_speed_kmh[1] / 3.6]),
+        arrival_offset=np.array([offset]),
+    )
+    return ego, max(float(farthest.north_start_distance(speed_limit)[0]), 0.0), offset
 
 
 def named_scenarios(name: str, batch: int) -> Scenarios:

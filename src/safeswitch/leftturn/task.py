@@ -508,9 +508,14 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             axis=1,
         )
         if np.any(progress < 0):
+            row, car = (int(i) for i in np.argwhere(progress < 0)[0])
             raise ValueError(
-                "a scenario starts a car before the start of its route; "
-                "shorten ego_start_distance_m or arrival_offset_s"
+                f"a scenario starts a car before the start of its route: scenario {row} starts "
+                f"the {('ego', 'north car')[car]} {-progress[row, car]:.1f} m before (ego start "
+                f"{scenarios.ego_start_distance[row]:g} m, north car at "
+                f"{scenarios.north_speed[row] * 3.6:g} km/h arriving "
+                f"{scenarios.arrival_offset[row]:g} s after the ego); shorten "
+                "ego_start_distance_m or arrival_offset_s"
             )
         speed = np.stack([scenarios.ego_speed, scenarios.north_speed], axis=1)
         world = self.world.place(progress, speed)
