@@ -266,6 +266,7 @@ def test_the_certified_traffic_policy_never_collides_and_rarely_needs_the_filter
     assert ours["collisions"] == 0 and ours["failures"] == 0
     assert ours["safety_activation_episodes"] <= 50
     assert rule["safety_activation_episodes"] > 500
+    assert ours["comfort_violation_fraction"] <= 0.01
 
 
 @pytest.mark.slow
