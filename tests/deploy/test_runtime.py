@@ -145,8 +145,12 @@ def test_a_missed_deadline_never_executes_the_learned_action(exported, caplog):
 def test_no_deadline_miss_within_budget(exported):
     controller = Controller(exported("paper"), deadline_s=1.0)
     scenarios = controller.task.scenario_set(1_000_003, 2)
-    decisions = [d for i in range(2) for _, _, d in drive(controller, scenarios, i)]
-    assert not any(d.deadline_missed for d in decisions)
+    episodes = [[d for _, _, d in drive(controller, scenarios, i)] for i in range(2)]
+    assert not any(d.deadline_missed for episode in episodes for d in episode)
+    # What a user sees at a prompt: the folder, the logic, the budget and where the episode is.
+    text = repr(controller)
+    assert f"{str(exported('paper'))!r}" in text and "switching='paper'" in text
+    assert "deadline=1000 ms" in text and f"tick={len(episodes[1])})" in text
 
 
 def test_bad_deadline_and_incomplete_folders_are_refused(exported, tmp_path):

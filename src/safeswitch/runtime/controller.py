@@ -209,6 +209,13 @@ class Controller:
         self.interventions: list[dict[str, Any]] = []
         self.reset()
 
+    def __repr__(self) -> str:
+        deadline = "none" if self.deadline_s is None else f"{self.deadline_s * 1e3:g} ms"
+        return (
+            f"Controller({str(self.folder)!r}, switching={self.config.switching!r}, "
+            f"deadline={deadline}, tick={self._tick})"
+        )
+
     def reset(self) -> None:
         """Start an episode: the controllers' memory as at an episode's start, no learned
         action held, the intervention log emptied."""
