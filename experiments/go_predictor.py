@@ -21,7 +21,7 @@ given it as one more observed value:
    (:meth:`~safeswitch.evaluation.traffic_planner.GapPlanner.goes`).
 3. **Model.** A 2 x 64 tanh MLP (``--hidden``) on the standardised observation, trained with
    the binary cross-entropy; its probability is what the policy is shown (``traffic.go_model``,
-   :class:`~safeswitch.leftturn.traffic.GoModel`). The weights are written as an ``.npz`` the
+   :class:`~safeswitch.leftturn.go_model.GoModel`). The weights are written as an ``.npz`` the
    task reads with numpy.
 
 The model sees only what the policy sees; it knows nothing the policy could not learn, but it
@@ -46,8 +46,8 @@ import torch
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.io import write_bytes_atomic
+from safeswitch.leftturn.go_model import GoModel
 from safeswitch.leftturn.make import build_task
-from safeswitch.leftturn.traffic import GoModel
 from safeswitch.training.config import load_config
 
 CONFIG = "experimental/traffic_certified_time_left_terminal_g997"
@@ -90,7 +90,8 @@ def samples(
     rule = None
     if model is not None:  # the predictor's own drivers: a threshold and a pedal noise each
         width = task.observation_bounds[0].shape[0]
-        rule = PredictedGo(task, rng.uniform(0.2, 0.8, episodes), GoModel(str(model), width))
+        predictor = GoModel(str(model), width, "traffic.go_model")
+        rule = PredictedGo(task, rng.uniform(0.2, 0.8, episodes), predictor)
         noise = rng.uniform(0.0, 0.4, episodes) * (rng.random(episodes) < 0.5)
     live = np.ones(episodes, dtype=bool)
     obs_rows: list[np.ndarray] = []

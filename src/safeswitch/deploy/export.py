@@ -58,10 +58,14 @@ LEFT_TURN_OBSERVATION = [
 
 def left_turn_observation(episode: Any) -> list[dict[str, str]]:
     """The left turn's observation as the manifest states it, for the scene's ``episode``."""
-    if not episode.observe_time_left:
-        return LEFT_TURN_OBSERVATION
-    left = f"time left to the episode's {episode.horizon_s:g} s horizon"
-    return [*LEFT_TURN_OBSERVATION, {"name": "t_left", "unit": "s", "meaning": left}]
+    layout = list(LEFT_TURN_OBSERVATION)
+    if episode.observe_time_left:
+        left = f"time left to the episode's {episode.horizon_s:g} s horizon"
+        layout.append({"name": "t_left", "unit": "s", "meaning": left})
+    if episode.go_model is not None:
+        go = "the go predictor's probability on the values before it (episode.go_model)"
+        layout.append({"name": "p_go", "unit": "1", "meaning": go})
+    return layout
 
 
 def left_turn_action(controllers: Any) -> list[dict[str, str]]:
@@ -223,6 +227,11 @@ def runtime_support(policy: Any) -> tuple[bool, str]:
         return False, (
             "trained in traffic: the traffic logics read every vehicle's state and the streams' "
             "phantoms, which the one-vehicle runtime does not take yet"
+        )
+    if policy.config.env.episode.go_model is not None:
+        return False, (
+            "its observation ends with a learned go predictor's probability "
+            "(episode.go_model), which the runtime does not compute yet"
         )
     return True, "the paper's scene (one oncoming car)"
 

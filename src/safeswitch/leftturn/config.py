@@ -431,7 +431,7 @@ class TrafficConfig:
             ``backups`` (``margins`` and, per vehicle, the stop backup's room before the ego's
             zone in metres; ours, :data:`~safeswitch.leftturn.traffic.BACKUP_FEATURES`).
         go_model: A learned go predictor, an ``.npz`` written by
-            ``experiments/go_predictor.py`` (:class:`~safeswitch.leftturn.traffic.GoModel`):
+            ``experiments/go_predictor.py`` (:class:`~safeswitch.leftturn.go_model.GoModel`):
             its probability that the fast drive from the current state gets past every
             conflict zone without the certified filter acting is appended to the observation,
             after everything else (ours; ``None``: none). In a configuration file a relative
@@ -569,6 +569,14 @@ class EpisodeConfig:
             Learning", ICML 2018) show its last state should then be treated as terminal;
             needs ``observe_time_left`` (without the clock the terminal would be aliased with
             states that go on). The end of the route still truncates.
+        go_model: A learned go predictor for the single-car scene, an ``.npz`` written by
+            ``experiments/go_leftturn.py`` (:class:`~safeswitch.leftturn.go_model.GoModel`):
+            its probability that the planners' fast drive from the current state clears the
+            conflict zone without the certified filter acting is appended to the
+            observation, after everything else (ours; ``None``: none). It reads only the
+            observation and is fitted to simulated outcomes, not to any controller's actions.
+            In a configuration file a relative path is read beside the file (else from the
+            working directory). In traffic use ``traffic.go_model``.
     """
 
     dt: Annotated[float, Bounds(0, 0.1, low_open=True, unit="s")] = 0.02
@@ -580,9 +588,14 @@ class EpisodeConfig:
     end_on_reasons: tuple[str, ...] = ()
     observe_time_left: bool = False
     horizon_terminates: bool = False
+    go_model: str | None = None
 
     def __post_init__(self) -> None:
         check_bounds(self, "episode")
+        if self.go_model is not None:
+            check(isinstance(self.go_model, str) and Path(self.go_model).is_file(), "episode",
+                  "go_model", self.go_model, "must be null or the path of an existing .npz "
+                  "(experiments/go_leftturn.py writes one)")  # fmt: skip
         check(not self.horizon_terminates or self.observe_time_left, "episode",
               "horizon_terminates", self.horizon_terminates,
               "needs episode.observe_time_left (without the time left in the observation the "

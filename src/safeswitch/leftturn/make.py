@@ -33,8 +33,11 @@ def build_task(
         resolved = resolve_config(resolved, episode=episode)
     settings = traffic_config(traffic)
     if settings is None:
-        return LeftTurnTask(resolved)
-    if settings.horizon_s is not None:
-        episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
-        resolved = resolve_config(resolved, episode=episode)
-    return LeftTurnTrafficTask(resolved, settings)
+        task = LeftTurnTask(resolved)
+    else:
+        if settings.horizon_s is not None:
+            episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
+            resolved = resolve_config(resolved, episode=episode)
+        task = LeftTurnTrafficTask(resolved, settings)
+    task.go_model  # noqa: B018 -- read now: a model that does not fit fails before anything runs
+    return task

@@ -43,6 +43,7 @@ from safeswitch.core.pid_gains import PIDKernel
 from safeswitch.core.registry import make_logic
 from safeswitch.core.switching import Supervision, SwitchingLogic, reason_names, supervise
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig
+from safeswitch.leftturn.go_model import GoModel
 from safeswitch.leftturn.perception import Perception, PerceptionState, Sighted, episode_keys
 from safeswitch.leftturn.rewards import REWARD_TERMS, reward_tables, tick_terms
 from safeswitch.leftturn.scenarios import (
@@ -599,12 +600,33 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
     @property
     def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """Lower and upper bounds of :meth:`observe`'s values: the scene's, then, with
-        ``episode.observe_time_left``, the time left [0, horizon] s."""
+        ``episode.observe_time_left``, the time left [0, horizon] s, then, with a go
+        predictor (:attr:`go_model`), its probability in [0, 1]."""
+        low, high = self._bounds_before_go()
+        if self.go_model is None:
+            return low, high
+        return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
+
+    def _bounds_before_go(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         low, high = self.scene_observation_bounds
         if self.config.episode.observe_time_left:
             low = np.append(low, np.float32(0.0))
             high = np.append(high, np.float32(self.config.episode.horizon_s))
         return low, high
+
+    @property
+    def go_model_setting(self) -> tuple[str, str | None]:
+        """The setting that names the task's go predictor, and its value (``None``: none)."""
+        return "episode.go_model", self.config.episode.go_model
+
+    @cached_property
+    def go_model(self) -> GoModel | None:
+        """The learned go predictor whose probability ends the observation (ours;
+        :class:`~safeswitch.leftturn.go_model.GoModel`), or ``None``."""
+        setting, path = self.go_model_setting
+        if path is None:
+            return None
+        return GoModel(path, self._bounds_before_go()[0].shape[0], setting)
 
     def observe(self, state: TaskState) -> NDArray[np.float32]:
         """The paper's state ``s = (x_e, y_e, v_e, x_n, y_n, v_n)``, ``[B, 6]`` float32 (the
@@ -620,15 +642,18 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
     ) -> NDArray[np.float32]:
         """The observation from the plant's six values (as the ego sees them): the task's
         :meth:`extend_observation`, then, with ``episode.observe_time_left``, the time left in
-        the episode [s] as the last value (ours, off by default: the horizon is part of the
-        state of a fixed-horizon task — Pardo et al., "Time Limits in Reinforcement Learning",
-        ICML 2018)."""
+        the episode [s] (ours, off by default: the horizon is part of the state of a
+        fixed-horizon task — Pardo et al., "Time Limits in Reinforcement Learning", ICML 2018),
+        then, with a go predictor (:attr:`go_model`), its probability on all of that as the
+        last value."""
         out = self.extend_observation(state, observation)
         episode = self.config.episode
-        if not episode.observe_time_left:
-            return out
-        left = np.maximum(episode.horizon_ticks - state.tick, 0) * episode.dt
-        return np.concatenate([out, left.astype(np.float32)[:, None]], axis=1)
+        if episode.observe_time_left:
+            left = np.maximum(episode.horizon_ticks - state.tick, 0) * episode.dt
+            out = np.concatenate([out, left.astype(np.float32)[:, None]], axis=1)
+        if self.go_model is not None:
+            out = np.concatenate([out, self.go_model(out)[:, None]], axis=1)
+        return out
 
     def seen_north(self, state: TaskState, observation: NDArray[np.float32]) -> NDArray[np.float32]:
         """``observation`` with the north car's values as the ego sees them (in place; within

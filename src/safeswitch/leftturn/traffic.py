@@ -131,55 +131,6 @@ class TrafficTaskState(TaskState):
     ghost_ego: BoolArray
 
 
-class GoModel:
-    """A learned go predictor (``traffic.go_model``; ours): a small tanh MLP on the
-    standardised observation whose output is the probability that the fast drive from the
-    current state gets past every conflict zone without the certified filter acting — the gap
-    planner's go check (:meth:`~safeswitch.evaluation.traffic_planner.GapPlanner.goes`),
-    learned from simulated outcomes by ``experiments/go_predictor.py``, which writes the
-    ``.npz`` read here (``mean``, ``std``, then ``w0``, ``b0``, ``w1``, ``b1``, ... with
-    ``x @ w + b``, tanh between the layers, one logit out).
-
-    Args:
-        path: The ``.npz``.
-        width: The width of the observation it reads (checked against the file).
-
-    Raises:
-        ConfigError: The file is not such a model, or reads another width.
-    """
-
-    def __init__(self, path: str, width: int) -> None:
-        try:
-            with np.load(path) as data:
-                arrays = {k: np.asarray(data[k], dtype=np.float32) for k in data.files}
-        except (OSError, ValueError) as error:
-            raise ConfigError(f"traffic.go_model={path!r} cannot be read: {error}") from error
-        layers = sum(1 for k in arrays if k.startswith("w"))
-        names = {"mean", "std", *(f"{p}{i}" for i in range(layers) for p in "wb")}
-        if layers == 0 or set(arrays) != names:
-            raise ConfigError(
-                f"traffic.go_model={path!r} holds {sorted(arrays)}, not a go model's mean, "
-                f"std, w0, b0, ... (experiments/go_predictor.py writes one)"
-            )
-        if arrays["mean"].shape != (width,) or arrays["w0"].shape[0] != width:
-            raise ConfigError(
-                f"traffic.go_model={path!r} reads observations of width "
-                f"{arrays['mean'].shape[0]}, this task's have {width} (a model learned with "
-                f"other traffic.observe / observed / episode.observe_time_left settings)"
-            )
-        self.mean, self.scale = arrays["mean"], 1.0 / arrays["std"]
-        self.layers = [(arrays[f"w{i}"], arrays[f"b{i}"]) for i in range(layers)]
-
-    def __call__(self, observation: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The probability per row of ``observation`` ``[B, width]``, ``[B]`` float32."""
-        h = (observation - self.mean) * self.scale
-        for i, (w, b) in enumerate(self.layers):
-            h = h @ w + b
-            if i < len(self.layers) - 1:
-                h = np.tanh(h)
-        return (1.0 / (1.0 + np.exp(-np.clip(h[:, 0], -30.0, 30.0)))).astype(np.float32)
-
-
 class LeftTurnTrafficTask(LeftTurnTask):
     """The left-turn task in traffic (see the module docstring).
 
@@ -189,6 +140,11 @@ class LeftTurnTrafficTask(LeftTurnTask):
     """
 
     def __init__(self, config: LeftTurnConfig, traffic: TrafficConfig) -> None:
+        if config.episode.go_model is not None:
+            raise ConfigError(
+                f"episode.go_model={config.episode.go_model!r} is the single-car scene's go "
+                "predictor; in traffic set traffic.go_model (a predictor learned in traffic)"
+            )
         super().__init__(config)
         self.traffic = traffic
         footprint = (config.vehicle.length, config.vehicle.width)
@@ -255,11 +211,6 @@ class LeftTurnTrafficTask(LeftTurnTask):
             low, high = [0, -150, -150, 0, -1, -1], [1, 150, 150, 60, 1, 1]
         self._observed_low = np.tile(np.array(low, dtype=np.float32), traffic.observed)
         self._observed_high = np.tile(np.array(high, dtype=np.float32), traffic.observed)
-        #: The learned go predictor whose probability ends the observation (``traffic.go_model``).
-        self.go_model = (
-            None if traffic.go_model is None
-            else GoModel(traffic.go_model, super().observation_bounds[0].shape[0])
-        )  # fmt: skip
 
     @cached_property
     def _margins(self) -> CertifiedSwitching | None:
@@ -627,23 +578,11 @@ class LeftTurnTrafficTask(LeftTurnTask):
         )
 
     @property
-    def observation_bounds(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """:meth:`LeftTurnTask.observation_bounds`, then, with ``traffic.go_model``, the go
-        predictor's probability in [0, 1]."""
-        low, high = super().observation_bounds
-        if self.go_model is None:
-            return low, high
-        return np.append(low, np.float32(0.0)), np.append(high, np.float32(1.0))
-
-    def complete_observation(
-        self, state: TaskState, observation: NDArray[np.float32]
-    ) -> NDArray[np.float32]:
-        """:meth:`LeftTurnTask.complete_observation`, then, with ``traffic.go_model``, the go
-        predictor's probability on it as the last value."""
-        out = super().complete_observation(state, observation)
-        if self.go_model is None:
-            return out
-        return np.concatenate([out, self.go_model(out)[:, None]], axis=1)
+    def go_model_setting(self) -> tuple[str, str | None]:
+        """In traffic the go predictor is ``traffic.go_model``'s (it is learned on scenes with
+        traffic); ``episode.go_model``, the single-car scene's, is refused when the task is
+        built."""
+        return "traffic.go_model", self.traffic.go_model
 
 
 def _destinations(origin: str) -> tuple[str, str, str]:

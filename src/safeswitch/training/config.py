@@ -885,20 +885,30 @@ def _read_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
-#: Settings that name a file, as (section, key): a relative path is read beside the
+#: Settings that name a file, as their keys from the top: a relative path is read beside the
 #: configuration file that names it when a file is there, else from the working directory
 #: (as ``base``), so that a recipe and its file load from any directory.
-FILE_SETTINGS = (("traffic", "go_model"),)
+FILE_SETTINGS = (("traffic", "go_model"), ("env", "episode", "go_model"))
 
 
 def _files_beside(data: dict[str, Any], path: Path) -> dict[str, Any]:
     """``data`` with each :data:`FILE_SETTINGS` path found beside ``path`` made absolute."""
-    for section, key in FILE_SETTINGS:
-        inner = data.get(section)
-        if isinstance(inner, dict) and isinstance(inner.get(key), str):
-            beside = path.parent / inner[key]
-            if not Path(inner[key]).is_absolute() and beside.is_file():
-                data = {**data, section: {**inner, key: str(beside.resolve())}}
+
+    def beside(inner: Any, keys: tuple[str, ...]) -> Any:
+        if not isinstance(inner, dict):
+            return inner
+        key, *rest = keys
+        if rest:
+            return {**inner, key: beside(inner[key], tuple(rest))} if key in inner else inner
+        value = inner.get(key)
+        if isinstance(value, str) and not Path(value).is_absolute():
+            found = path.parent / value
+            if found.is_file():
+                return {**inner, key: str(found.resolve())}
+        return inner
+
+    for keys in FILE_SETTINGS:
+        data = beside(data, keys)
     return data
 
 
