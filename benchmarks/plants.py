@@ -45,13 +45,24 @@ def _col(runs: list[dict[str, Any]], key: str | Callable[[dict[str, Any]], Any],
     return " / ".join(one(get(run)) for run in runs)
 
 
-def left_turn(config: str, scenarios: int = 1000) -> Row | None:
-    """The left turn's recipe ``config`` (``train_seeds.py``), 1,000 unseen scenarios."""
-    data = _load(f"train_seeds_{config}.json")
+def left_turn(
+    config: str,
+    scenarios: int = 1000,
+    logic: str | None = None,
+    method: str | None = None,
+    before: str | None = None,
+) -> Row | None:
+    """The left turn's recipe ``config`` (``train_seeds.py``), 1,000 unseen scenarios, against
+    the targets of ``logic``'s row (default: the recipe's own name); ``method`` names a
+    variant (an experimental recipe: not the shipped one), ``before`` the command that makes
+    what it needs."""
+    stem = config.replace("/", "_")
+    data = _load(f"train_seeds_{stem}.json")
     if data is None:
         return None
     runs = sorted(data["runs"], key=lambda r: r["seed"])
-    paper = config == "paper"
+    logic = logic or config
+    paper = logic == "paper"
     checks = {
         "0 collisions in training and evaluation": all(
             r["training_collision_episodes"] == 0 and r["collisions"] == 0 for r in runs
@@ -78,8 +89,10 @@ def left_turn(config: str, scenarios: int = 1000) -> Row | None:
         f"cleared {_col(runs, 'cleared_episodes')}; efficiency "
         f"{_col(runs, 'mean_efficiency', '.3f')}"
     )
-    source = f"python benchmarks/train_seeds.py --config {config}"
-    timing = _load(f"train_time_{config}.json")  # bench_train.py: the recipe alone on the machine
+    source = (
+        f"{before}; " if before else ""
+    ) + f"python benchmarks/train_seeds.py --config {config}"
+    timing = _load(f"train_time_{stem}.json")  # bench_train.py: the recipe alone on the machine
     if timing is not None:
         checks["≤ 5 min to train on one torch thread"] = (
             timing["wall_time_s"] <= 300 and timing["torch_threads"] == 1
@@ -90,17 +103,31 @@ def left_turn(config: str, scenarios: int = 1000) -> Row | None:
         )
         source += (
             f"; python benchmarks/bench_train.py --config {config} "
-            f"--out benchmarks/results/train_time_{config}.json"
+            f"--out benchmarks/results/train_time_{stem}.json"
         )
     return {
-        "plant": f"left turn, `{config}`",
-        "method": f"PPO with R_ADAS from a random start, `configs/{config}.yaml`",
+        "plant": f"left turn, `{logic}`",
+        "method": method or f"PPO with R_ADAS from a random start, `configs/{config}.yaml`",
         "seeds": [r["seed"] for r in runs],
         "measured": measured,
         "checks": checks,
-        "shipped": True,
+        "shipped": method is None,
         "source": source,
     }
+
+
+#: The left turn's variants (not shipped): the recipe, the logic whose row's targets it is
+#: held to, its method, and the command that makes what it needs.
+LEFT_TURN_VARIANTS = (
+    (
+        "experimental/certified_go_plain",
+        "certified",
+        "PPO with R_ADAS from a random start and a learned go predictor in the observation "
+        "(`experiments/certified_go_plain.yaml`; the predictor fitted to simulated outcomes, "
+        "no controller's actions)",
+        "python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz",
+    ),
+)
 
 
 #: The densities a traffic recipe's safety target holds at (``train_seeds.py --traffic-eval``).
@@ -362,9 +389,16 @@ def own_plant(name: str, label: str, command: str) -> list[Row]:
     return rows
 
 
+def variants() -> list[Row]:
+    """The rows of :data:`LEFT_TURN_VARIANTS` that have results."""
+    found = (left_turn(c, logic=logic, method=m, before=b) for c, logic, m, b in LEFT_TURN_VARIANTS)
+    return [row for row in found if row]
+
+
 def rows() -> list[Row]:
     sources: list[Callable[[], list[Row]]] = [
         lambda: [r for r in (left_turn("paper"), left_turn("certified"), traffic()) if r],
+        variants,
         highway,
         lambda: own_plant(
             "Follow-v0_100k",

@@ -89,3 +89,27 @@ def test_the_shipped_table_has_one_row_per_plant_from_the_full_table(benchmark_m
     assert all(row in every for row in shipped) and len(shipped) < len(every)
     highway = next(row for row in shipped if row["plant"] == "highway-env")
     assert "as shipped" in highway["method"]
+
+
+def left_turn_run(seed, cleared=982, efficiency=0.851):
+    return {"seed": seed, "training_collision_episodes": 0, "collisions": 0,
+            "speeding_episodes": 0, "mean_efficiency": efficiency, "cleared_episodes": cleared,
+            "safety_activation_episodes": 4, "comfort_violation_fraction": 0.0,
+            "max_speed_kmh": 30.0, "cut_episodes": 288}  # fmt: skip
+
+
+def test_a_left_turn_variant_is_checked_against_its_logics_row_and_is_not_shipped(plants, tmp_path):
+    name, logic, _, before = plants.LEFT_TURN_VARIANTS[0]
+    results = tmp_path / f"train_seeds_{name.replace('/', '_')}.json"
+    runs = [left_turn_run(1), left_turn_run(2, efficiency=0.847), left_turn_run(3, cleared=990)]
+    results.write_text(json.dumps({"runs": runs}))
+    (row,) = plants.variants()
+    assert row["plant"] == f"left turn, `{logic}`" and row["shipped"] is False
+    assert row["source"].startswith(before) and f"--config {name}" in row["source"]
+    assert "go predictor" in row["method"]
+    # the `certified` row's targets: 99 % cleared and 0.85 on every seed
+    assert row["checks"]["efficiency ≥ 0.85"] is False  # seed 2: 0.847
+    assert row["checks"]["clears ≥ 99 %"] is False  # seeds 1 and 2: 982
+    assert row["checks"]["never above 30 km/h"] is True
+    results.write_text(json.dumps({"runs": [left_turn_run(s, 990, 0.86) for s in (1, 2, 3)]}))
+    assert all(plants.variants()[0]["checks"].values())
