@@ -87,32 +87,11 @@ def test_the_observed_time_left_is_stated_as_the_last_input():
     assert timed[-1]["unit"] == "s" and "8 s horizon" in timed[-1]["meaning"]
 
 
-def test_a_go_predictor_is_stated_last_and_keeps_the_runtime_out(tmp_path):
-    """``episode.go_model``: the predictor's probability is the last input, and the runtime,
-    which takes the paper's values from the vehicle and does not compute it, is said not to
-    run such a policy."""
-    from types import SimpleNamespace
-
-    from safeswitch.training.config import load_config
-    from tests.leftturn.test_traffic import _write_go_model
-
-    model = _write_go_model(tmp_path / "go.npz", 7)
-    episode = EpisodeConfig(observe_time_left=True, go_model=model)
-    assert [entry["name"] for entry in left_turn_observation(episode)][-2:] == ["t_left", "p_go"]
-    recipe = tmp_path / "recipe.yaml"
-    _write_go_model(tmp_path / "go6.npz", 6)
-    recipe.write_text("base: certified\nenv:\n  episode:\n    go_model: go6.npz\n")
-    supported, why = export_module.runtime_support(SimpleNamespace(config=load_config(recipe)))
-    assert supported is False and "go predictor" in why and "episode.go_model" in why
-    shipped = export_module.runtime_support(SimpleNamespace(config=load_config("certified")))
-    assert shipped[0] is True
-
-
 def test_a_failed_parity_check_writes_nothing(tmp_path, monkeypatch):
     real = policy_graph
 
-    def perturbed(policy):
-        model = real(policy)
+    def perturbed(policy, go_model=None):
+        model = real(policy, go_model)
         bias = next(t for t in model.graph.initializer if t.name == "b0")
         values = onnx.numpy_helper.to_array(bias).copy()
         values[0] += 0.5  # the first hidden unit's bias, as a broken export would have it

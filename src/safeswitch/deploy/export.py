@@ -3,8 +3,8 @@ checked against the original on observations of its own evaluation episodes.
 
 The folder (see docs/deploy.md):
 
-* ``policy.onnx`` — the deterministic action, observation normalisation folded in
-  (:mod:`~safeswitch.deploy.onnx_policy`);
+* ``policy.onnx`` — the deterministic action, observation normalisation (and a left-turn
+  policy's go predictor, ``episode.go_model``) folded in (:mod:`~safeswitch.deploy.onnx_policy`);
 * ``scene.yaml`` — the scene the policy is deployed in: the switching logic's and the Safety
   controller's parameters (``switching``, ``paper``/``certified``, ``controllers``), the
   vehicle, the geometry and the tick: everything :class:`safeswitch.runtime.Controller` builds
@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from safeswitch.core.config import to_dict
 from safeswitch.deploy.onnx_policy import INPUT, OPSET, ExportError, policy_graph
 from safeswitch.io import prepare_output_dir, write_atomic, write_bytes_atomic, write_json
+from safeswitch.leftturn.go_model import GoModel
 
 #: Manifest format written here and read by :mod:`safeswitch.runtime`.
 FORMAT = "safeswitch-controller"
@@ -58,14 +59,10 @@ LEFT_TURN_OBSERVATION = [
 
 def left_turn_observation(episode: Any) -> list[dict[str, str]]:
     """The left turn's observation as the manifest states it, for the scene's ``episode``."""
-    layout = list(LEFT_TURN_OBSERVATION)
-    if episode.observe_time_left:
-        left = f"time left to the episode's {episode.horizon_s:g} s horizon"
-        layout.append({"name": "t_left", "unit": "s", "meaning": left})
-    if episode.go_model is not None:
-        go = "the go predictor's probability on the values before it (episode.go_model)"
-        layout.append({"name": "p_go", "unit": "1", "meaning": go})
-    return layout
+    if not episode.observe_time_left:
+        return LEFT_TURN_OBSERVATION
+    left = f"time left to the episode's {episode.horizon_s:g} s horizon"
+    return [*LEFT_TURN_OBSERVATION, {"name": "t_left", "unit": "s", "meaning": left}]
 
 
 def left_turn_action(controllers: Any) -> list[dict[str, str]]:
@@ -197,19 +194,34 @@ def env_observations(policy: Any, config: Any, count: int, seed: int = PARITY_SE
 
 
 def parity(
-    onnx_bytes: bytes, policy: Any, observations: NDArray[np.float32]
+    onnx_bytes: bytes, policy: Any, observations: NDArray[np.float32], folded: bool = False
 ) -> tuple[float, NDArray[np.float32]]:
     """Largest |ONNX − torch| action difference on ``observations`` (torch: SB3's
-    deterministic ``predict`` on the normalised observations), and the ONNX actions."""
+    deterministic ``predict`` on the normalised observations), and the ONNX actions. With
+    ``folded`` the graph computes the observations' last value (a go predictor's probability)
+    itself and is given the rest."""
     import onnxruntime as ort
 
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(onnx_bytes, options, providers=["CPUExecutionProvider"])
-    actions = np.asarray(session.run(None, {INPUT: observations})[0], dtype=np.float32)
+    given = observations[:, :-1] if folded else observations
+    actions = np.asarray(session.run(None, {INPUT: given})[0], dtype=np.float32)
     reference, _ = policy.model.predict(policy.normalise(observations), deterministic=True)
     reference = np.asarray(reference, dtype=np.float32).reshape(actions.shape)
     return float(np.max(np.abs(actions - reference))), actions
+
+
+def go_predictor(policy: Any) -> GoModel | None:
+    """The left-turn policy's go predictor (``episode.go_model``), which its export folds into
+    the graph; ``None`` for a policy without one or of another plant."""
+    from safeswitch.training.config import TrainConfig
+
+    config = policy.config
+    if not isinstance(config, TrainConfig) or config.env.episode.go_model is None:
+        return None
+    space = policy.model.observation_space
+    return GoModel(config.env.episode.go_model, int(space.shape[0]) - 1, "episode.go_model")
 
 
 def runtime_support(policy: Any) -> tuple[bool, str]:
@@ -227,11 +239,6 @@ def runtime_support(policy: Any) -> tuple[bool, str]:
         return False, (
             "trained in traffic: the traffic logics read every vehicle's state and the streams' "
             "phantoms, which the one-vehicle runtime does not take yet"
-        )
-    if policy.config.env.episode.go_model is not None:
-        return False, (
-            "its observation ends with a learned go predictor's probability "
-            "(episode.go_model), which the runtime does not compute yet"
         )
     return True, "the paper's scene (one oncoming car)"
 
@@ -267,7 +274,8 @@ def export(
     if not tolerance > 0:
         raise ExportError(f"the parity tolerance must be positive, got {tolerance}")
     policy = load_policy(model)
-    graph = policy_graph(policy)
+    go = go_predictor(policy)
+    graph = policy_graph(policy, go)
     onnx_bytes = graph.SerializeToString()
     config = policy.config
     if isinstance(config, TrainConfig):
@@ -280,6 +288,8 @@ def export(
                 )
             scene = replace(scene, switching=switching)
         seen = left_turn_observations(policy, scene, config.traffic_settings, observations)
+        # the graph computes the predictor's value: the vehicle gives the values before it
+        scene = replace(scene, episode=replace(scene.episode, go_model=None))
         scene_dict: dict[str, Any] = to_dict(scene)
         if config.traffic is not None:
             scene_dict = {"env": scene_dict, "traffic": to_dict(config.traffic_settings)}
@@ -300,7 +310,7 @@ def export(
         env_id = config.env_id
         # ASSUMPTIONS are the left turn's logics'; a plant's logic documents its own
         assumptions = [f"see the documentation of the {logic!r} logic for {env_id}"]
-    worst, _ = parity(onnx_bytes, policy, seen)
+    worst, _ = parity(onnx_bytes, policy, seen, folded=go is not None)
     if not worst <= tolerance:
         raise ExportError(
             f"parity check failed: the ONNX actions differ from torch's by up to {worst:.3g} on "
@@ -309,6 +319,8 @@ def export(
     supported, why = runtime_support(policy)
     space, action_space = policy.model.observation_space, policy.model.action_space
     assert isinstance(space, Box) and isinstance(action_space, Box)  # checked by policy_graph
+    given = slice(0, -1 if go is not None else None)  # the graph's input
+    low, high = np.asarray(space.low)[given], np.asarray(space.high)[given]
     manifest: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -319,19 +331,23 @@ def export(
             "sha256": hashlib.sha256(onnx_bytes).hexdigest(),
             "opset": OPSET,
             "ir_version": int(graph.ir_version),
-            "input": {"name": INPUT, "dtype": "float32", "shape": ["N", *map(int, space.shape)]},
+            "input": {"name": INPUT, "dtype": "float32", "shape": ["N", *map(int, low.shape)]},
             "output": {
                 "name": "action",
                 "dtype": "float32",
                 "shape": ["N", int(action_space.shape[0])],
             },
             "normalisation": "folded in" if policy.normalizer is not None else "none",
+            "go_predictor": "folded in: the graph computes the policy's last observed value "
+            "(episode.go_model) from its input"
+            if go is not None
+            else "none",
             "deterministic": "the Gaussian's mean, clipped to the action bounds",
         },
         "observation": {
             "layout": observation_layout,
-            "low": np.asarray(space.low).tolist(),
-            "high": np.asarray(space.high).tolist(),
+            "low": low.tolist(),
+            "high": high.tolist(),
         },
         "action": {
             "layout": action_layout,

@@ -10,6 +10,11 @@ order and precision —
    ONNX operators) and the action head: the Gaussian's mean;
 3. the mean clipped to the action space's bounds (``Min`` then ``Max``, per component).
 
+A policy whose observation ends with a learned go predictor's probability
+(``episode.go_model``) gets the predictor in front (its tanh MLP, the logit clipped, a
+``Sigmoid``, then ``Concat`` with the input): the graph then reads the observation without that
+value, as a vehicle gives it.
+
 Anything else (a squashed or state-dependent-noise policy, a CNN or dict feature extractor, an
 activation not listed) is refused by name rather than exported approximately.
 """
@@ -21,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
+
+from safeswitch.leftturn.go_model import GO_LOGIT_BOUND, GoModel
 
 if TYPE_CHECKING:
     from safeswitch.training.policies import TrainedPolicy
@@ -50,11 +57,14 @@ def _activation(layer: Any) -> tuple[str, dict[str, Any]] | None:
     return None
 
 
-def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
+def policy_graph(policy: TrainedPolicy, go_model: GoModel | None = None) -> onnx.ModelProto:
     """The ONNX model of ``policy``'s deterministic action: input ``observation`` float32
     ``[N, *obs_shape]`` (raw, as the environment gives it; an observation of more than one
     axis, such as highway-env's ``[vehicles, features]``, is flattened after its statistics
     are applied, as SB3's ``FlattenExtractor`` does), output ``action`` float32 ``[N, A]``.
+    With ``go_model`` (the policy's ``episode.go_model``) the predictor is folded in: the
+    input is the observation without its last value, which the graph computes from the rest
+    as :class:`~safeswitch.leftturn.go_model.GoModel` does.
 
     Raises:
         ExportError: The policy is not an MLP policy with a Box observation and a flat Box
@@ -90,6 +100,35 @@ def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
         return name
 
     x = INPUT
+    input_shape = obs_space.shape
+    if go_model is not None:
+        if len(obs_space.shape) != 1 or go_model.mean.shape[0] != obs_space.shape[0] - 1:
+            raise ExportError(
+                f"{where}: its go predictor reads {go_model.mean.shape[0]} values, its "
+                f"observation has {obs_space.shape}"
+            )
+        input_shape = (obs_space.shape[0] - 1,)
+        nodes += [
+            helper.make_node("Sub", [x, constant("go_mean", go_model.mean)], ["go_centred"]),
+            helper.make_node("Mul", ["go_centred", constant("go_scale", go_model.scale)], ["go0"]),
+        ]
+        for i, (w, b) in enumerate(go_model.layers):
+            gemm = [f"go{i}", constant(f"go_w{i}", w), constant(f"go_b{i}", b)]
+            nodes.append(helper.make_node("Gemm", gemm, [f"go_lin{i}"]))
+            if i < len(go_model.layers) - 1:
+                nodes.append(helper.make_node("Tanh", [f"go_lin{i}"], [f"go{i + 1}"]))
+        last = f"go_lin{len(go_model.layers) - 1}"
+        bound = np.float32(GO_LOGIT_BOUND)
+        nodes += [
+            helper.make_node(
+                "Clip",
+                [last, constant("go_low", np.array(-bound)), constant("go_high", np.array(bound))],
+                ["go_logit"],
+            ),
+            helper.make_node("Sigmoid", ["go_logit"], ["go_probability"]),
+            helper.make_node("Concat", [x, "go_probability"], ["with_go"], axis=1),
+        ]
+        x = "with_go"
     normalizer = policy.normalizer
     if normalizer is not None:
         rms: Any = normalizer.obs_rms
@@ -144,7 +183,7 @@ def policy_graph(policy: TrainedPolicy) -> onnx.ModelProto:
     graph = helper.make_graph(
         nodes,
         "safeswitch_policy",
-        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", *obs_space.shape])],
+        [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", *input_shape])],
         [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", act_space.shape[0]])],
         inits,
     )

@@ -7,6 +7,9 @@ from numpy.typing import NDArray
 
 from safeswitch.core.config import ConfigError
 
+#: The logit is clipped to ``±GO_LOGIT_BOUND`` before the sigmoid (no overflow in ``exp``).
+GO_LOGIT_BOUND = 30.0
+
 
 class GoModel:
     """A learned go predictor (``episode.go_model`` in the single-car scene,
@@ -57,4 +60,5 @@ class GoModel:
             h = h @ w + b
             if i < len(self.layers) - 1:
                 h = np.tanh(h)
-        return (1.0 / (1.0 + np.exp(-np.clip(h[:, 0], -30.0, 30.0)))).astype(np.float32)
+        logit = np.clip(h[:, 0], -GO_LOGIT_BOUND, GO_LOGIT_BOUND)
+        return (1.0 / (1.0 + np.exp(-logit))).astype(np.float32)

@@ -1,0 +1,75 @@
+"""A left-turn policy with a go predictor in its observation (``episode.go_model``) exports with
+the predictor folded into the ONNX graph, and the runtime runs it on the six values a vehicle
+gives, deciding exactly as the environment."""
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+import yaml
+
+from safeswitch.deploy.export import export
+from safeswitch.leftturn.go_model import GoModel
+from safeswitch.leftturn.make import build_task
+from safeswitch.runtime import Controller
+from safeswitch.training.config import load_config
+from safeswitch.training.pipeline import train
+from safeswitch.training.policies import load_policy
+
+from .test_runtime import drive
+
+MODEL = Path(__file__).parents[2] / "experiments" / "go_model_leftturn_plain.npz"
+
+
+@pytest.fixture(scope="module")
+def go_run(tmp_path_factory):
+    """A short run of the `certified` recipe with the committed predictor (its policy need not
+    be good: the export must reproduce whatever it computes)."""
+    config = load_config("certified")
+    episode = replace(config.env.episode, go_model=str(MODEL))
+    config = replace(config, env=replace(config.env, episode=episode), timesteps=8192,
+                     n_envs=32, eval_episodes=50)  # fmt: skip
+    run = tmp_path_factory.mktemp("go_run")
+    train(config, run, progress_bar=False)
+    return run
+
+
+def test_the_predictor_is_folded_into_the_graph_and_the_runtime_decides_as_the_env(
+    go_run, tmp_path
+):
+    result = export(go_run, tmp_path / "exported", observations=3_000)
+    manifest = json.loads((result.folder / "manifest.json").read_text())
+    assert manifest["policy"]["input"]["shape"] == ["N", 6]
+    assert manifest["policy"]["go_predictor"].startswith("folded in")
+    assert [e["name"] for e in manifest["observation"]["layout"]][-1] == "v_n"
+    assert manifest["runtime"]["supported"] is True and result.max_abs_diff <= 1e-5
+    scene = yaml.safe_load((result.folder / "scene.yaml").read_text())
+    assert scene["episode"]["go_model"] is None  # the graph computes it; nothing to ship beside
+    # the graph's predictor is the task's: on six values it gives the policy's seventh
+    policy = load_policy(go_run)
+    session = ort.InferenceSession(str(result.folder / "policy.onnx"),
+                                   providers=["CPUExecutionProvider"])  # fmt: skip
+    rng = np.random.default_rng(0)
+    six = rng.uniform([-40, -40, 0, -40, -40, 0], [40, 40, 10, 40, 40, 12], (500, 6))
+    six = six.astype(np.float32)
+    seven = np.concatenate([six, GoModel(str(MODEL), 6, "episode.go_model")(six)[:, None]], 1)
+    onnx_actions = session.run(None, {"observation": six})[0][:, 0]
+    torch_actions = np.asarray(policy.act(seven)).reshape(-1)
+    np.testing.assert_allclose(onnx_actions, torch_actions, atol=1e-5)
+    # the runtime, given the six values, drives exactly as the environment with the policy
+    controller = Controller(result.folder)
+    task = controller.task
+    assert task.observation_bounds[0].shape == (6,)
+    env_task = build_task(None, policy.config.deployed_env)
+    scenarios = env_task.scenario_set(1_000_003, 6)
+    for i in range(6):
+        state = env_task.initial(scenarios.take(np.array([i])))
+        for _, pedals, decision in drive(controller, scenarios, i):
+            if decision.tick % task.config.episode.decision_interval == 0:
+                seen = env_task.observe(state)
+                assert abs(policy.act(seen)[0] - decision.learned_action) <= 1e-5
+            state, expected = env_task.step(state, np.array([decision.learned_action]))
+            assert (expected.throttle[0], expected.brake[0]) == (pedals.throttle, pedals.brake)
