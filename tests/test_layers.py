@@ -77,8 +77,9 @@ def test_each_module_imports_only_the_layers_below_it(layer, path):
 #: module level or inside a function). The scene hooks the logics read are typed protocols in
 #: ``views``; the logics are built from a finished scene; only ``make`` knows every scene.
 LEFTTURN_ORDER = (
-    "config", "rewards", "scenarios", "views", "perception", "logics.certified", "logics.paper",
-    "task", "traffic", "make", "statistics", "info", "spaces", "render", "env", "vec_env",
+    "config", "go_model", "rewards", "scenarios", "views", "perception", "logics.certified",
+    "logics.paper", "task", "traffic", "make", "statistics", "info", "spaces", "render", "env",
+    "vec_env",
 )  # fmt: skip
 
 
