@@ -37,13 +37,28 @@ from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.training.config import load_config
 
+sys.path.insert(0, str(Path(__file__).parent))
+from go_predictor import RandomDrivers, fit  # the traffic predictor's drivers and fit
 
-def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, ...]:
-    """Observations, labels and episode ids of random drivers' decisions before the zone."""
+
+def samples(
+    config: str, seed: int, episodes: int, drivers: Path | None = None
+) -> tuple[np.ndarray, ...]:
+    """Observations, labels and episode ids of random drivers' decisions before the zone, or
+    (``drivers``: a run trained with a predictor) of that policy's, its action plus a pedal
+    noise drawn per episode (none in half of them): a DAgger-like round for the predictor,
+    still no action labels."""
     cfg = load_config(config)
     # the observation the predictor reads is the one before its own probability
     env = dataclasses.replace(cfg.env, episode=dataclasses.replace(cfg.env.episode, go_model=None))
     task = build_task(None, env)
+    policy = None
+    if drivers is not None:
+        from safeswitch.training.policies import load_policy
+
+        trained = load_policy(drivers)
+        policy = trained.as_policy()
+        task = build_task(None, trained.config.env)  # its observation ends with its predictor
     c = GapPlannerConfig()
     drive = FastDrive(task, c.top_speed_kmh, c.accel_lat, c.curve_decel, c.preview_s,
                       c.speed_gain)  # fmt: skip
@@ -53,14 +68,17 @@ def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, ...]:
     rng = np.random.default_rng(seed)
     ids = np.arange(episodes)
     scenes = task.draw_scenarios(seed, ids, np.zeros_like(ids))
-    bias = rng.uniform(-0.6, 1.0, episodes)
-    spread = rng.uniform(0.1, 0.8, episodes)
-    action = np.clip(bias + spread * rng.standard_normal(episodes), -1, 1)
+    random_drivers = RandomDrivers(rng, episodes)
+    if policy is not None:  # (drawn only then: the random drivers' draws stay as they were)
+        noise = rng.uniform(0.0, 0.4, episodes) * (rng.random(episodes) < 0.5)
+    width = build_task(None, env).observation_bounds[0].shape[0]
     live = np.ones(episodes, dtype=bool)
     rows_x: list[np.ndarray] = []
     rows_y: list[np.ndarray] = []
     rows_g: list[np.ndarray] = []
     interval = task.config.episode.decision_interval
+
+    action = random_drivers.action
 
     def act(obs, state, tick):  # type: ignore[no-untyped-def]
         nonlocal action
@@ -70,12 +88,14 @@ def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, ...]:
                 part = state.take(rows)
                 ok = drive_passes(check, part, np.arange(rows.size), exit_at, horizon,
                                   lambda now, t: drive.action(now, t))  # fmt: skip
-                rows_x.append(obs[rows].copy())
+                rows_x.append(obs[rows, :width].copy())
                 rows_y.append(ok)
                 rows_g.append(rows)
-            redraw = rng.random(episodes) < 0.3
-            fresh = np.clip(bias + spread * rng.standard_normal(episodes), -1, 1)
-            action = np.where(redraw, fresh, action)
+            if policy is not None:
+                pedal = policy(obs, state, tick) + noise * rng.standard_normal(episodes)
+                action = np.clip(pedal, -1.0, 1.0)
+            else:
+                action = random_drivers.next()
         return action.astype(np.float64)
 
     def on_tick(state, record, tick):  # type: ignore[no-untyped-def]
@@ -86,9 +106,6 @@ def samples(config: str, seed: int, episodes: int) -> tuple[np.ndarray, ...]:
 
 
 def main() -> None:
-    sys.path.insert(0, str(Path(__file__).parent))
-    from go_predictor import fit  # the traffic predictor's fit, the same model
-
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--config", default="certified")
     parser.add_argument("--seed", type=int, default=7001)
@@ -96,6 +113,14 @@ def main() -> None:
     parser.add_argument("--batches", type=int, default=2)
     parser.add_argument("--epochs", type=int, default=30)
     parser.add_argument("--hidden", type=int, default=64)
+    parser.add_argument(
+        "--drivers",
+        type=Path,
+        default=None,
+        metavar="RUN",
+        help="also sample as many batches (scene seeds from seed + 400) of this run's policy, "
+        "its action plus a pedal noise",
+    )
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     import torch
@@ -104,6 +129,10 @@ def main() -> None:
     start = time.time()
     seeds = [args.seed + 100 * b for b in range(args.batches)]
     parts = [samples(args.config, s, args.episodes) for s in seeds]
+    if args.drivers is not None:
+        driven = [args.seed + 400 + 100 * b for b in range(args.batches)]
+        parts += [samples(args.config, s, args.episodes, args.drivers) for s in driven]
+        seeds += driven
     x = np.concatenate([p[0] for p in parts])
     y = np.concatenate([p[1] for p in parts])
     g = np.concatenate([p[2] + b * args.episodes for b, p in enumerate(parts)])
@@ -112,7 +141,8 @@ def main() -> None:
     buffer = BytesIO()
     np.savez(buffer, **model["weights"])
     write_bytes_atomic(args.out, buffer.getvalue())
-    report = {"config": args.config, "scene_seeds": seeds, "drivers": "random",
+    drivers = "random" + (f", then {args.drivers}" if args.drivers else "")
+    report = {"config": args.config, "scene_seeds": seeds, "drivers": drivers,
               "episodes": int(g.max()) + 1, "hidden": args.hidden, "epochs": args.epochs,
               "sampling_s": round(sampled, 1), "scores": model["scores"]}  # fmt: skip
     text = json.dumps(report, indent=2) + "\n"

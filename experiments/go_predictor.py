@@ -73,6 +73,26 @@ class PredictedGo(GapPlanner):
         return self.probability(self.task.observe(state)) > self.threshold
 
 
+class RandomDrivers:
+    """The random drivers whose states the predictors are sampled on: each episode a random
+    pedal around a random per-episode bias, redrawn with probability 0.3 at each decision."""
+
+    def __init__(self, rng: np.random.Generator, episodes: int) -> None:
+        self.rng = rng
+        self.bias = rng.uniform(-0.6, 1.0, episodes)
+        self.spread = rng.uniform(0.1, 0.8, episodes)
+        self.action = self._drawn()
+
+    def _drawn(self) -> np.ndarray:
+        return np.clip(self.bias + self.spread * self.rng.standard_normal(len(self.bias)), -1, 1)
+
+    def next(self) -> np.ndarray:
+        """The pedals of the next decision."""
+        redraw = self.rng.random(len(self.bias)) < 0.3
+        self.action = np.where(redraw, self._drawn(), self.action)
+        return self.action
+
+
 def samples(
     config: str, seed: int, episodes: int, model: Path | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -84,9 +104,7 @@ def samples(
     rng = np.random.default_rng(seed)
     ids = np.arange(episodes)
     scenes = task.draw_scenarios(seed, ids, np.zeros_like(ids))
-    bias = rng.uniform(-0.6, 1.0, episodes)
-    spread = rng.uniform(0.1, 0.8, episodes)
-    action = np.clip(bias + spread * rng.standard_normal(episodes), -1, 1)
+    random_drivers = RandomDrivers(rng, episodes)
     rule = None
     if model is not None:  # the predictor's own drivers: a threshold and a pedal noise each
         width = task.observation_bounds[0].shape[0]
@@ -99,7 +117,6 @@ def samples(
     which: list[np.ndarray] = []
 
     def drive(obs: np.ndarray, state: object, tick: int) -> np.ndarray:
-        nonlocal action
         rows = np.flatnonzero(live & (state.world.progress[:, 0] <= planner.first_entry))
         if rows.size:
             ok = planner._passes(state.take(rows), 0)
@@ -109,10 +126,7 @@ def samples(
         if rule is not None:
             pedal = rule(obs, state, tick) + noise * rng.standard_normal(episodes)
             return np.clip(pedal, -1.0, 1.0)
-        redraw = rng.random(episodes) < 0.3
-        fresh = np.clip(bias + spread * rng.standard_normal(episodes), -1, 1)
-        action = np.where(redraw, fresh, action)
-        return action.astype(np.float64)
+        return random_drivers.next().astype(np.float64)
 
     def on_tick(state: object, record: object, tick: int) -> None:
         live[:] &= ~(record.terminated | record.truncated)
