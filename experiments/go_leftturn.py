@@ -14,7 +14,9 @@ controller's action is a label.
 
 Run: ``python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz`` (one
 torch thread, about 25 s); ``--config`` names the recipe whose scene and observation it reads
-(default ``certified``; its own ``episode.go_model`` is left out).
+(default ``certified``; its own ``episode.go_model`` is left out); ``--drivers RUN`` adds as
+many batches of the states a run trained with a predictor drives through (scene seeds 7401 and
+7501), for a DAgger-like second round.
 """
 
 from __future__ import annotations
