@@ -127,6 +127,13 @@ LEFT_TURN_VARIANTS = (
         "no controller's actions)",
         "python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz",
     ),
+    (
+        "experimental/certified_go_4m",
+        "certified",
+        "PPO with R_ADAS from a random start and the same go predictor, 4 M steps instead of "
+        "3 M (`experiments/certified_go_4m.yaml`)",
+        "python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz",
+    ),
 )
 
 
