@@ -383,6 +383,13 @@ class ScenarioConfig:
         check_bounds(self, "scenarios")
 
 
+def check_go_model(value: str | None, section: str, writer: str) -> None:
+    """A ``go_model`` setting is ``None`` or names an existing file (``writer`` writes one)."""
+    if value is not None:
+        check(isinstance(value, str) and Path(value).is_file(), section, "go_model", value,
+              f"must be null or the path of an existing .npz ({writer} writes one)")  # fmt: skip
+
+
 @dataclass(frozen=True)
 class TrafficConfig:
     """Traffic from every leg (ours: the paper's scene has one other car). Each scene draws its
@@ -462,10 +469,7 @@ class TrafficConfig:
 
     def __post_init__(self) -> None:
         o = "traffic"
-        if self.go_model is not None:
-            check(isinstance(self.go_model, str) and Path(self.go_model).is_file(), o,
-                  "go_model", self.go_model, "must be null or the path of an existing .npz "
-                  "(experiments/go_predictor.py writes one)")  # fmt: skip
+        check_go_model(self.go_model, o, "experiments/go_predictor.py")
         check_bounds(self, o)
         check(
             len(self.turn_shares) == 3 and min(self.turn_shares) >= 0
@@ -592,10 +596,7 @@ class EpisodeConfig:
 
     def __post_init__(self) -> None:
         check_bounds(self, "episode")
-        if self.go_model is not None:
-            check(isinstance(self.go_model, str) and Path(self.go_model).is_file(), "episode",
-                  "go_model", self.go_model, "must be null or the path of an existing .npz "
-                  "(experiments/go_leftturn.py writes one)")  # fmt: skip
+        check_go_model(self.go_model, "episode", "experiments/go_leftturn.py")
         check(not self.horizon_terminates or self.observe_time_left, "episode",
               "horizon_terminates", self.horizon_terminates,
               "needs episode.observe_time_left (without the time left in the observation the "
