@@ -52,7 +52,7 @@ from safeswitch.core.config import ConfigError, with_settings
 from safeswitch.core.registry import import_modules
 from safeswitch.io import write_json
 from safeswitch.training import train
-from safeswitch.training.config import EnvTrainConfig, TrainConfig, load_any_config
+from safeswitch.training.config import EnvTrainConfig, TrainConfig, comparable, load_any_config
 from safeswitch.training.policies import load_policy
 from safeswitch.training.run import evaluate_trained
 
@@ -191,7 +191,10 @@ def collected(
         raise SystemExit(f"--collect: {run} was not trained with seed {seed}")
     # what --set may change of a kept run: how it is evaluated now, not how it was trained
     evaluation = {"eval_episodes": trained.eval_episodes, "eval_seed": trained.eval_seed}
-    if config is not None and trained != replace(config, seed=seed, **evaluation):
+    # a file a setting names (a go predictor) compares by its contents: the run has its copy
+    if config is not None and comparable(trained) != comparable(
+        replace(config, seed=seed, **evaluation)
+    ):
         raise SystemExit(f"--collect: {run} was trained with another configuration than --config")
     return {**row(seed, metrics), "run": str(run)}
 

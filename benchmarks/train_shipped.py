@@ -13,8 +13,10 @@ import shutil
 import sys
 from pathlib import Path
 
+import yaml
+
 from safeswitch.app.train import train_and_plot
-from safeswitch.training.config import load_config
+from safeswitch.training.config import load_config, named_files
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = (
@@ -98,6 +100,8 @@ def ship(name: str) -> None:
     for artefact in OPTIONAL_ARTEFACTS:
         if (run / artefact).is_file():
             shutil.copy2(run / artefact, target / artefact)
+    for _, _, named in named_files(yaml.safe_load((run / "config.yaml").read_text())):
+        shutil.copy2(run / named, target / named)  # the run's copy (a go predictor)
     metrics = json.loads((run / "metrics.json").read_text())
     config = load_config(run / "config.yaml")
     traffic = config.traffic

@@ -1,6 +1,7 @@
 """The single-car scene's go predictor, ``episode.go_model`` (``traffic.go_model``'s are in
 test_traffic.py)."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 from safeswitch.core.config import ConfigError
 from safeswitch.leftturn import make_vec_env
 from safeswitch.leftturn.make import build_task
-from safeswitch.training.config import load_config
+from safeswitch.training.config import comparable, dump_config, load_config, write_config_with_files
 
 from .test_traffic import _write_go_model
 
@@ -86,3 +87,57 @@ def test_a_recipe_reads_its_go_model_beside_it_from_any_directory(tmp_path, monk
     assert go is not None and Path(go) == (tmp_path / "models" / "go.npz").resolve()
     # the recipe's other settings are the base's, untouched
     assert load_config(recipe).env.episode.decision_interval == 5
+
+
+def test_a_folder_takes_the_files_its_config_names_and_refuses_another_of_that_name(tmp_path):
+    """``write_config_with_files``: the go predictor is copied beside ``config.yaml``, which
+    names it by its file name; a folder holding another file of that name is refused, naming
+    it, with nothing written; and ``comparable`` tells the recipes apart by the file's
+    contents, not its path."""
+    (tmp_path / "a").mkdir()
+    model = _write_go_model(tmp_path / "a" / "go.npz", 6)
+    config = load_config("certified")
+    config = replace(config, env=replace(config.env, episode=replace(config.env.episode,
+                                                                     go_model=model)))  # fmt: skip
+    folder = tmp_path / "run"
+    folder.mkdir()
+    write_config_with_files(folder, dump_config(config))
+    assert (folder / "go.npz").read_bytes() == Path(model).read_bytes()
+    assert "go_model: go.npz" in (folder / "config.yaml").read_text()
+    assert (
+        Path(load_config(folder / "config.yaml").env.episode.go_model)
+        == (folder / "go.npz").resolve()
+    )
+    assert comparable(load_config(folder / "config.yaml")) == comparable(config)
+    # another file of that name: refused, the folder as it was
+    (tmp_path / "b").mkdir()
+    other = _write_go_model(tmp_path / "b" / "go.npz", 6, seed=1)
+    changed = replace(config, env=replace(config.env, episode=replace(config.env.episode,
+                                                                      go_model=other)))  # fmt: skip
+    assert comparable(changed) != comparable(config)
+    before = (folder / "config.yaml").read_text()
+    target = tmp_path / "second"
+    target.mkdir()
+    (target / "go.npz").write_bytes(Path(model).read_bytes())
+    refused = r"env\.episode\.go_model=.*b/go\.npz.*holds another 'go\.npz'"
+    with pytest.raises(ConfigError, match=refused):
+        write_config_with_files(target, dump_config(changed))
+    assert not (target / "config.yaml").exists()
+    assert (folder / "config.yaml").read_text() == before
+
+
+def test_the_probability_does_not_depend_on_how_many_blas_threads_the_process_allows():
+    """The predictor is a policy input: on two BLAS threads OpenBLAS rounds its products
+    differently (a run of the `certified` recipe differed from its first rollout), so it
+    computes on one whatever the process allows, and a run is the same under any
+    ``OPENBLAS_NUM_THREADS``."""
+    import torch  # noqa: F401 -- loaded, as in training (its OpenMP changes how BLAS splits)
+    from threadpoolctl import threadpool_limits
+
+    task = build_task(None, load_config("certified").env)
+    plain = task.observe(task.initial(task.scenario_set(0, 128)))[:, :6]
+    with threadpool_limits(limits=1, user_api="blas"):
+        one = task.go_model(plain)
+    with threadpool_limits(limits=2, user_api="blas"):
+        two = task.go_model(plain)
+    np.testing.assert_array_equal(one, two)

@@ -57,7 +57,6 @@ from stable_baselines3.common.callbacks import BaseCallback
 from safeswitch.app.evaluate import scene_settings
 from safeswitch.io import (
     prepare_output_dir,
-    write_atomic,
     write_json,
     write_policy_files,
     write_snapshot,
@@ -485,8 +484,11 @@ def learning_terms(config: Any, reasons: Sequence[str]) -> tuple[Any, Any]:
 
 
 def _save_policy(folder: Path, model: Any, env: Any, config_text: str) -> None:
-    """The adapted policy as a run directory ``evaluate --model`` accepts."""
-    write_atomic(folder / "config.yaml", config_text)
+    """The adapted policy as a run directory ``evaluate --model`` accepts (with the files its
+    configuration names)."""
+    from safeswitch.training.config import write_config_with_files
+
+    write_config_with_files(folder, config_text)
     write_policy_files(folder, model, env)
 
 

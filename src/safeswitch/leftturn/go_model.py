@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 from numpy.typing import NDArray
+from threadpoolctl import ThreadpoolController
 
 from safeswitch.core.config import ConfigError
 
 #: The logit is clipped to ``±GO_LOGIT_BOUND`` before the sigmoid (no overflow in ``exp``).
 GO_LOGIT_BOUND = 30.0
+
+
+@cache
+def _blas() -> ThreadpoolController:
+    """The process's numeric thread pools (found once)."""
+    return ThreadpoolController()
 
 
 class GoModel:
@@ -54,11 +63,17 @@ class GoModel:
         self.layers = [(arrays[f"w{i}"], arrays[f"b{i}"]) for i in range(layers)]
 
     def __call__(self, observation: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The probability per row of ``observation`` ``[B, width]``, ``[B]`` float32."""
+        """The probability per row of ``observation`` ``[B, width]``, ``[B]`` float32.
+
+        Computed with one BLAS thread whatever the process allows: OpenBLAS splits a product
+        differently on two threads and rounds differently, and the probability is a policy
+        input, so a run would otherwise depend on ``OPENBLAS_NUM_THREADS`` (measured: the
+        `certified` recipe's first rollout already differed)."""
         h = (observation - self.mean) * self.scale
-        for i, (w, b) in enumerate(self.layers):
-            h = h @ w + b
-            if i < len(self.layers) - 1:
-                h = np.tanh(h)
+        with _blas().limit(limits=1, user_api="blas"):
+            for i, (w, b) in enumerate(self.layers):
+                h = h @ w + b
+                if i < len(self.layers) - 1:
+                    h = np.tanh(h)
         logit = np.clip(h[:, 0], -GO_LOGIT_BOUND, GO_LOGIT_BOUND)
         return (1.0 / (1.0 + np.exp(-logit))).astype(np.float32)

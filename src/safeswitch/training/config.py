@@ -9,7 +9,9 @@ configuration is saved with every run.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal
@@ -28,6 +30,7 @@ from safeswitch.core.config import (
 )
 from safeswitch.core.registry import logic_names, logic_params, plain_env_id
 from safeswitch.evaluation.planner_config import GapPlannerConfig, PlannerConfig
+from safeswitch.io import replacing, write_atomic
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig, TrafficConfig, traffic_config
 
 
@@ -892,23 +895,68 @@ FILE_SETTINGS = (("traffic", "go_model"), ("env", "episode", "go_model"))
 
 
 def _files_beside(data: dict[str, Any], path: Path) -> dict[str, Any]:
-    """``data`` with each :data:`FILE_SETTINGS` path found beside ``path`` made absolute."""
+    """``data`` (changed in place) with each :data:`FILE_SETTINGS` path found beside ``path``
+    made absolute."""
+    for inner, keys, value in named_files(data):
+        found = path.parent / value
+        if not Path(value).is_absolute() and found.is_file():
+            inner[keys[-1]] = str(found.resolve())
+    return data
 
-    def beside(inner: Any, keys: tuple[str, ...]) -> Any:
-        if not isinstance(inner, dict):
-            return inner
-        key, *rest = keys
-        if rest:
-            return {**inner, key: beside(inner[key], tuple(rest))} if key in inner else inner
-        value = inner.get(key)
-        if isinstance(value, str) and not Path(value).is_absolute():
-            found = path.parent / value
-            if found.is_file():
-                return {**inner, key: str(found.resolve())}
-        return inner
 
+def named_files(data: dict[str, Any]) -> list[tuple[dict[str, Any], tuple[str, ...], str]]:
+    """Each :data:`FILE_SETTINGS` setting of the configuration mapping ``data`` that names a
+    file: ``(the mapping holding it, its keys from the top, its value)``."""
+    found = []
     for keys in FILE_SETTINGS:
-        data = beside(data, keys)
+        inner: Any = data
+        for key in keys[:-1]:
+            inner = inner.get(key) if isinstance(inner, dict) else None
+        if isinstance(inner, dict) and isinstance(inner.get(keys[-1]), str):
+            found.append((inner, keys, inner[keys[-1]]))
+    return found
+
+
+def write_config_with_files(folder: str | Path, config_text: str) -> None:
+    """``folder/config.yaml`` (``config_text``, a resolved configuration) with every file a
+    setting names (:data:`FILE_SETTINGS`, e.g. ``episode.go_model``) copied beside it and
+    named there by its file name, so that a run or policy folder is whole: it loads (``read
+    beside``) wherever it is moved. Each file is written whole (``replacing``).
+
+    Raises:
+        ConfigError: Two settings name different files of one name, or the folder holds
+            another file of that name already.
+    """
+    folder = Path(folder)
+    data = yaml.safe_load(config_text)
+    copied: dict[str, Path] = {}
+    for inner, keys, value in named_files(data):
+        source = Path(value)
+        target = folder / source.name
+        if source.resolve() != target.resolve():
+            other = copied.get(source.name)
+            if (other is not None and other != source.resolve()) or (
+                other is None and target.exists()
+                and target.read_bytes() != source.read_bytes()
+            ):  # fmt: skip
+                raise ConfigError(
+                    f"{'.'.join(keys)}={value!r}: {folder} holds another {source.name!r} already"
+                )
+            with replacing(target) as tmp:
+                shutil.copyfile(source, tmp)
+        copied[source.name] = source.resolve()
+        inner[keys[-1]] = source.name
+    write_atomic(folder / "config.yaml", yaml.safe_dump(data, sort_keys=False))
+
+
+def comparable(config: Any) -> Any:
+    """``config`` (a dataclass) as a mapping in which each file a setting names
+    (:data:`FILE_SETTINGS`) is its contents' SHA-256, not its path: two runs of one recipe
+    compare equal wherever each keeps its copy of the file."""
+    data = to_dict(config)
+    for inner, keys, value in named_files(data):
+        path = Path(value)
+        inner[keys[-1]] = hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else value
     return data
 
 

@@ -54,6 +54,7 @@ from safeswitch.training.config import (
     ShapingConfig,
     TrainConfig,
     dump_config,
+    write_config_with_files,
 )
 from safeswitch.training.constraints import CONSTRAINTS_LOG, ConstraintCosts, ConstraintUpdate
 from safeswitch.training.interventions import InterventionRecorder
@@ -265,10 +266,11 @@ def open_run(run: Path, resume: bool) -> dict[str, Any] | None:
 
 
 def start_run(run: Path, config_text: str) -> None:
-    """Create the new run directory with its resolved configuration (after
-    :func:`open_run` and every other check passed)."""
+    """Create the new run directory with its resolved configuration and the files it names
+    (:func:`~safeswitch.training.config.write_config_with_files`; after :func:`open_run` and
+    every other check passed)."""
     run.mkdir(parents=True, exist_ok=True)
-    write_atomic(run / "config.yaml", config_text)
+    write_config_with_files(run, config_text)
 
 
 def normalized(venv: Any, config: Any, checkpoint: dict[str, Any] | None) -> VecNormalize:
