@@ -5,7 +5,8 @@ scratch: 1.2 M steps, 16 environments, 1 torch thread) into a temporary run dire
 reports wall time and steps per second (for a configuration with a warm start, such as
 ``--config paper``, the warm start's wall time separately), then times the trained
 policy's decision for a single observation (normalisation + forward pass, median of 2,000
-calls, 1 torch thread). Run on an otherwise idle machine:
+calls, 1 torch thread; a go predictor's probability, which the task computes, is not timed:
+``benchmarks/runtime_latency.py`` times the whole decision). Run on an otherwise idle machine:
 ``python benchmarks/bench_train.py [--config FILE] [--timesteps N] [--json] [--out FILE]``.
 """
 
@@ -24,6 +25,7 @@ import torch
 
 import _common
 from safeswitch.io import write_json
+from safeswitch.leftturn.make import build_task
 from safeswitch.training import train
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import load_policy
@@ -34,7 +36,10 @@ ROOT = Path(__file__).resolve().parent.parent
 def decision_latency_ms(run: Path, calls: int = 2000) -> float:
     torch.set_num_threads(1)
     policy = load_policy(run)
-    obs = np.array([[1.75, -30.0, 6.9, -1.75, 40.0, 8.0]], dtype=np.float32)
+    # one scenario's first observation as the policy's task builds it (with a go predictor's
+    # probability where the recipe has one; computing it is the task's, not timed here)
+    task = build_task(None, policy.config.env)
+    obs = task.observe(task.initial(task.scenario_set(0, 1)))
     for _ in range(50):
         policy.act(obs)
     times = []

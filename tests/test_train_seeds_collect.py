@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from safeswitch.training.config import dump_config, load_config, write_config_with_files
 from safeswitch.training.policies import resolve_model_dir, run_config_path
 
 BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
@@ -22,7 +23,8 @@ def train_seeds(benchmark_module):
 def kept_run(folder, evaluation, warm_start=None):
     """A run as ``--keep`` leaves it: the shipped `certified` config (seed 1), a metrics.json."""
     folder.mkdir(parents=True)
-    shutil.copyfile(run_config_path(resolve_model_dir("certified")), folder / "config.yaml")
+    shipped = load_config(run_config_path(resolve_model_dir("certified")))
+    write_config_with_files(folder, dump_config(shipped))  # with its go predictor
     metrics = {
         "timesteps": 2_000_000, "wall_time_s": 200.0,
         "training": {"collision_episodes": 0, "safety_activation_episodes": 40, "episodes": 900},

@@ -3,6 +3,7 @@ the predictor folded into the ONNX graph, and the runtime runs it on the six val
 gives, deciding exactly as the environment."""
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,23 +16,20 @@ from safeswitch.deploy.export import export
 from safeswitch.leftturn.go_model import GoModel
 from safeswitch.leftturn.make import build_task
 from safeswitch.runtime import Controller
-from safeswitch.training.config import load_config
+from safeswitch.training.config import comparable, load_config
 from safeswitch.training.pipeline import train
 from safeswitch.training.policies import load_policy
 
 from .test_runtime import drive
 
-MODEL = Path(__file__).parents[2] / "experiments" / "go_model_leftturn_plain.npz"
+MODEL = Path(load_config("certified").env.episode.go_model)  # packaged beside the recipe
 
 
 @pytest.fixture(scope="module")
 def go_run(tmp_path_factory):
-    """A short run of the `certified` recipe with the committed predictor (its policy need not
+    """A short run of the `certified` recipe, with its packaged predictor (its policy need not
     be good: the export must reproduce whatever it computes)."""
-    config = load_config("certified")
-    episode = replace(config.env.episode, go_model=str(MODEL))
-    config = replace(config, env=replace(config.env, episode=episode), timesteps=8192,
-                     n_envs=32, eval_episodes=50)  # fmt: skip
+    config = replace(load_config("certified"), timesteps=8192, n_envs=32, eval_episodes=50)
     run = tmp_path_factory.mktemp("go_run")
     train(config, run, progress_bar=False)
     return run
@@ -73,3 +71,22 @@ def test_the_predictor_is_folded_into_the_graph_and_the_runtime_decides_as_the_e
                 assert abs(policy.act(seen)[0] - decision.learned_action) <= 1e-5
             state, expected = env_task.step(state, np.array([decision.learned_action]))
             assert (expected.throttle[0], expected.brake[0]) == (pedals.throttle, pedals.brake)
+
+
+def test_a_run_keeps_its_go_predictor_beside_its_config_and_loads_wherever_it_is_moved(
+    go_run, tmp_path
+):
+    """The run copies the file its recipe names into its folder and names it there by its file
+    name, so the folder (a shipped policy's, a copied run) is whole: moved elsewhere, it loads
+    and acts as before."""
+    named = yaml.safe_load((go_run / "config.yaml").read_text())["env"]["episode"]["go_model"]
+    assert named == MODEL.name and (go_run / named).read_bytes() == MODEL.read_bytes()
+    moved = Path(shutil.copytree(go_run, tmp_path / "elsewhere" / "run"))
+    config = load_config(moved / "config.yaml")
+    assert Path(config.env.episode.go_model) == (moved / MODEL.name).resolve()
+    seven = np.random.default_rng(1).uniform(-1, 1, (64, 7)).astype(np.float32)
+    np.testing.assert_array_equal(load_policy(moved).act(seven), load_policy(go_run).act(seven))
+    # and its recipe compares equal to the packaged one that made it, whose file it copied
+    trained = replace(config, timesteps=8192, n_envs=32, eval_episodes=50)
+    packaged = replace(load_config("certified"), timesteps=8192, n_envs=32, eval_episodes=50)
+    assert trained != packaged and comparable(trained) == comparable(packaged)

@@ -4,6 +4,7 @@ of their own, declared bounds are checked by one checker, and configurations wri
 the split load unchanged."""
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 
@@ -22,6 +23,8 @@ from safeswitch.training.config import (
     PPOConfig,
     ShapingConfig,
     TrainConfig,
+    comparable,
+    config_path,
     load_config,
 )
 
@@ -149,8 +152,8 @@ def test_a_plant_trains_with_the_one_ppo_section_and_the_left_turn_starts_from_t
     [
         ("paper", "experimental/paper_uncleared", "experimental/paper_fric_scene_guard",
          ("policy", "constraints")),
-        ("certified", "experimental/certified_ablate_noise", "experimental/certified_narrow_safety",
-         ("policy",)),
+        ("experimental/certified_ablate_noise", "experimental/certified_ablate_noise",
+         "experimental/certified_narrow_safety", ("policy",)),
     ],
 )  # fmt: skip
 def test_the_left_turns_shipped_recipes_use_a_plants_ppo_section_and_its_learned_noise(
@@ -171,6 +174,27 @@ def test_the_left_turns_shipped_recipes_use_a_plants_ppo_section_and_its_learned
     assert old.policy.log_std_final == -2.0 and not old.policy.learn_log_std
     assert dataclasses.replace(old, **{k: getattr(config, k) for k in changed}) == config
     assert config.constraints.uncleared == load_config("certified").constraints.uncleared
+
+
+def test_the_shipped_certified_recipe_is_the_noise_recipe_with_its_go_predictor_for_longer():
+    """Since 2026-12-05 the shipped `certified` recipe is the one before it
+    (`certified_ablate_noise`, the `certified` row above) with the learned go predictor in its
+    observation, trained for 4 M steps instead of 3 M: the experiment record whose seeds the
+    docs quote (`certified_go_4m`), its predictor the same file, byte for byte, packaged beside
+    the recipe."""
+    config = load_config("certified")
+    record = load_config("experimental/certified_go_4m")
+    assert Path(config.env.episode.go_model).parent == Path(config_path("certified")).parent
+    assert (
+        Path(config.env.episode.go_model).read_bytes()
+        == Path(record.env.episode.go_model).read_bytes()
+    )
+    assert config != record and comparable(config) == comparable(record)
+    before = load_config("experimental/certified_ablate_noise")
+    assert before.env.episode.go_model is None and before.timesteps == 3_000_000
+    episode = dataclasses.replace(before.env.episode, go_model=config.env.episode.go_model)
+    env = dataclasses.replace(before.env, episode=episode)
+    assert dataclasses.replace(before, env=env, timesteps=4_000_000) == config
 
 
 def test_the_reference_describes_a_key_a_section_inherits():

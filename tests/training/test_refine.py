@@ -19,7 +19,13 @@ from safeswitch.evaluation.search import SEGMENT_S, family_of_drivers
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 from safeswitch.training import refine as refine_module
 from safeswitch.training import train
-from safeswitch.training.config import RefineConfig, TrainConfig, load_config
+from safeswitch.training.config import (
+    RefineConfig,
+    TrainConfig,
+    dump_config,
+    load_config,
+    write_config_with_files,
+)
 from safeswitch.training.policies import load_policy, resolve_model_dir, run_config_path
 from safeswitch.training.refine import refine_run, search_task
 from safeswitch.training.run import evaluate_trained
@@ -38,7 +44,8 @@ def shipped_run(folder, policy="certified"):
     source = resolve_model_dir(policy)
     for name in ("model.zip", "vecnormalize.pkl"):
         shutil.copyfile(source / name, folder / name)
-    shutil.copyfile(run_config_path(source), folder / "config.yaml")
+    # its config.yaml with the file it names (its go predictor)
+    write_config_with_files(folder, dump_config(load_config(run_config_path(source))))
     return folder
 
 
