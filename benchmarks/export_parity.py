@@ -1,7 +1,8 @@
 """ONNX parity of every shipped policy (``safeswitch export``, issue #42): the largest
 |ONNX − torch| action difference on 100,000 observations of the policy's own evaluation
 episodes (seed 1,000,003; the highway-env policies: 10,000), onnxruntime and torch on one
-thread each.
+thread each; for a policy with a folded go predictor also the predictor's own difference and
+the end-to-end one (``safeswitch.deploy.export.Parity``).
 
 Run: ``python benchmarks/export_parity.py [--observations N] [--highway-observations N]
 [--out results/export_parity.json]``.
@@ -38,11 +39,17 @@ def main() -> None:
             result = export(name, Path(tmp) / name, observations=count)
             rows[name] = {"max_abs_diff": result.max_abs_diff,
                           "observations": result.observations}  # fmt: skip
+            if result.parity.go_max_abs_diff is not None:  # a folded go predictor's parts
+                rows[name]["go_probability_max_abs_diff"] = result.parity.go_max_abs_diff
+                rows[name]["end_to_end_max_abs_diff"] = result.parity.end_to_end_max_abs_diff
     out = {"machine": _common.machine(), "tolerance": 1e-5, "policies": rows}
     if not _common.publish(out, args.out, args.json):
         for name, row in rows.items():
+            go = (f" (its go predictor {row['go_probability_max_abs_diff']:.2e}, end to end "
+                  f"{row['end_to_end_max_abs_diff']:.2e})" if "end_to_end_max_abs_diff" in row
+                  else "")  # fmt: skip
             print(f"{name:>18}: max |ONNX - torch| = {row['max_abs_diff']:.2e} on "
-                  f"{row['observations']:,} observations")  # fmt: skip
+                  f"{row['observations']:,} observations{go}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -12,7 +12,9 @@ import onnxruntime as ort
 import pytest
 import yaml
 
-from safeswitch.deploy.export import export
+from safeswitch.deploy import export as export_module
+from safeswitch.deploy.export import export, go_predictor, parity
+from safeswitch.deploy.onnx_policy import ExportError, policy_graph
 from safeswitch.leftturn.go_model import GoModel
 from safeswitch.leftturn.make import build_task
 from safeswitch.runtime import Controller
@@ -44,6 +46,10 @@ def test_the_predictor_is_folded_into_the_graph_and_the_runtime_decides_as_the_e
     assert manifest["policy"]["go_predictor"].startswith("folded in")
     assert [e["name"] for e in manifest["observation"]["layout"]][-1] == "v_n"
     assert manifest["runtime"]["supported"] is True and result.max_abs_diff <= 1e-5
+    # each folded part checked on its reference's inputs, the compound difference reported
+    check = manifest["parity"]
+    assert check["go_probability_max_abs_diff"] == result.parity.go_max_abs_diff <= 1e-5
+    assert check["end_to_end_max_abs_diff"] == result.parity.end_to_end_max_abs_diff
     scene = yaml.safe_load((result.folder / "scene.yaml").read_text())
     assert scene["episode"]["go_model"] is None  # the graph computes it; nothing to ship beside
     # the graph's predictor is the task's: on six values it gives the policy's seventh
@@ -90,3 +96,24 @@ def test_a_run_keeps_its_go_predictor_beside_its_config_and_loads_wherever_it_is
     trained = replace(config, timesteps=8192, n_envs=32, eval_episodes=50)
     packaged = replace(load_config("certified"), timesteps=8192, n_envs=32, eval_episodes=50)
     assert trained != packaged and comparable(trained) == comparable(packaged)
+
+
+def test_a_folded_predictor_that_disagrees_with_the_environment_is_refused(go_run, tmp_path):
+    """The predictor is checked as its own part: a probability off by 1e-3 (as a predictor the
+    graph got wrong would be) fails the check, and export writes nothing, naming it."""
+    policy = load_policy(go_run)
+    go = go_predictor(policy)
+    graph = policy_graph(policy, go).SerializeToString()
+    task = build_task(None, policy.config.deployed_env)
+    seen = task.observe(task.initial(task.scenario_set(5, 64)))
+    good = parity(graph, policy, seen, folded=True)
+    assert good.go_max_abs_diff <= 1e-5 and good.max_abs_diff <= 1e-5
+    off = seen.copy()
+    off[:, -1] += 1e-3
+    assert parity(graph, policy, off, folded=True).go_max_abs_diff >= 9e-4
+    bad = replace(good, go_max_abs_diff=1e-3)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(export_module, "parity", lambda *args, **kwargs: bad)
+        with pytest.raises(ExportError, match=r"go predictor's probability .*0\.001"):
+            export(go_run, tmp_path / "refused", observations=500)
+    assert not (tmp_path / "refused").exists()

@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from safeswitch.evaluation.rollout import rollout
+from safeswitch.leftturn.make import build_task
 from safeswitch.runtime import DEADLINE_MISSED, Controller, ControllerLoadError, measurement_of
 from safeswitch.training.policies import load_policy
 
@@ -64,13 +65,26 @@ def test_the_runtime_decides_exactly_as_the_environment(
     assert controller.config.episode.learned_scope == scope
     task = controller.task
     torch_policy = load_policy(model)
+    # with the `certified` policy's go predictor the environment is the policy's own (its
+    # seventh value the predictor's probability, which the runtime's graph computes itself)
+    env_task = task
+    if torch_policy.config.env.episode.go_model is not None:
+        env_task = build_task(None, torch_policy.config.deployed_env)
+    go = env_task.go_model
+    # end to end the predictor's and the policy's float32 roundings compound (docs/deploy.md)
+    tolerance = 1e-5 if go is None else 2e-5
     scenarios = task.scenario_set(1_000_003, 12)
     interval = task.config.episode.decision_interval
     ticks, sources, outcomes = 0, set(), []
 
     def same_action_as_torch(observation, decision):
         if decision.tick % interval == 0:
-            assert abs(torch_policy.act(observation)[0] - decision.learned_action) <= 1e-5
+            seen = (
+                observation
+                if go is None
+                else np.concatenate([observation, go(observation)[:, None]], 1)
+            )
+            assert abs(torch_policy.act(seen)[0] - decision.learned_action) <= tolerance
 
     for i in range(12):
         for record, pedals, decision in drive(controller, scenarios, i, same_action_as_torch):
@@ -87,7 +101,7 @@ def test_the_runtime_decides_exactly_as_the_environment(
     assert ticks > 1_000
     assert sources >= ({"learned", "rule"} if scope == "window" else {"learned"})
     # The same episodes driven by the torch policy through the environment end the same way.
-    result = rollout(task, scenarios, torch_policy.as_policy())
+    result = rollout(env_task, scenarios, torch_policy.as_policy())
     assert outcomes == list(zip(result.collision.tolist(), result.outcome.tolist(), strict=True))
 
 

@@ -15,7 +15,9 @@ The folder (see docs/deploy.md):
 
 Parity: the ONNX actions must equal SB3's deterministic ``predict`` (torch) within
 ``tolerance`` on ``observations`` observations drawn from evaluation episodes of the policy
-itself; otherwise nothing is written and the command fails.
+itself; otherwise nothing is written and the command fails. A folded go predictor is checked
+as its own part: its probability against the environment's within ``tolerance``, and the
+actions against torch's given that probability (:func:`parity`).
 """
 
 from __future__ import annotations
@@ -105,14 +107,17 @@ class ExportResult:
     Attributes:
         folder: The export folder.
         manifest: The manifest written.
-        max_abs_diff: Largest |ONNX − torch| action difference on the parity observations.
+        max_abs_diff: Largest |ONNX − torch| action difference on the parity observations
+            (given the same policy inputs: :class:`Parity`).
         observations: How many observations the parity check used.
+        parity: Every measure of the parity check.
     """
 
     folder: Path
     manifest: dict[str, Any]
     max_abs_diff: float
     observations: int
+    parity: Parity
 
 
 def _versions() -> dict[str, str]:
@@ -193,23 +198,58 @@ def env_observations(policy: Any, config: Any, count: int, seed: int = PARITY_SE
     return np.stack(seen)
 
 
+@dataclass(frozen=True)
+class Parity:
+    """The parity check's measures (:func:`parity`).
+
+    Attributes:
+        max_abs_diff: Largest |ONNX − torch| action difference given the same policy inputs
+            (with a folded go predictor: torch given the graph's own probability).
+        actions: The ONNX actions.
+        go_max_abs_diff: With a folded go predictor, the largest |ONNX − numpy| difference
+            of its probability (numpy: :class:`~safeswitch.leftturn.go_model.GoModel`, as
+            in training); else ``None``.
+        end_to_end_max_abs_diff: Largest difference between the ONNX action on the vehicle's
+            values and torch's on the environment's observation (the two float32 roundings
+            of a folded predictor compound, amplified by the network; equal to
+            ``max_abs_diff`` without one).
+    """
+
+    max_abs_diff: float
+    actions: NDArray[np.float32]
+    go_max_abs_diff: float | None
+    end_to_end_max_abs_diff: float
+
+
 def parity(
     onnx_bytes: bytes, policy: Any, observations: NDArray[np.float32], folded: bool = False
-) -> tuple[float, NDArray[np.float32]]:
-    """Largest |ONNX − torch| action difference on ``observations`` (torch: SB3's
-    deterministic ``predict`` on the normalised observations), and the ONNX actions. With
-    ``folded`` the graph computes the observations' last value (a go predictor's probability)
-    itself and is given the rest."""
+) -> Parity:
+    """The ONNX graph against torch (SB3's deterministic ``predict`` on the normalised
+    observations) on ``observations``. With ``folded`` the graph computes the observations'
+    last value (a go predictor's probability) itself and is given the rest; each translated
+    part is then checked on the same inputs as its reference: the predictor against the
+    environment's value, the policy against torch given the graph's probability."""
     import onnxruntime as ort
 
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(onnx_bytes, options, providers=["CPUExecutionProvider"])
     given = observations[:, :-1] if folded else observations
-    actions = np.asarray(session.run(None, {INPUT: given})[0], dtype=np.float32)
-    reference, _ = policy.model.predict(policy.normalise(observations), deterministic=True)
-    reference = np.asarray(reference, dtype=np.float32).reshape(actions.shape)
-    return float(np.max(np.abs(actions - reference))), actions
+    outputs = session.run(None, {INPUT: given})
+    actions = np.asarray(outputs[0], dtype=np.float32)
+
+    def torch_actions(inputs: NDArray[np.float32]) -> NDArray[np.float32]:
+        reference, _ = policy.model.predict(policy.normalise(inputs), deterministic=True)
+        return np.asarray(reference, dtype=np.float32).reshape(actions.shape)
+
+    end_to_end = float(np.max(np.abs(actions - torch_actions(observations))))
+    if not folded:
+        return Parity(end_to_end, actions, None, end_to_end)
+    probability = np.asarray(outputs[1], dtype=np.float32).reshape(-1, 1)
+    go = float(np.max(np.abs(probability[:, 0] - observations[:, -1])))
+    same = np.concatenate([given, probability], axis=1)
+    worst = float(np.max(np.abs(actions - torch_actions(same))))
+    return Parity(worst, actions, go, end_to_end)
 
 
 def go_predictor(policy: Any) -> GoModel | None:
@@ -310,11 +350,18 @@ def export(
         env_id = config.env_id
         # ASSUMPTIONS are the left turn's logics'; a plant's logic documents its own
         assumptions = [f"see the documentation of the {logic!r} logic for {env_id}"]
-    worst, _ = parity(onnx_bytes, policy, seen, folded=go is not None)
+    check = parity(onnx_bytes, policy, seen, folded=go is not None)
+    worst = check.max_abs_diff
     if not worst <= tolerance:
         raise ExportError(
             f"parity check failed: the ONNX actions differ from torch's by up to {worst:.3g} on "
             f"{len(seen):,} observations (tolerance {tolerance:g}); nothing was written"
+        )
+    if check.go_max_abs_diff is not None and not check.go_max_abs_diff <= tolerance:
+        raise ExportError(
+            f"parity check failed: the folded go predictor's probability differs from the "
+            f"environment's by up to {check.go_max_abs_diff:.3g} on {len(seen):,} observations "
+            f"(tolerance {tolerance:g}); nothing was written"
         )
     supported, why = runtime_support(policy)
     space, action_space = policy.model.observation_space, policy.model.action_space
@@ -365,6 +412,17 @@ def export(
             "observations": len(seen),
             "from": f"evaluation episodes of the policy (seed {PARITY_SEED})",
             "max_abs_diff": worst,
+            **(
+                {
+                    "go_probability_max_abs_diff": check.go_max_abs_diff,
+                    "end_to_end_max_abs_diff": check.end_to_end_max_abs_diff,
+                    "checked": "each part on the same inputs as its reference: the go "
+                    "predictor against the environment's probability, the policy against "
+                    "torch given the graph's probability",
+                }
+                if check.go_max_abs_diff is not None
+                else {}
+            ),
             "tolerance": tolerance,
             "reference": "stable-baselines3 predict(deterministic=True), torch, CPU",
         },
@@ -374,7 +432,7 @@ def export(
     write_bytes_atomic(folder / "policy.onnx", onnx_bytes)
     write_atomic(folder / "scene.yaml", yaml.safe_dump(scene_dict, sort_keys=False))
     write_json(folder / "manifest.json", manifest)
-    return ExportResult(folder, manifest, worst, len(seen))
+    return ExportResult(folder, manifest, worst, len(seen), check)
 
 
 def main_summary(result: ExportResult) -> str:
@@ -383,7 +441,13 @@ def main_summary(result: ExportResult) -> str:
     lines = [
         f"exported to {result.folder}: policy.onnx (opset {OPSET}), scene.yaml, manifest.json",
         f"parity: max |ONNX - torch| = {result.max_abs_diff:.2e} on {result.observations:,} "
-        f"observations (tolerance {result.manifest['parity']['tolerance']:g})",
+        f"observations (tolerance {result.manifest['parity']['tolerance']:g})"
+        + (
+            f"; the folded go predictor's probability {result.parity.go_max_abs_diff:.2e}, "
+            f"end to end {result.parity.end_to_end_max_abs_diff:.2e}"
+            if result.parity.go_max_abs_diff is not None
+            else ""
+        ),
         "runtime: safeswitch.runtime.Controller runs it"
         if runtime["supported"]
         else f"runtime: policy only ({runtime['scope']})",

@@ -36,6 +36,8 @@ if TYPE_CHECKING:
 OPSET = 17
 #: Names of the graph's input and output.
 INPUT, OUTPUT = "observation", "action"
+#: A folded go predictor's probability, the graph's second output.
+GO_OUTPUT = "go_probability"
 
 
 class ExportError(ValueError):
@@ -64,7 +66,8 @@ def policy_graph(policy: TrainedPolicy, go_model: GoModel | None = None) -> onnx
     are applied, as SB3's ``FlattenExtractor`` does), output ``action`` float32 ``[N, A]``.
     With ``go_model`` (the policy's ``episode.go_model``) the predictor is folded in: the
     input is the observation without its last value, which the graph computes from the rest
-    as :class:`~safeswitch.leftturn.go_model.GoModel` does.
+    as :class:`~safeswitch.leftturn.go_model.GoModel` does, and gives as a second output
+    ``go_probability`` float32 ``[N, 1]`` (the action stays the first).
 
     Raises:
         ExportError: The policy is not an MLP policy with a Box observation and a flat Box
@@ -180,11 +183,14 @@ def policy_graph(policy: TrainedPolicy, go_model: GoModel | None = None) -> onnx
         helper.make_node("Min", [x, constant("action_high", high)], ["below_high"]),
         helper.make_node("Max", ["below_high", constant("action_low", low)], [OUTPUT]),
     ]
+    outputs = [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", act_space.shape[0]])]
+    if go_model is not None:  # second, for the parity check: the predictor's own value
+        outputs.append(helper.make_tensor_value_info(GO_OUTPUT, TensorProto.FLOAT, ["N", 1]))
     graph = helper.make_graph(
         nodes,
         "safeswitch_policy",
         [helper.make_tensor_value_info(INPUT, TensorProto.FLOAT, ["N", *input_shape])],
-        [helper.make_tensor_value_info(OUTPUT, TensorProto.FLOAT, ["N", act_space.shape[0]])],
+        outputs,
         inits,
     )
     onnx_model = helper.make_model(
