@@ -122,17 +122,16 @@ LEFT_TURN_VARIANTS = (
     (
         "experimental/certified_go_plain",
         "certified",
-        "PPO with R_ADAS from a random start and a learned go predictor in the observation "
-        "(`experiments/certified_go_plain.yaml`; the predictor fitted to simulated outcomes, "
-        "no controller's actions)",
+        "PPO with R_ADAS from a random start and the shipped recipe's go predictor, 3 M steps "
+        "instead of 4 M (`experiments/certified_go_plain.yaml`)",
         "python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz",
     ),
     (
-        "experimental/certified_go_4m",
+        "experimental/certified_ablate_noise",
         "certified",
-        "PPO with R_ADAS from a random start and the same go predictor, 4 M steps instead of "
-        "3 M (`experiments/certified_go_4m.yaml`)",
-        "python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz",
+        "PPO with R_ADAS from a random start without the go predictor, 3 M steps (the recipe "
+        "shipped from 2026-12-01 to 2026-12-05, `experiments/certified_ablate_noise.yaml`)",
+        None,
     ),
 )
 

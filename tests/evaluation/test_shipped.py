@@ -3,12 +3,12 @@ scenarios it never saw (the issue targets)."""
 
 import json
 
-import numpy as np
 import pytest
 
 from safeswitch.app.evaluate import controller_setup, evaluate
 from safeswitch.evaluation.evaluate import run_controller, scenario_set
 from safeswitch.evaluation.metrics import STOP_SPEED
+from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.task import OUTCOMES, LeftTurnTask
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import SHIPPED_DIR, load_policy, resolve_model_dir
@@ -33,13 +33,17 @@ def rule():
 
 
 def test_every_shipped_policy_loads_with_its_config_and_acts_in_bounds():
-    obs = np.array([[1.75, -30.0, 6.9, -1.75, 40.0, 8.0]], dtype=np.float32)
     for name in NAMES:
         policy = load_policy(SHIPPED_DIR / name)
         config = load_config(SHIPPED_DIR / name / "config.yaml")
         # trained for as long as its config says (PPO rounds up to whole rollouts)
         rollout = config.ppo.n_steps * config.n_envs
         assert config.timesteps <= metrics(name)["timesteps"] < config.timesteps + rollout
+        # a first observation of the policy's own task (`certified`: its go predictor's
+        # probability last, read from the policy's folder)
+        task = build_task(None, config.env)
+        obs = task.observe(task.initial(task.scenario_set(0, 1)))
+        assert obs.shape == (1, 7 if name == "certified" else 6)
         action = policy.act(obs)
         assert action.shape == (1,) and -1.0 <= action[0] <= 1.0
     assert resolve_model_dir("shipped") == SHIPPED_DIR / "paper"

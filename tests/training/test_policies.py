@@ -5,8 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from safeswitch.leftturn import LeftTurnTask
-from safeswitch.leftturn.config import LeftTurnConfig
 from safeswitch.leftturn.make import build_task
 from safeswitch.training.policies import SHIPPED, load_policy
 
@@ -17,8 +15,9 @@ from safeswitch.training.policies import SHIPPED, load_policy
 def test_the_fast_deterministic_path_acts_as_sb3_predict(name):
     policy = load_policy(name.replace("_", "-"))
     assert policy._actor is not None  # the shipped policies take the fast path
-    traffic = policy.config.traffic_settings  # the traffic policies observe their traffic
-    task = build_task(None, None, traffic=traffic) if traffic else LeftTurnTask(LeftTurnConfig())
+    # each policy's own observation: the traffic policies observe their traffic, `certified`
+    # its go predictor's probability too
+    task = build_task(None, policy.config.env, traffic=policy.config.traffic_settings)
     rng = np.random.default_rng(0)
     # observations from real scenes, and far outside them (the clip to [-1, 1] matters there)
     obs = task.observe(task.initial(task.draw_scenarios(0, np.arange(2048), np.zeros(2048, int))))

@@ -261,7 +261,8 @@ def test_a_dirty_clear_is_a_label_only_where_the_policy_never_clears(monkeypatch
 
 
 def test_a_lock_keeps_the_policys_own_decisions_before_its_first_dirty_tick(monkeypatch):
-    config = small_config(lock_s=1.0)
+    # 200 scenes: enough failing ones for one whose first dirty tick comes after the lock
+    config = small_config(lock_s=1.0, scenes=200)
     task, policy = search_task(config), load_policy("certified")
     episode = task.config.episode
     searched, real = [], refine_module.search_sequences

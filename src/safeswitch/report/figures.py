@@ -295,7 +295,7 @@ def comparison_figure(
                 )  # fmt: skip
         mean = float(np.nanmean(row.efficiency)) if np.isfinite(row.efficiency).any() else 0.0
         ax.set_title(
-            f"{row.label}\nefficiency {mean:.2f}, {int(failed.sum())} failures, "
+            f"{row.label}\nefficiency {mean:.3f}, {int(failed.sum())} failures, "
             f"{int(row.speeding.sum())} speeding",
             fontsize=9,
             color="red" if failed.any() or row.speeding.any() else "k",

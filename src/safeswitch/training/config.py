@@ -30,7 +30,6 @@ from safeswitch.core.config import (
 )
 from safeswitch.core.registry import logic_names, logic_params, plain_env_id
 from safeswitch.evaluation.planner_config import GapPlannerConfig, PlannerConfig
-from safeswitch.io import replacing, write_atomic
 from safeswitch.leftturn.config import LeftTurnConfig, ScenarioConfig, TrafficConfig, traffic_config
 
 
@@ -927,6 +926,8 @@ def write_config_with_files(folder: str | Path, config_text: str) -> None:
         ConfigError: Two settings name different files of one name, or the folder holds
             another file of that name already.
     """
+    from safeswitch.io import replacing, write_atomic  # writing a run, not reading a config
+
     folder = Path(folder)
     data = yaml.safe_load(config_text)
     copied: dict[str, Path] = {}
