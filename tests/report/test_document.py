@@ -66,3 +66,22 @@ def test_every_driving_table_shows_comfort_in_ticks_and_episodes_and_marks_an_ex
 
     compared = comparison_table({"controllers": {"ppo": {"random": comfort(0.001, 17)}}})
     assert compared.rows[0][compared.header.index("comfort exceeded (episodes)")] == "17"
+
+
+def test_clearing_sooner_than_the_oracle_is_red_only_when_a_limit_was_broken():
+    """The oracle's point mass on the route's centre line is not the car: a policy that takes
+    a line within the lane clears sooner without breaking a rule (the shipped `certified`
+    policy, 258 of 1,000). The cell is red when any of those episodes sped or broke a comfort
+    limit — and, for a summary without that split, whenever there are any."""
+
+    def sooner(episodes, broken=None):
+        split = {} if broken is None else {"faster_than_oracle_either": broken}
+        return {"random": {**row(0, 0), "faster_than_oracle_episodes": episodes, **split}}
+
+    table = comparison_table({"controllers": {
+        "lane line": sooner(258, 0), "speeder": sooner(40, 40), "old": sooner(3),
+        "none": sooner(0, 0),
+    }})  # fmt: skip
+    column = table.header.index("faster than the oracle")
+    assert [r[column] for r in table.rows] == ["258", "40", "3", "0"]
+    assert [b[column] for b in table.bad] == [False, True, True, False]

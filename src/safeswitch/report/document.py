@@ -65,7 +65,7 @@ TRAFFIC = (
 #: Counts that break a target unless they are 0: their cells are drawn red (as a collision's).
 MUST_BE_ZERO = frozenset(
     {"failures", "collisions", "lost_control_episodes", "speeding_episodes",
-     "faster_than_oracle_episodes", "sumo_collision_episodes"}
+     "sumo_collision_episodes"}
 )  # fmt: skip
 
 #: The shipped policies the verdict judges against the targets (the results the project
@@ -107,8 +107,10 @@ DEFINITIONS = (
     (
         "faster than the oracle",
         "episodes that cleared more than 0.05 s sooner than the oracle, which keeps every limit "
-        "(two 20 ms ticks of reading and rounding are allowed): each broke one (the verdict "
-        "names which)",
+        "on its point-mass model (two 20 ms ticks of reading and rounding are allowed): by "
+        "breaking a limit, speeding or comfort (the cell is then red), or by what the model "
+        "rules out and the rules allow — a line within the lane off the route's centre line, "
+        "or sharing the conflict area with the north car",
     ),
     ("cleared", "episodes in which the ego left its conflict zone within the {horizon:g} s"),
     (
@@ -171,15 +173,18 @@ def _columns(
     """A summary's cells for ``columns``, and which show a violation (``lead`` text cells
     first, never flagged)."""
     cells = [_cell(r.get(k), f, k) for k, _, f in columns]
-    bad = [False] * lead + [_breaks(k, r.get(k)) for k, _, _ in columns]
+    bad = [False] * lead + [_breaks(k, r.get(k), r) for k, _, _ in columns]
     return cells, bad
 
 
-def _breaks(key: str, value: Any) -> bool:
-    """Whether a cell's value breaks a target: a count of :data:`MUST_BE_ZERO` above 0, or
-    comfort exceeded on more ticks than the targets allow."""
+def _breaks(key: str, value: Any, summary: dict[str, Any]) -> bool:
+    """Whether a cell's value breaks a target: a count of :data:`MUST_BE_ZERO` above 0,
+    comfort exceeded on more ticks than the targets allow, or episodes sooner than the oracle
+    of which any broke a limit (speeding or comfort; a summary without that split: any)."""
     if key == "comfort_violation_fraction":
         return value is not None and value > COMFORT_BUDGET
+    if key == "faster_than_oracle_episodes":
+        return bool(summary.get("faster_than_oracle_either", value))
     return key in MUST_BE_ZERO and bool(value)
 
 
