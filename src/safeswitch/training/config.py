@@ -930,8 +930,12 @@ def write_config_with_files(folder: str | Path, config_text: str) -> None:
 
     folder = Path(folder)
     data = yaml.safe_load(config_text)
+    named = named_files(data)
+    if not named:  # the text as given, byte for byte
+        write_atomic(folder / "config.yaml", config_text)
+        return
     copied: dict[str, Path] = {}
-    for inner, keys, value in named_files(data):
+    for inner, keys, value in named:
         source = Path(value)
         target = folder / source.name
         if source.resolve() != target.resolve():
