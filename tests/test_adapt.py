@@ -50,12 +50,13 @@ def test_an_adversarial_update_still_cannot_collide_under_certified(tmp_path, ad
     # the update took hold: the deployed policy is the full-throttle one, overruled often
     assert blocks[-1]["safety_activation_episodes"] == 48
     last = SwitchPPO.load(tmp_path / "a" / "checkpoint" / "model.zip", device="cpu")
-    full = last.predict(np.zeros((1, 6), dtype=np.float32), deterministic=True)[0]
+    width = last.observation_space.shape[0]  # the certified policy's: with its go predictor
+    full = last.predict(np.zeros((1, width), dtype=np.float32), deterministic=True)[0]
     assert full[0, 0] == pytest.approx(1.0)
     # ... and it is not what adapting hands back: the selection keeps the frozen policy
     assert summary["selected_block"] == 0
-    adapted = load_policy(tmp_path / "a").act(np.zeros((1, 6), dtype=np.float32))[0]
-    frozen = load_policy("certified").act(np.zeros((1, 6), dtype=np.float32))[0]
+    adapted = load_policy(tmp_path / "a").act(np.zeros((1, width), dtype=np.float32))[0]
+    frozen = load_policy("certified").act(np.zeros((1, width), dtype=np.float32))[0]
     assert adapted == pytest.approx(frozen) and adapted != pytest.approx(1.0)
 
 

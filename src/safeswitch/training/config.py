@@ -906,7 +906,7 @@ def _files_beside(data: dict[str, Any], path: Path) -> dict[str, Any]:
 def named_files(data: dict[str, Any]) -> list[tuple[dict[str, Any], tuple[str, ...], str]]:
     """Each :data:`FILE_SETTINGS` setting of the configuration mapping ``data`` that names a
     file: ``(the mapping holding it, its keys from the top, its value)``."""
-    found = []
+    found: list[tuple[dict[str, Any], tuple[str, ...], str]] = []
     for keys in FILE_SETTINGS:
         inner: Any = data
         for key in keys[:-1]:
