@@ -127,6 +127,22 @@ LEFT_TURN_VARIANTS = (
         "python experiments/go_leftturn.py --out experiments/go_model_leftturn_plain.npz",
     ),
     (
+        "experimental/certified_go_wide",
+        "certified",
+        "PPO with R_ADAS from a random start and a go predictor fitted on the shifts' wider "
+        "ranges (`experiments/certified_go_wide.yaml`)",
+        "python experiments/go_leftturn.py --config experimental/go_leftturn_wide_scene "
+        "--out experiments/go_model_leftturn_wide.npz",
+    ),
+    (
+        "experimental/certified_go_wide_train",
+        "certified",
+        "PPO with R_ADAS from a random start, trained on the shifts' wider ranges, with their "
+        "go predictor (`experiments/certified_go_wide_train.yaml`)",
+        "python experiments/go_leftturn.py --config experimental/go_leftturn_wide_scene "
+        "--out experiments/go_model_leftturn_wide.npz",
+    ),
+    (
         "experimental/certified_ablate_noise",
         "certified",
         "PPO with R_ADAS from a random start without the go predictor, 3 M steps (the recipe "
