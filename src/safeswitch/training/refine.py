@@ -292,8 +292,12 @@ def refine_run(
         for name in ("model.zip", "vecnormalize.pkl"):
             shutil.copyfile(run / name, ppo / f".{name}.tmp")
             os.replace(ppo / f".{name}.tmp", ppo / name)
-        chosen = policy if tuned is None else tuned
-        write_policy_files(run, chosen.model, chosen.normalizer)
+        if tuned is None:
+            write_policy_files(run, policy.model, policy.normalizer)
+        else:  # the fine-tune phase's files as it wrote them, byte for byte
+            for name in ("model.zip", "vecnormalize.pkl"):
+                shutil.copyfile(tuned.path / name, run / f".{name}.tmp")
+                os.replace(run / f".{name}.tmp", run / name)
     write_atomic(run / "refine.csv", buffer.getvalue())
     stage = rows[kept]["stage"]
     return {
