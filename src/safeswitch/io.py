@@ -62,6 +62,18 @@ def write_policy_files(folder: str | Path, model: Any, normalizer: Any) -> None:
         normalizer.save(str(tmp))
 
 
+#: The files of a policy in a run or snapshot folder (:func:`write_policy_files`).
+POLICY_FILES = ("model.zip", "vecnormalize.pkl")
+
+
+def copy_policy_files(source: str | Path, folder: str | Path) -> None:
+    """``source``'s policy files (:data:`POLICY_FILES`) copied into ``folder`` byte for byte,
+    each written whole (:func:`replacing`)."""
+    for name in POLICY_FILES:
+        with replacing(Path(folder) / name) as tmp:
+            shutil.copyfile(Path(source) / name, tmp)
+
+
 def write_snapshot(folder: str | Path, model: Any, normalizer: Any, state: dict[str, Any]) -> Path:
     """A policy snapshot ``folder/{model.zip, vecnormalize.pkl, state.json}`` (a checkpoint, the
     best policy so far), written into ``.NAME.tmp`` beside it and renamed whole; the folder it

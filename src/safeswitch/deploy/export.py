@@ -107,17 +107,20 @@ class ExportResult:
     Attributes:
         folder: The export folder.
         manifest: The manifest written.
-        max_abs_diff: Largest |ONNX − torch| action difference on the parity observations
-            (given the same policy inputs: :class:`Parity`).
         observations: How many observations the parity check used.
         parity: Every measure of the parity check.
     """
 
     folder: Path
     manifest: dict[str, Any]
-    max_abs_diff: float
     observations: int
     parity: Parity
+
+    @property
+    def max_abs_diff(self) -> float:
+        """Largest |ONNX − torch| action difference on the parity observations (given the
+        same policy inputs: :class:`Parity`)."""
+        return self.parity.max_abs_diff
 
 
 def _versions() -> dict[str, str]:
@@ -432,7 +435,7 @@ def export(
     write_bytes_atomic(folder / "policy.onnx", onnx_bytes)
     write_atomic(folder / "scene.yaml", yaml.safe_dump(scene_dict, sort_keys=False))
     write_json(folder / "manifest.json", manifest)
-    return ExportResult(folder, manifest, worst, len(seen), check)
+    return ExportResult(folder, manifest, len(seen), check)
 
 
 def main_summary(result: ExportResult) -> str:

@@ -48,7 +48,6 @@ import copy
 import csv
 import io
 import json
-import os
 import shutil
 import sys
 import time
@@ -67,7 +66,12 @@ from safeswitch.evaluation.search import (
     policy_actions,
     search_sequences,
 )
-from safeswitch.io import complete_checkpoints, write_atomic, write_policy_files
+from safeswitch.io import (
+    complete_checkpoints,
+    copy_policy_files,
+    write_atomic,
+    write_policy_files,
+)
 from safeswitch.leftturn.config import EpisodeConfig
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
@@ -289,15 +293,11 @@ def refine_run(
     if kept:
         ppo = run / "ppo"
         ppo.mkdir(exist_ok=True)
-        for name in ("model.zip", "vecnormalize.pkl"):
-            shutil.copyfile(run / name, ppo / f".{name}.tmp")
-            os.replace(ppo / f".{name}.tmp", ppo / name)
+        copy_policy_files(run, ppo)
         if tuned is None:
             write_policy_files(run, policy.model, policy.normalizer)
         else:  # the fine-tune phase's files as it wrote them, byte for byte
-            for name in ("model.zip", "vecnormalize.pkl"):
-                shutil.copyfile(tuned.path / name, run / f".{name}.tmp")
-                os.replace(run / f".{name}.tmp", run / name)
+            copy_policy_files(tuned.path, run)
     write_atomic(run / "refine.csv", buffer.getvalue())
     stage = rows[kept]["stage"]
     return {

@@ -29,7 +29,6 @@ import csv
 import dataclasses
 import json
 import os
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -40,7 +39,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
-from safeswitch.io import append_row, replacing, write_snapshot
+from safeswitch.io import POLICY_FILES, append_row, copy_policy_files, write_snapshot
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
@@ -352,7 +351,6 @@ def select_best(run: Path) -> None:
     ``last/``, ``best/``'s model and statistics take its place (each file renamed whole)."""
     last = run / "last"
     last.mkdir(exist_ok=True)
-    for name in ("model.zip", "vecnormalize.pkl"):
+    for name in POLICY_FILES:
         os.replace(run / name, last / name)
-        with replacing(run / name) as tmp:
-            shutil.copyfile(run / "best" / name, tmp)
+    copy_policy_files(run / "best", run)
