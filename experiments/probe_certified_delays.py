@@ -1,0 +1,124 @@
+"""Would knowing when a drive begun later gets through help the single-car scene clear 99 %?
+(issue #39; docs/learning_experiments.md, "A go predictor for the left turn").
+
+A one-off probe with exact, simulated checks (no learning): the `certified` recipe's scene (no
+predictor in the observation) on the 1,000 unseen scenarios of seed 1000003, driven by
+
+1. the throttle planner alone;
+2. the planner, overruled by the go check the recipe's predictor learns: drive the planners'
+   fast drive wherever it gets past the ego's certified zone, with no collision, without the
+   filter acting and within the episode's time;
+3. 2, and where that fails, coast (throttle closed) wherever the fast drive begun after one of
+   ``DELAYS`` seconds of coasting gets through — the "coast, then go" drives that lift the
+   ceiling (benchmarks/certified_ceiling.py) above the full-throttle driver and the planner.
+
+If 3 clears no more than the trained policies (983-985), a predictor of delayed drives in the
+observation is not the missing information. Run: ``python experiments/probe_certified_delays.py
+[DELAY ...]`` (default every 0.25 s from 0.25 to 7 s; one thread, about 3 min).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+
+import numpy as np
+
+from safeswitch.evaluation.evaluate import run_controller, scenario_chunks, summary_against_oracle
+from safeswitch.evaluation.planner import FastDrive, Planner, throttle_scene
+from safeswitch.evaluation.traffic_planner import GapPlannerConfig
+from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.task import LeftTurnTask, TaskState
+from safeswitch.training.config import load_config
+
+config = load_config("certified")
+ENV = dataclasses.replace(
+    config.env, episode=dataclasses.replace(config.env.episode, go_model=None)
+)
+TASK = build_task(None, ENV)
+G = GapPlannerConfig()
+DRIVE = FastDrive(TASK, G.top_speed_kmh, G.accel_lat, G.curve_decel, G.preview_s, G.speed_gain)
+CHECK = LeftTurnTask(dataclasses.replace(throttle_scene(TASK.config), switching="certified"))
+ENTRY, EXIT = TASK.north_conflict.ego_cert_zone
+HORIZON = TASK.config.episode.horizon_ticks
+INTERVAL = TASK.config.episode.decision_interval
+DT = TASK.config.episode.dt
+
+
+def passes(state: TaskState, rows: np.ndarray, delay: int, now: int) -> np.ndarray:
+    """Whether the fast drive begun after ``delay`` ticks of a closed throttle takes the ego of
+    ``rows`` past its certified zone with no collision, no safety action and before the
+    episode's end (tick ``now`` of ``HORIZON``); other rows get True."""
+
+    def act(current: TaskState, tick: int) -> np.ndarray:
+        closed = np.full(current.batch_size, -1.0)
+        return DRIVE.action(current, tick) if tick >= delay else closed
+
+    ok = np.ones(state.batch_size, dtype=bool)
+    reached = np.zeros(state.batch_size, dtype=bool)
+    reached[np.setdiff1d(np.arange(state.batch_size), rows)] = True
+    sim, index = state.take(rows), rows.copy()
+    for tick in range(HORIZON - now):
+        if index.size == 0:
+            break
+        inside = sim.world.progress[:, 0] <= EXIT
+        sim, record = CHECK.step(sim, act(sim, tick), observe=False)
+        ok[index[inside & (record.safety_active | record.collision)]] = False
+        past = sim.world.progress[:, 0] > EXIT
+        reached[index[past]] = True
+        keep = np.flatnonzero(ok[index] & ~past)
+        index, sim = index[keep], sim.take(keep)
+    return ok & reached
+
+
+class Rule:
+    """The planner, overruled by the exact go check and (``delays``) the coast-then-go one."""
+
+    def __init__(self, delays: list[float]) -> None:
+        self.delays, self.base = delays, Planner(TASK)
+        self.go: np.ndarray | None = None
+        self.coast: np.ndarray | None = None
+
+    def __call__(self, obs: np.ndarray, state: TaskState, tick: int) -> np.ndarray:
+        base = self.base(obs, state, tick)
+        size = state.batch_size
+        if tick % INTERVAL == 0 or self.go is None or self.go.shape[0] != size:
+            rows = np.flatnonzero(state.world.progress[:, 0] <= ENTRY)
+            self.go, self.coast = np.zeros(size, bool), np.zeros(size, bool)
+            if rows.size:
+                now = passes(state, rows, 0, tick)
+                self.go[rows] = now[rows]
+                left = rows[~now[rows]]
+                for delay in self.delays:
+                    if left.size == 0:
+                        break
+                    later = passes(state, left, round(delay / DT), tick)
+                    self.coast[left[later[left]]] = True
+                    left = left[~later[left]]
+        fast = DRIVE.to_scene(DRIVE.action(state, tick))
+        closed = DRIVE.to_scene(np.full(size, -1.0))
+        assert self.coast is not None
+        return np.where(self.go, fast, np.where(self.coast, closed, base))
+
+
+def main() -> None:
+    delays = [float(a) for a in sys.argv[1:]] or list(np.arange(1, 29) * 0.25)
+    ((_, scenes),) = scenario_chunks(TASK, "random", 1000, 1_000_003)
+    rules = [("planner", Planner(TASK)), ("planner + exact go check", Rule([])),
+             ("planner + exact go check + coast-then-go checks", Rule(delays))]  # fmt: skip
+    for name, rule in rules:
+        start = time.time()
+        result, plan = run_controller(TASK, rule, scenes, trace=False)
+        s = summary_against_oracle(result, plan, TASK.config.episode.horizon_s)
+        print(
+            f"{name}: collisions {s['collisions']}, safety episodes "
+            f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, efficiency "
+            f"{s['mean_efficiency']:.3f}, comfort exceeded {s['comfort_violation_fraction']:.4%} "
+            f"of ticks ({time.time() - start:.0f} s)",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()
