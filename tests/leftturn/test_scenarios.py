@@ -32,6 +32,34 @@ def test_a_focused_distribution_moves_only_the_focused_share_of_arrival_offsets(
     assert plain.arrival_offset.min() >= -3.0 and plain.arrival_offset.max() <= 5.0
 
 
+def test_a_focused_box_draws_a_share_of_whole_scenarios_from_wider_ranges():
+    """Every ``focus_`` range set moves the focused share's values into it (a wider scene mixed
+    into training); the rest are the plain distribution's draws, unchanged."""
+    plain = draw(ScenarioConfig())
+    wide = ScenarioConfig(
+        focus_share=0.5, focus_arrival_offset_s=(-3.0, 5.0), focus_north_speed_kmh=(6.0, 44.0),
+        focus_ego_speed_kmh=(18.0, 30.0), focus_ego_start_distance_m=(22.0, 40.0),
+    )  # fmt: skip
+    mixed = draw(wide)
+    moved = mixed.north_speed != plain.north_speed
+    assert abs(moved.mean() - 0.5) < 0.015
+    for name in ("ego_start_distance", "ego_speed", "arrival_offset"):
+        assert np.array_equal(getattr(mixed, name)[~moved], getattr(plain, name)[~moved])
+    kmh = mixed.north_speed[moved] * 3.6
+    assert kmh.min() < 8.0 and kmh.max() > 42.0 and kmh.min() >= 6.0 - 1e-9
+    assert (mixed.ego_start_distance[moved] < 30.0).mean() > 0.4
+    assert mixed.ego_speed.max() * 3.6 > 29.0
+    # a focus range left unset keeps the plain range for the focused share
+    only_north = draw(dataclasses.replace(wide, focus_ego_start_distance_m=None))
+    assert only_north.ego_start_distance.min() >= 32.0
+
+
+def test_a_focused_box_that_does_not_fit_the_road_is_refused():
+    far = ScenarioConfig(focus_share=0.1, focus_north_speed_kmh=(20.0, 90.0))
+    with pytest.raises(ConfigError, match="north_speed_kmh"):
+        build_task(None, LeftTurnConfig(scenarios=far))
+
+
 def test_the_plain_distribution_is_what_it_was_before_the_focus_existed():
     """``focus_share`` 0 draws four numbers per scenario, as before it was added: the
     scenarios behind every recorded result stay the same."""
@@ -46,7 +74,9 @@ def test_the_plain_distribution_is_what_it_was_before_the_focus_existed():
 @pytest.mark.parametrize(
     ("given", "named"),
     [({"focus_share": 1.5}, "focus_share"), ({"focus_share": float("nan")}, "focus_share"),
-     ({"focus_arrival_offset_s": (3.0, 1.8)}, "focus_arrival_offset_s")],
+     ({"focus_arrival_offset_s": (3.0, 1.8)}, "focus_arrival_offset_s"),
+     ({"focus_north_speed_kmh": (0.0, 30.0)}, "focus_north_speed_kmh"),
+     ({"focus_ego_start_distance_m": (10.0, 30.0)}, "focus_ego_start_distance_m")],
 )  # fmt: skip
 def test_a_bad_focus_is_named(given, named):
     with pytest.raises(ConfigError, match=named):

@@ -358,12 +358,17 @@ class ScenarioConfig:
         ego_speed_kmh: Ego's initial speed [km/h].
         north_speed_kmh: North car's (constant target) speed [km/h].
         arrival_offset_s: North arrival time minus ego arrival time [s].
-        focus_share: Share of scenarios whose arrival offset is drawn from
-            ``focus_arrival_offset_s`` instead (ours; 0: none, the distribution above). A
-            training distribution that dwells on where rare failures concentrate
-            (``train_only.scenarios`` of the training configuration); evaluations keep the plain
-            one.
+        focus_share: Share of scenarios drawn from the focused ranges instead (ours; 0: none,
+            the distribution above). A training distribution that dwells on where rare
+            failures concentrate, or that mixes in a wider scene (``train_only.scenarios`` of
+            the training configuration); evaluations keep the plain one.
         focus_arrival_offset_s: The focused range of the arrival offset [s].
+        focus_ego_start_distance_m: The focused range of the ego's start distance [m]
+            (``null``: the plain one).
+        focus_ego_speed_kmh: The focused range of the ego's initial speed [km/h] (``null``:
+            the plain one).
+        focus_north_speed_kmh: The focused range of the north car's speed [km/h] (``null``:
+            the plain one).
     """
 
     ego_start_distance_m: Annotated[tuple[float, float], Bounds(20, unit="m")] = (32.0, 40.0)
@@ -378,9 +383,20 @@ class ScenarioConfig:
         1.8,
         3.0,
     )
+    focus_ego_start_distance_m: Annotated[tuple[float, float] | None, Bounds(20, unit="m")] = None
+    focus_ego_speed_kmh: Annotated[tuple[float, float] | None, Bounds(0, 100, unit="km/h")] = None
+    focus_north_speed_kmh: Annotated[
+        tuple[float, float] | None, Bounds(0, 100, True, unit="km/h")
+    ] = None
 
     def __post_init__(self) -> None:
         check_bounds(self, "scenarios")
+
+    def focused(self, name: str) -> tuple[float, float]:
+        """The focused range of the scenario value ``name`` (e.g. ``"north_speed_kmh"``): its
+        ``focus_`` setting, or the plain range where that is ``null``."""
+        value: tuple[float, float] | None = getattr(self, f"focus_{name}")
+        return getattr(self, name) if value is None else value
 
 
 def check_go_model(value: str | None, section: str, writer: str) -> None:

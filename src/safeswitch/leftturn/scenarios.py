@@ -122,32 +122,36 @@ def sample_scenarios(config: ScenarioConfig, uniforms: FloatArray) -> Scenarios:
     def between(bounds: tuple[float, float], u: FloatArray) -> FloatArray:
         return bounds[0] + (bounds[1] - bounds[0]) * u
 
-    offset = between(config.arrival_offset_s, uniforms[:, 3])
+    names = ("ego_start_distance_m", "ego_speed_kmh", "north_speed_kmh", "arrival_offset_s")
+    values = [between(getattr(config, name), uniforms[:, i]) for i, name in enumerate(names)]
     if config.focus_share > 0:
         focused = uniforms[:, 4] < config.focus_share
-        offset = np.where(focused, between(config.focus_arrival_offset_s, uniforms[:, 3]), offset)
+        for i, name in enumerate(names):
+            values[i] = np.where(focused, between(config.focused(name), uniforms[:, i]), values[i])
     return Scenarios(
-        ego_start_distance=between(config.ego_start_distance_m, uniforms[:, 0]),
-        ego_speed=between(config.ego_speed_kmh, uniforms[:, 1]) / 3.6,
-        north_speed=between(config.north_speed_kmh, uniforms[:, 2]) / 3.6,
-        arrival_offset=offset,
+        ego_start_distance=values[0],
+        ego_speed=values[1] / 3.6,
+        north_speed=values[2] / 3.6,
+        arrival_offset=values[3],
     )
 
 
 def farthest_starts(config: ScenarioConfig, speed_limit: float) -> tuple[float, float, float]:
     """How far before the conflict point the distribution can start each car: the ego's
     farthest path distance [m], the north car's [m] and the latest arrival offset it draws [s]
-    (the focused range's too when ``focus_share`` is set). The north car starts farthest out
+    (the focused ranges' too when ``focus_share`` is set). The north car starts farthest out
     at its highest speed, the ego's farthest start and the latest arrival (see
     :meth:`Scenarios.north_start_distance`)."""
-    ego = config.ego_start_distance_m[1]
-    offset = config.arrival_offset_s[1]
-    if config.focus_share > 0:
-        offset = max(offset, config.focus_arrival_offset_s[1])
+
+    def highest(name: str) -> float:
+        high = getattr(config, name)[1]
+        return max(high, config.focused(name)[1]) if config.focus_share > 0 else high
+
+    ego, offset = highest("ego_start_distance_m"), highest("arrival_offset_s")
     farthest = Scenarios(
         ego_start_distance=np.array([ego]),
-        ego_speed=np.array([config.ego_speed_kmh[1] / 3.6]),
-        north_speed=np.array([config.north_speed_kmh[1] / 3.6]),
+        ego_speed=np.array([highest("ego_speed_kmh") / 3.6]),
+        north_speed=np.array([highest("north_speed_kmh") / 3.6]),
         arrival_offset=np.array([offset]),
     )
     return ego, max(float(farthest.north_start_distance(speed_limit)[0]), 0.0), offset

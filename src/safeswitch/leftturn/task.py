@@ -474,6 +474,8 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             )
         if north > north_room:
             speed = scenarios.north_speed_kmh[1]
+            if scenarios.focus_share > 0:
+                speed = max(speed, scenarios.focused("north_speed_kmh")[1])
             ego_arrival = ego / v_lim
             fits_speed = math.floor(north_room / (ego_arrival + offset) * 3.6 * 10) / 10
             fits_offset = math.floor((north_room / (speed / 3.6) - ego_arrival) * 10) / 10
@@ -482,7 +484,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
                 f"after the ego (arrival_offset_s; the ego starting up to {ego:g} m out at the "
                 f"{v_lim * 3.6:g} km/h limit), starts up to {north:.1f} m before the conflict "
                 f"point, but its route starts {north_room:.1f} m before it: lower "
-                f"north_speed_kmh's upper end to at most {fits_speed:g} km/h or "
+                f"(focus_)north_speed_kmh's upper end to at most {fits_speed:g} km/h or "
                 f"arrival_offset_s's to at most {fits_offset:g} s"
             )
 
