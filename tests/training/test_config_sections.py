@@ -176,25 +176,32 @@ def test_the_left_turns_shipped_recipes_use_a_plants_ppo_section_and_its_learned
     assert config.constraints.uncleared == load_config("certified").constraints.uncleared
 
 
-def test_the_shipped_certified_recipe_is_the_noise_recipe_with_its_go_predictor_for_longer():
-    """Since 2026-12-05 the shipped `certified` recipe is the one before it
-    (`certified_ablate_noise`, the `certified` row above) with the learned go predictor in its
-    observation, trained for 4 M steps instead of 3 M: the experiment record whose seeds the
-    docs quote (`certified_go_4m`), its predictor the same file, byte for byte, packaged beside
-    the recipe."""
+def test_the_shipped_certified_recipe_is_the_go_recipe_with_a_wide_predictor_and_wide_episodes():
+    """Since 2026-12-05 (the second recipe shipped that day) the `certified` recipe is the one
+    before it (`certified_go_4m`: `certified_ablate_noise` with the learned go predictor, 4 M
+    steps) with the predictor fitted on the shifts' wider scene and half of the training
+    episodes drawn from it: the experiment record whose seeds the docs quote
+    (`certified_go_wide_mix`), its predictor the same file, byte for byte, packaged beside the
+    recipe. The evaluation's scene is unchanged."""
     config = load_config("certified")
-    record = load_config("experimental/certified_go_4m")
+    record = load_config("experimental/certified_go_wide_mix")
     assert Path(config.env.episode.go_model).parent == Path(config_path("certified")).parent
     assert (
         Path(config.env.episode.go_model).read_bytes()
         == Path(record.env.episode.go_model).read_bytes()
+        == Path(load_config("experimental/certified_go_wide").env.episode.go_model).read_bytes()
     )
     assert config != record and comparable(config) == comparable(record)
-    before = load_config("experimental/certified_ablate_noise")
-    assert before.env.episode.go_model is None and before.timesteps == 3_000_000
+    before = load_config("experimental/certified_go_4m")
+    assert before.timesteps == 4_000_000 and before.train_only is None
     episode = dataclasses.replace(before.env.episode, go_model=config.env.episode.go_model)
     env = dataclasses.replace(before.env, episode=episode)
-    assert dataclasses.replace(before, env=env, timesteps=4_000_000) == config
+    assert dataclasses.replace(before, env=env, train_only=config.train_only) == config
+    wide = config.train_env.scenarios
+    assert wide.focus_share == 0.5 and wide.focus_north_speed_kmh == (6.0, 44.0)
+    assert config.env.scenarios == load_config("experimental/certified_ablate_noise").env.scenarios
+    previous = load_config("experimental/certified_ablate_noise")
+    assert previous.env.episode.go_model is None and previous.timesteps == 3_000_000
 
 
 def test_the_reference_describes_a_key_a_section_inherits():
