@@ -9,7 +9,8 @@ arriving at 28-30 km/h (ego-fast) and starting 22-28 m before the conflict point
 
 Run: ``python benchmarks/shifts.py [--models certified RUN ...] [--at REV ...] [--episodes N]
 [--out results/shifts.json]``; ``--at REV`` adds the `certified` policy shipped at the git
-revision ``REV`` (e.g. ``bae2585``, the last without a go predictor). One torch thread.
+revision ``REV`` (e.g. ``bee852d``, the go predictor fitted on the training scene alone;
+``bae2585``, the last without a go predictor). One torch thread.
 """
 
 from __future__ import annotations
