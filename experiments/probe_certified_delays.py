@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-import time
 
 import numpy as np
+from probe_go_rule import score_rules
 
-from safeswitch.evaluation.evaluate import run_controller, scenario_chunks, summary_against_oracle
+from safeswitch.evaluation.evaluate import scenario_chunks
 from safeswitch.evaluation.planner import FastDrive, Planner, throttle_scene
 from safeswitch.evaluation.traffic_planner import GapPlannerConfig
 from safeswitch.leftturn.make import build_task
@@ -107,17 +107,7 @@ def main() -> None:
     ((_, scenes),) = scenario_chunks(TASK, "random", 1000, 1_000_003)
     rules = [("planner", Planner(TASK)), ("planner + exact go check", Rule([])),
              ("planner + exact go check + coast-then-go checks", Rule(delays))]  # fmt: skip
-    for name, rule in rules:
-        start = time.time()
-        result, plan = run_controller(TASK, rule, scenes, trace=False)
-        s = summary_against_oracle(result, plan, TASK.config.episode.horizon_s)
-        print(
-            f"{name}: collisions {s['collisions']}, safety episodes "
-            f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, efficiency "
-            f"{s['mean_efficiency']:.3f}, comfort exceeded {s['comfort_violation_fraction']:.4%} "
-            f"of ticks ({time.time() - start:.0f} s)",
-            flush=True,
-        )
+    score_rules(TASK, rules, scenes)
 
 
 if __name__ == "__main__":

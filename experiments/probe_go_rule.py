@@ -11,7 +11,9 @@ Run: ``python experiments/probe_go_rule.py [experimental/traffic_certified_go_mo
 """
 
 import sys
+import time
 from dataclasses import replace
+from typing import Any
 
 from go_predictor import PredictedGo
 
@@ -31,13 +33,22 @@ def main() -> None:
     ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
     rules = [("gap planner (its simulated go check)", GapPlanner(task))]
     rules += [(f"learned predictor > {t}", PredictedGo(task, t)) for t in (0.3, 0.5, 0.7)]
-    for name, planner in rules:
-        result, plan = run_controller(task, planner, scenes, trace=False)
+    score_rules(task, rules, scenes)
+
+
+def score_rules(task: Any, rules: list[tuple[str, Any]], scenes: Any) -> None:
+    """Drive each named rule on ``scenes`` of ``task`` and print its summary against the
+    oracle (also ``experiments/probe_certified_delays.py``'s)."""
+    for name, rule in rules:
+        start = time.time()
+        result, plan = run_controller(task, rule, scenes, trace=False)
         s = summary_against_oracle(result, plan, task.config.episode.horizon_s)
         print(
             f"{name}: collisions {s['collisions']}, safety episodes "
-            f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, "
-            f"efficiency {s['mean_efficiency']:.3f}"
+            f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, efficiency "
+            f"{s['mean_efficiency']:.3f}, comfort exceeded {s['comfort_violation_fraction']:.4%} "
+            f"of ticks ({time.time() - start:.0f} s)",
+            flush=True,
         )
 
 
