@@ -20,17 +20,18 @@ import tempfile
 from pathlib import Path
 
 import _common
+from adapt import SHIFTS as ADAPT_SHIFTS
 from safeswitch.app.evaluate import evaluate
 
 ROOT = Path(__file__).resolve().parent.parent
-SHIFTS = {
+SHIFTS = {  # adapt.py's shifts by their settings, and two between them and the training scene
     "trained": [],
-    "north 38-44 km/h (north-fast)": ["env.scenarios.north_speed_kmh=[38, 44]"],
+    "north 38-44 km/h (north-fast)": ADAPT_SHIFTS["north-fast"][1],
     "north 32-38 km/h": ["env.scenarios.north_speed_kmh=[32, 38]"],
     "north 12-20 km/h": ["env.scenarios.north_speed_kmh=[12, 20]"],
-    "north 6-12 km/h (north-slow)": ["env.scenarios.north_speed_kmh=[6, 12]"],
-    "ego 28-30 km/h (ego-fast)": ["env.scenarios.ego_speed_kmh=[28, 30]"],
-    "ego 22-28 m out (ego-close)": ["env.scenarios.ego_start_distance_m=[22, 28]"],
+    "north 6-12 km/h (north-slow)": ADAPT_SHIFTS["north-slow"][1],
+    "ego 28-30 km/h (ego-fast)": ADAPT_SHIFTS["ego-fast"][1],
+    "ego 22-28 m out (ego-close)": ADAPT_SHIFTS["ego-close"][1],
 }
 KEPT = ("episodes", "collisions", "failures", "safety_activation_episodes", "cleared_episodes",
         "mean_efficiency", "speeding_episodes", "comfort_violation_fraction")  # fmt: skip
