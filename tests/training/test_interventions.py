@@ -7,8 +7,10 @@ import pytest
 import torch
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
+from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.core.wrappers import SafeSwitch
 from safeswitch.leftturn.vec_env import LeftTurnVecEnv
+from safeswitch.training.config import EnvTrainConfig, TrainConfig
 from safeswitch.training.interventions import (
     LEFT_TURN_SAFE_ACTION,
     InterventionRecorder,
@@ -16,6 +18,7 @@ from safeswitch.training.interventions import (
     recorder_of,
 )
 from safeswitch.training.ppo import SwitchPPO
+from safeswitch.training.run import build_model
 from tests.core import user_plant
 
 
@@ -137,3 +140,49 @@ def test_an_anchored_actor_stays_near_its_reference_only_where_anchored():
     with pytest.raises(ValueError, match=r"one flag per environment \(4\)"):
         anchored.anchor_to(anchored.policy, np.array([True]))
     assert "_anchor" in anchored._excluded_save_params()
+
+
+def _model_with_bound_loss(weight, bias):
+    """A fresh model on the wall plant (no logic) whose mean starts at ``bias`` everywhere."""
+    model = SwitchPPO("MlpPolicy", wall_env("none", n=4), n_steps=32, batch_size=32, n_epochs=2,
+                      seed=0, device="cpu", action_bound_loss=weight, learning_rate=0.01,
+                      policy_kwargs={"net_arch": [16, 16], "log_std_init": -3.0})  # fmt: skip
+    with torch.no_grad():
+        model.policy.action_net.weight.zero_()
+        model.policy.action_net.bias.fill_(bias)
+    return model
+
+
+def test_the_bound_loss_pulls_a_mean_beyond_the_action_bounds_back_and_leaves_one_within():
+    """``action_bound_loss`` (``policy.action_bound_loss``): a mean far beyond the action bounds
+    (the wall plant's acceleration, up to ``MAX_ACCEL``) makes every sample of a small noise the
+    same clipped action, so PPO's own update cannot move it; the fit after the update pulls it
+    back toward the bound. Within the bounds it changes nothing, to the last bit."""
+    high = float(wall_env("none").action_space.high[0])
+    states = np.random.default_rng(0).normal(size=(64, 2)).astype(np.float32)
+    far = 4.0 * high
+    plain, pulled = _model_with_bound_loss(0.0, far), _model_with_bound_loss(1.0, far)
+    plain.learn(1024)
+    pulled.learn(128)  # one rollout: every state's mean lies beyond the bound
+    assert pulled.logger.name_to_value["train/means_out_of_bounds"] == 1.0
+    pulled.learn(896, reset_num_timesteps=False)
+    assert _mean_action(plain.policy, states).mean() > 3.5 * high  # PPO alone: stuck out there
+    assert _mean_action(pulled.policy, states).max() < 1.1 * high
+    inside = _model_with_bound_loss(1.0, 0.0)
+    inside.learn(256)
+    reference = _model_with_bound_loss(0.0, 0.0)
+    reference.learn(256)
+    assert np.abs(_mean_action(inside.policy, states)).max() < high
+    for a, b in zip(_parameters(inside), _parameters(reference), strict=True):
+        assert torch.equal(a, b)
+
+
+def test_the_bound_loss_is_a_policy_setting_off_by_default_and_reaches_the_model():
+    assert TrainConfig().policy.action_bound_loss == 0.0
+    assert EnvTrainConfig(env_id=user_plant.ENV_ID).policy.action_bound_loss == 0.0
+    config = from_dict(
+        EnvTrainConfig, {"env_id": user_plant.ENV_ID, "policy": {"action_bound_loss": 0.5}}
+    )
+    assert build_model(config, wall_env("none"), None).action_bound_loss == 0.5
+    with pytest.raises(ConfigError, match=r"action_bound_loss.*-1"):
+        from_dict(TrainConfig, {"policy": {"action_bound_loss": -1}})

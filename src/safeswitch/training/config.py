@@ -144,6 +144,12 @@ class PolicyConfig:
             the executed safety action on the rollout's states where it ran, with this weight
             on the squared difference (0: off — PPO and the penalty alone). See
             :mod:`safeswitch.training.interventions`.
+        action_bound_loss: Keeping the actor's mean within the action bounds (ours, the bound
+            loss of rl_games' PPO): after each PPO update the mean is pulled back to the bound
+            on the rollout's states where it lies beyond one, with this weight on the squared
+            excess (0: off). Every action is clipped to its bounds, so a mean far beyond one
+            makes every sample of a small noise the same action and PPO stops learning there;
+            see :meth:`~safeswitch.training.ppo.SwitchPPO.keep_means_in_bounds`.
     """
 
     learning_rate_final: Annotated[float | None, Bounds(0, 1, high_open=True)] = None
@@ -158,6 +164,7 @@ class PolicyConfig:
     use_sde: bool = False
     sde_sample_freq: Annotated[int, Bounds(-1)] = -1
     intervention_imitation: Annotated[float, Bounds(0, 1000)] = 0.0
+    action_bound_loss: Annotated[float, Bounds(0, 1000)] = 0.0
 
     def __post_init__(self) -> None:
         check_bounds(self, "policy")

@@ -17,10 +17,19 @@ rebuild the same parameter groups.
 With ``intervention_imitation`` > 0 the actor also learns from the Safety controller's
 interventions after each update (:mod:`safeswitch.training.interventions`); anchored
 (:meth:`SwitchPPO.anchor_to`), it also stays near a reference policy on chosen environments.
+
+With ``action_bound_loss`` > 0 the Gaussian's mean is pulled back inside the action bounds
+after each update (:meth:`SwitchPPO.keep_means_in_bounds`). The environment clips every action
+to its bounds, so where the mean has drifted far beyond one (PPO's actor asks for 2.7 where
+full throttle is 1) every sample of a small exploration noise is clipped to the same action:
+the advantages there no longer tell the actor anything, and the policy cannot learn to ease
+off. The same remedy as the bound loss of rl_games' PPO (ours: applied as a fit after the
+update, like the interventions' fit, not inside PPO's loss).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -49,6 +58,8 @@ class SwitchPPO(PPO):
             rollout's intervention states after each update (0: none, plain PPO; needs an
             :class:`~safeswitch.training.interventions.InterventionRecorder` around the
             environment).
+        action_bound_loss: Weight of the fit that pulls a mean beyond the action bounds back
+            to them on the rollout's states after each update (0: none, plain PPO).
         *args, **kwargs: Passed to :class:`~stable_baselines3.PPO`.
     """
 
@@ -61,6 +72,7 @@ class SwitchPPO(PPO):
         learn_log_std: bool = True,
         log_std_final: float | None = None,
         intervention_imitation: float = 0.0,
+        action_bound_loss: float = 0.0,
         **kwargs: Any,
     ) -> None:
         self.actor_learning_rate = actor_learning_rate
@@ -69,6 +81,7 @@ class SwitchPPO(PPO):
         self.learn_log_std = learn_log_std
         self.log_std_final = log_std_final
         self.intervention_imitation = intervention_imitation
+        self.action_bound_loss = action_bound_loss
         #: ``(reference policy, environment mask, weight)`` (see :meth:`anchor_to`).
         self._anchor: tuple[Any, np.ndarray, float] | None = None
         #: While true, rollouts are collected but :meth:`train` updates nothing (``safeswitch
@@ -142,6 +155,8 @@ class SwitchPPO(PPO):
         super().train()
         if self.intervention_imitation > 0:
             self.imitate_interventions()
+        if self.action_bound_loss > 0:
+            self.keep_means_in_bounds()
         if self._anchor is not None:
             self.keep_anchor()
 
@@ -162,18 +177,42 @@ class SwitchPPO(PPO):
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_anchor", "learning_paused"]
 
-    def keep_anchor(self) -> None:
-        """The fit of :meth:`anchor_to` on this rollout's anchored states."""
-        assert self._anchor is not None
-        reference, columns, weight = self._anchor
+    def _rollout_states(self, columns: np.ndarray | None = None) -> np.ndarray:
+        """The rollout buffer's observations ``[N, *obs_shape]``, of the environments
+        ``columns`` (a mask; ``None``: all)."""
         buffer = self.rollout_buffer
         observations = buffer.observations
         # SB3 flattens the buffer environment by environment once an update has read it
         if buffer.generator_ready:
             observations = observations.reshape(self.n_envs, -1, *observations.shape[1:])
-            states = observations[columns].reshape(-1, *observations.shape[2:])
+            chosen = observations if columns is None else observations[columns]
         else:
-            states = observations[:, columns].reshape(-1, *observations.shape[2:])
+            chosen = observations if columns is None else observations[:, columns]
+        return np.asarray(chosen).reshape(-1, *observations.shape[2:])
+
+    def keep_means_in_bounds(self) -> None:
+        """The fit of ``action_bound_loss``: on the rollout's states whose mean lies beyond
+        the action bounds, ``n_epochs`` passes in minibatches of ``batch_size`` minimising
+        ``weight · mean ‖μ(s) − clip(μ(s))‖²`` — nothing where every mean is within them. Logs
+        the share of states beyond (``train/means_out_of_bounds``) and the loss."""
+        states = self._rollout_states()
+        with torch.no_grad():
+            mean = self._mean(self.policy, obs_as_tensor(states, self.device))
+            out = (mean != self._clip_to_bounds(mean)).any(dim=-1).numpy()
+        self.logger.record("train/means_out_of_bounds", float(out.mean()) if len(out) else 0.0)
+        if not out.any():
+            return
+        self._fit(states[out], self._bound_loss, self.action_bound_loss, "bound")
+
+    def _bound_loss(self, observation: Any, rows: np.ndarray) -> torch.Tensor:
+        mean = self._mean(self.policy, observation)
+        return (mean - self._clip_to_bounds(mean).detach()).pow(2).sum(dim=-1).mean()
+
+    def keep_anchor(self) -> None:
+        """The fit of :meth:`anchor_to` on this rollout's anchored states."""
+        assert self._anchor is not None
+        reference, columns, weight = self._anchor
+        states = self._rollout_states(columns)
         if not len(states):
             return
         with torch.no_grad():
@@ -193,21 +232,46 @@ class SwitchPPO(PPO):
         target = torch.as_tensor(targets, dtype=torch.float32)
         self._fit_actor(states, target, self.intervention_imitation, "imitation")
 
-    def _executed_mean(self, policy: Any, observation: Any) -> torch.Tensor:
-        """``policy``'s mean action on ``observation``, clipped to the action bounds as the
-        environment clips it."""
+    def _mean(self, policy: Any, observation: Any) -> torch.Tensor:
+        """``policy``'s Gaussian mean on ``observation`` (not clipped)."""
+        normal = policy.get_distribution(observation).distribution
+        assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
+        return normal.mean
+
+    def _clip_to_bounds(self, action: torch.Tensor) -> torch.Tensor:
+        """``action`` clipped to the action space's bounds, as the environment clips it."""
         space = self.action_space
         low = torch.as_tensor(np.asarray(getattr(space, "low", -np.inf)), dtype=torch.float32)
         high = torch.as_tensor(np.asarray(getattr(space, "high", np.inf)), dtype=torch.float32)
-        normal = policy.get_distribution(observation).distribution
-        assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
-        return torch.maximum(torch.minimum(normal.mean, high), low)
+        return torch.maximum(torch.minimum(action, high), low)
+
+    def _executed_mean(self, policy: Any, observation: Any) -> torch.Tensor:
+        """``policy``'s mean action on ``observation``, clipped to the action bounds as the
+        environment clips it."""
+        return self._clip_to_bounds(self._mean(policy, observation))
 
     def _fit_actor(
         self, states: np.ndarray, target: torch.Tensor, weight: float, name: str
     ) -> None:
         """``n_epochs`` passes in minibatches of ``batch_size`` minimising
         ``weight · mean ‖clip(μ(s)) − target‖²`` (logged as ``train/{name}_loss``)."""
+
+        def loss(observation: Any, rows: np.ndarray) -> torch.Tensor:
+            executed = self._executed_mean(self.policy, observation)
+            return (executed - target[rows]).pow(2).sum(dim=-1).mean()
+
+        self._fit(states, loss, weight, name)
+
+    def _fit(
+        self,
+        states: np.ndarray,
+        loss_of: Callable[[Any, np.ndarray], torch.Tensor],
+        weight: float,
+        name: str,
+    ) -> None:
+        """``n_epochs`` passes over ``states`` in minibatches of ``batch_size``, each step
+        minimising ``weight · loss_of(observations, rows)`` (``rows``: the minibatch's indices
+        into ``states``); the mean loss is logged as ``train/{name}_loss``."""
         self.policy.set_training_mode(True)
         losses = []
         count = len(states)
@@ -217,8 +281,7 @@ class SwitchPPO(PPO):
             for start in range(0, count, size):
                 rows = order[start : start + size]
                 observation = obs_as_tensor(states[rows], self.device)
-                executed = self._executed_mean(self.policy, observation)
-                loss = weight * (executed - target[rows]).pow(2).sum(dim=-1).mean()
+                loss = weight * loss_of(observation, rows)
                 self.policy.optimizer.zero_grad()
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)

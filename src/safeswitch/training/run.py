@@ -203,6 +203,7 @@ def build_model(
         learn_log_std=policy.learn_log_std,
         log_std_final=policy.log_std_final,
         intervention_imitation=policy.intervention_imitation,
+        action_bound_loss=policy.action_bound_loss,
     )
     if policy.initial_action is not None:
         with torch.no_grad():
