@@ -107,6 +107,40 @@ def test_the_learned_speed_limiter_keeps_the_action_checks():
     assert task.reasons[record.reason[1]] == "invalid_learned_action"
 
 
+def test_the_curve_limiter_lets_full_throttle_corner_within_the_comfort_limit():
+    """``controllers.learned_curve_accel``: the speed limiter's cap falls ahead of the turn to
+    the speed that corners at that acceleration, reached by closing the throttle; full throttle
+    then takes the 11.75 m turn within the 3 m/s² comfort limit (without it, at 6 m/s²), and
+    the straights at the limiter's speed."""
+    lateral = LeftTurnConfig().rewards.comfort_accel_lat
+    free = _drive(_limited_task(29.9), 1.0, 600)
+    curved = _drive(_task_with(learned_speed_limiter_kmh=29.9, learned_curve_accel=2.8), 1.0, 600)
+    assert max(np.abs(r.accel_lat).max() for r in free) > 2 * lateral
+    assert max(np.abs(r.accel_lat).max() for r in curved) <= lateral
+    # on the straight before the turn it still reaches the limiter's speed
+    assert max(r.ego_speed.max() for r in curved[:250]) >= 29.5 / 3.6
+    # the cap: the limiter's speed far from the turn, √(a/|κ|) in it, and a coast between
+    task = _task_with(learned_speed_limiter_kmh=29.9, learned_curve_accel=2.8)
+    spacing, kappa = task.ego_curvature()
+    _, caps = task.curve_speed_caps(2.8, 1.0, 29.9 / 3.6)
+    assert caps[0] == pytest.approx(29.9 / 3.6)
+    assert np.all(caps**2 * kappa <= 2.8 + 1e-9)
+    assert np.all(np.diff(caps**2) >= -2.0 * 1.0 * spacing - 1e-9)  # never more than a coast
+    # the learned action may still ask for less: a slower driver is left alone
+    slow = 0.3 * 2 - 1
+    for a, b in zip(_drive(_limited_task(29.9), slow, 600),
+                    _drive(task, slow, 600), strict=True):  # fmt: skip
+        np.testing.assert_array_equal(a.throttle, b.throttle)
+
+
+def test_the_curve_limiter_needs_the_speed_limiter():
+    needs = r"controllers\.learned_curve_accel.*limiter_kmh, got 2\.8"
+    with pytest.raises(ConfigError, match=needs):
+        ControllerConfig(learned_curve_accel=2.8)
+    with pytest.raises(ConfigError, match=r"controllers\.learned_curve_decel"):
+        ControllerConfig(learned_speed_limiter_kmh=29.9, learned_curve_decel=0.0)
+
+
 @pytest.mark.parametrize("kind", ["limiter", "command"])
 @pytest.mark.parametrize("bad", [float("nan"), 2.0, 500.0])
 def test_a_bad_speed_limiter_or_command_is_named(kind, bad):

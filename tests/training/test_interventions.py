@@ -142,11 +142,12 @@ def test_an_anchored_actor_stays_near_its_reference_only_where_anchored():
     assert "_anchor" in anchored._excluded_save_params()
 
 
-def _model_with_bound_loss(weight, bias):
+def _model_with_bound_loss(weight, bias, margin=0.0, log_std=-3.0):
     """A fresh model on the wall plant (no logic) whose mean starts at ``bias`` everywhere."""
     model = SwitchPPO("MlpPolicy", wall_env("none", n=4), n_steps=32, batch_size=32, n_epochs=2,
-                      seed=0, device="cpu", action_bound_loss=weight, learning_rate=0.01,
-                      policy_kwargs={"net_arch": [16, 16], "log_std_init": -3.0})  # fmt: skip
+                      seed=0, device="cpu", action_bound_loss=weight, action_bound_margin=margin,
+                      learning_rate=0.01, learn_log_std=False,
+                      policy_kwargs={"net_arch": [16, 16], "log_std_init": log_std})  # fmt: skip
     with torch.no_grad():
         model.policy.action_net.weight.zero_()
         model.policy.action_net.bias.fill_(bias)
@@ -175,6 +176,26 @@ def test_the_bound_loss_pulls_a_mean_beyond_the_action_bounds_back_and_leaves_on
     assert np.abs(_mean_action(inside.policy, states)).max() < high
     for a, b in zip(_parameters(inside), _parameters(reference), strict=True):
         assert torch.equal(a, b)
+
+
+def test_the_bound_loss_leaves_a_mean_within_its_margin_and_pulls_one_beyond_it():
+    """``action_bound_margin``: a mean may lie that many noise standard deviations beyond a
+    bound, so that some samples still fall within; only beyond that is it pulled."""
+    high = float(wall_env("none").action_space.high[0])
+    sigma = 1.0  # log_std 0
+    states = np.random.default_rng(0).normal(size=(64, 2)).astype(np.float32)
+    runs = {}
+    for weight, margin in [(0.0, 0.0), (1.0, 1.0), (1.0, 0.25)]:
+        model = _model_with_bound_loss(weight, high + 0.5 * sigma, margin, log_std=0.0)
+        model.learn(128)  # one rollout, one update: where the fit does or does not act
+        runs[weight, margin] = model
+    within, beyond = runs[1.0, 1.0], runs[1.0, 0.25]
+    assert within.logger.name_to_value["train/means_out_of_bounds"] == 0.0
+    assert beyond.logger.name_to_value["train/means_out_of_bounds"] == 1.0
+    for a, b in zip(_parameters(within), _parameters(runs[0.0, 0.0]), strict=True):
+        assert torch.equal(a, b)
+    moved = _mean_action(beyond.policy, states).mean()
+    assert moved < _mean_action(within.policy, states).mean() - 0.05
 
 
 def test_the_bound_loss_is_a_policy_setting_off_by_default_and_reaches_the_model():

@@ -375,6 +375,14 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             v_cap = ctrl.learned_speed_limiter_kmh / 3.6
             hold = float(steady_state_throttle(config.vehicle, np.asarray(v_cap)))
             self._limiter = (v_cap, hold, ctrl.learned_speed_limiter_gain)
+        #: The curve limiter's cap along the ego's route (``None`` if off): the waypoint
+        #: spacing [m], the cap at each waypoint [m/s] and the throttle that holds it.
+        self._curve_caps: tuple[float, FloatArray, FloatArray] | None = None
+        if ctrl.learned_curve_accel is not None and self._limiter is not None:
+            spacing, caps = self.curve_speed_caps(
+                ctrl.learned_curve_accel, ctrl.learned_curve_decel, self._limiter[0]
+            )
+            self._curve_caps = (spacing, caps, steady_state_throttle(config.vehicle, caps))
         #: The learned action's speed command (``None``: the action is the throttle): the
         #: speed of ``a = 1`` [m/s] and the tracking gain (see ControllerConfig).
         self._command: tuple[float, float] | None = None
@@ -563,13 +571,31 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         ki = c.controllers.brake_pid.ki
         return min(brake, 1.0) / ki if ki > 0 else 0.0
 
-    def limit_speed(self, throttle: FloatArray, speed: FloatArray) -> FloatArray:
+    def curve_speed_caps(self, accel: float, decel: float, top: float) -> tuple[float, FloatArray]:
+        """The curve limiter's cap along the ego's route: at each waypoint the highest speed
+        [m/s] from which slowing at ``decel`` [m/s²] keeps ``v² |κ| <= accel`` at every
+        waypoint ahead, and no more than ``top``; with the waypoint spacing [m]."""
+        spacing, kappa = self.ego_curvature()
+        at_curve = np.sqrt(accel / np.maximum(kappa, 1e-9))
+        caps = np.minimum(at_curve, top)
+        for i in range(len(caps) - 2, -1, -1):  # backward: the cap a coast still meets
+            caps[i] = min(caps[i], float(np.sqrt(caps[i + 1] ** 2 + 2.0 * decel * spacing)))
+        return spacing, caps
+
+    def limit_speed(
+        self, throttle: FloatArray, speed: FloatArray, progress: FloatArray | None = None
+    ) -> FloatArray:
         """The learned controller's speed limiter (``controllers.learned_speed_limiter_kmh``):
-        ``throttle`` no higher than the limiter's cap at ``speed`` (NaN stays NaN); without a
-        limiter, ``throttle`` unchanged."""
+        ``throttle`` no higher than the limiter's cap at ``speed`` (NaN stays NaN); with the
+        curve limiter (``controllers.learned_curve_accel``), the cap at the ego's route
+        ``progress`` [m]; without a limiter, ``throttle`` unchanged."""
         if self._limiter is None:
             return throttle
         v_cap, hold, gain = self._limiter
+        if self._curve_caps is not None and progress is not None:
+            spacing, caps, holds = self._curve_caps
+            index = np.clip(np.rint(progress / spacing).astype(np.int64), 0, len(caps) - 1)
+            v_cap, hold = caps[index], holds[index]
         return np.minimum(throttle, np.clip(hold + gain * (v_cap - speed), 0.0, 1.0))
 
     def learned_pedals(self, action: FloatArray, speed: FloatArray) -> LearnedPedals:
@@ -913,7 +939,7 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
             # The learned controller's speed limiter cuts its finite throttle (NaN/inf is left
             # for the logic to refuse); one above 1 that it cut still counts as clipped.
             raw = proposed[:, 0]  # a view: the cut is written into the proposal in place
-            cut = self.limit_speed(raw, v.speed[:, 0])
+            cut = self.limit_speed(raw, v.speed[:, 0], world.progress[:, 0])
             limited = out.in_charge & np.isfinite(raw) & (cut < raw)
             cut_over_range = limited & (raw > 1.0)
             raw[limited] = cut[limited]

@@ -150,6 +150,9 @@ class PolicyConfig:
             excess (0: off). Every action is clipped to its bounds, so a mean far beyond one
             makes every sample of a small noise the same action and PPO stops learning there;
             see :meth:`~safeswitch.training.ppo.SwitchPPO.keep_means_in_bounds`.
+        action_bound_margin: With ``action_bound_loss``, how far beyond a bound the mean may
+            lie before it is pulled, in standard deviations of the exploration noise at the
+            state (0: the bound itself; 1: about one sample in six still falls within).
     """
 
     learning_rate_final: Annotated[float | None, Bounds(0, 1, high_open=True)] = None
@@ -165,6 +168,7 @@ class PolicyConfig:
     sde_sample_freq: Annotated[int, Bounds(-1)] = -1
     intervention_imitation: Annotated[float, Bounds(0, 1000)] = 0.0
     action_bound_loss: Annotated[float, Bounds(0, 1000)] = 0.0
+    action_bound_margin: Annotated[float, Bounds(0, 10)] = 0.0
 
     def __post_init__(self) -> None:
         check_bounds(self, "policy")

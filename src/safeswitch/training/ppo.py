@@ -60,6 +60,8 @@ class SwitchPPO(PPO):
             environment).
         action_bound_loss: Weight of the fit that pulls a mean beyond the action bounds back
             to them on the rollout's states after each update (0: none, plain PPO).
+        action_bound_margin: How far beyond a bound the mean may lie before that fit pulls
+            it, in standard deviations of the exploration noise at the state (0: the bound).
         *args, **kwargs: Passed to :class:`~stable_baselines3.PPO`.
     """
 
@@ -73,6 +75,7 @@ class SwitchPPO(PPO):
         log_std_final: float | None = None,
         intervention_imitation: float = 0.0,
         action_bound_loss: float = 0.0,
+        action_bound_margin: float = 0.0,
         **kwargs: Any,
     ) -> None:
         self.actor_learning_rate = actor_learning_rate
@@ -82,6 +85,7 @@ class SwitchPPO(PPO):
         self.log_std_final = log_std_final
         self.intervention_imitation = intervention_imitation
         self.action_bound_loss = action_bound_loss
+        self.action_bound_margin = action_bound_margin
         #: ``(reference policy, environment mask, weight)`` (see :meth:`anchor_to`).
         self._anchor: tuple[Any, np.ndarray, float] | None = None
         #: While true, rollouts are collected but :meth:`train` updates nothing (``safeswitch
@@ -191,22 +195,33 @@ class SwitchPPO(PPO):
         return np.asarray(chosen).reshape(-1, *observations.shape[2:])
 
     def keep_means_in_bounds(self) -> None:
-        """The fit of ``action_bound_loss``: on the rollout's states whose mean lies beyond
-        the action bounds, ``n_epochs`` passes in minibatches of ``batch_size`` minimising
-        ``weight · mean ‖μ(s) − clip(μ(s))‖²`` — nothing where every mean is within them. Logs
-        the share of states beyond (``train/means_out_of_bounds``) and the loss."""
+        """The fit of ``action_bound_loss``: on the rollout's states whose mean lies more than
+        ``action_bound_margin`` noise standard deviations beyond an action bound, ``n_epochs``
+        passes in minibatches of ``batch_size`` minimising ``weight · mean ‖μ(s) − m(s)‖²``,
+        ``m(s)`` the nearest mean allowed — nothing where every mean is allowed. Logs the
+        share of states beyond (``train/means_out_of_bounds``) and the loss."""
         states = self._rollout_states()
         with torch.no_grad():
-            mean = self._mean(self.policy, obs_as_tensor(states, self.device))
-            out = (mean != self._clip_to_bounds(mean)).any(dim=-1).numpy()
+            mean, allowed = self._mean_and_allowed(obs_as_tensor(states, self.device))
+            out = (mean != allowed).any(dim=-1).numpy()
         self.logger.record("train/means_out_of_bounds", float(out.mean()) if len(out) else 0.0)
         if not out.any():
             return
         self._fit(states[out], self._bound_loss, self.action_bound_loss, "bound")
 
+    def _mean_and_allowed(self, observation: Any) -> tuple[torch.Tensor, torch.Tensor]:
+        """The policy's Gaussian mean on ``observation`` and the nearest mean within
+        ``action_bound_margin`` standard deviations of the bounds (not differentiated)."""
+        normal = self.policy.get_distribution(observation).distribution
+        assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
+        margin = self.action_bound_margin * normal.stddev.detach()
+        low, high = self._bounds()
+        allowed = torch.maximum(torch.minimum(normal.mean, high + margin), low - margin)
+        return normal.mean, allowed.detach()
+
     def _bound_loss(self, observation: Any, rows: np.ndarray) -> torch.Tensor:
-        mean = self._mean(self.policy, observation)
-        return (mean - self._clip_to_bounds(mean).detach()).pow(2).sum(dim=-1).mean()
+        mean, allowed = self._mean_and_allowed(observation)
+        return (mean - allowed).pow(2).sum(dim=-1).mean()
 
     def keep_anchor(self) -> None:
         """The fit of :meth:`anchor_to` on this rollout's anchored states."""
@@ -238,11 +253,16 @@ class SwitchPPO(PPO):
         assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
         return normal.mean
 
-    def _clip_to_bounds(self, action: torch.Tensor) -> torch.Tensor:
-        """``action`` clipped to the action space's bounds, as the environment clips it."""
+    def _bounds(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The action space's lower and upper bounds (±inf where it has none)."""
         space = self.action_space
         low = torch.as_tensor(np.asarray(getattr(space, "low", -np.inf)), dtype=torch.float32)
         high = torch.as_tensor(np.asarray(getattr(space, "high", np.inf)), dtype=torch.float32)
+        return low, high
+
+    def _clip_to_bounds(self, action: torch.Tensor) -> torch.Tensor:
+        """``action`` clipped to the action space's bounds, as the environment clips it."""
+        low, high = self._bounds()
         return torch.maximum(torch.minimum(action, high), low)
 
     def _executed_mean(self, policy: Any, observation: Any) -> torch.Tensor:

@@ -204,6 +204,7 @@ def build_model(
         log_std_final=policy.log_std_final,
         intervention_imitation=policy.intervention_imitation,
         action_bound_loss=policy.action_bound_loss,
+        action_bound_margin=policy.action_bound_margin,
     )
     if policy.initial_action is not None:
         with torch.no_grad():
