@@ -166,9 +166,10 @@ LEFT_TURN_VARIANTS = (
 TRAFFIC_FAMILIES = ("test", "light", "medium", "heavy")
 
 
-def traffic(config: str = "traffic_certified") -> Row | None:
+def traffic(config: str = "traffic_certified", shipped: bool = True) -> Row | None:
     """Traffic from every leg under ``certified`` (``train_seeds.py --traffic-eval``), against
-    the gap planner under the same filter (``traffic_certified.py``)."""
+    the gap planner under the same filter (``traffic_certified.py``); ``shipped``: the recipe
+    of the shipped ``traffic-certified`` policy (else a recipe shipped beside it)."""
     data, planners = _load(f"train_seeds_{config}.json"), _load("traffic_certified.json")
     if data is None or planners is None:
         return None
@@ -232,7 +233,7 @@ def traffic(config: str = "traffic_certified") -> Row | None:
         "seeds": [r["seed"] for r in runs],
         "measured": measured,
         "checks": checks,
-        "shipped": True,
+        "shipped": shipped,
         "source": f"python benchmarks/train_seeds.py --config {config} --parallel 2 "
         f"--traffic-eval {' '.join(TRAFFIC_FAMILIES)}; python benchmarks/traffic_certified.py",
     }
@@ -429,7 +430,8 @@ def variants() -> list[Row]:
 
 def rows() -> list[Row]:
     sources: list[Callable[[], list[Row]]] = [
-        lambda: [r for r in (left_turn("paper"), left_turn("certified"), traffic()) if r],
+        lambda: [r for r in (left_turn("paper"), left_turn("certified"), traffic(),
+                             traffic("traffic_certified_clone", shipped=False)) if r],  # fmt: skip
         variants,
         highway,
         lambda: own_plant(

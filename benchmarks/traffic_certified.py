@@ -5,8 +5,9 @@ On the same random scenes (seed 1000003, the README's) of the ``train`` and ``te
 families: the gap planner (``--controller gap_planner``, under ``certified``, with the filter's
 default zones and with the zones of the shipped ``traffic-certified`` policy's recipe), the
 rule-based system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the
-shipped ``traffic-certified`` and ``traffic-paper`` policies (each under the logic it was
-trained with) and any trained runs given with ``--model``; and the shipped
+shipped ``traffic-certified`` (PPO from a random start), ``traffic-certified-clone`` (the clone
+of the gap planner shipped before it) and ``traffic-paper`` policies (each under the logic it
+was trained with) and any trained runs given with ``--model``; and the shipped
 ``traffic-certified`` policy in ``light``, ``medium`` and ``heavy`` traffic too. Every row is
 ``safeswitch evaluate``'s summary, cut to the fields the README quotes.
 
@@ -63,6 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         ("rule", "rule", None, "certified", ()),
         ("rule", "rule", None, "paper", ()),
         shipped,
+        ("learned:traffic-certified-clone", "learned", "traffic-certified-clone", None, ()),
         ("learned:traffic-paper", "learned", "traffic-paper", None, ()),
         *((f"learned:{Path(m).name}", "learned", m, None, ()) for m in args.model),
     ]

@@ -1,7 +1,7 @@
 """Reproduce the shipped policies: train each from its configuration and copy the run's
 artefacts into ``src/safeswitch/policies/<name>/`` with a README of how it was made.
 
-Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all eight).
+Usage: ``python benchmarks/train_shipped.py [--from-runs] [name ...]`` (default: all nine).
 Training is the same as ``safeswitch train --config <name> --out runs/<name>``;
 ``--from-runs`` only copies already finished runs from ``runs/``.
 """
@@ -21,7 +21,7 @@ from safeswitch.training.config import load_config, named_files
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = (
     "paper", "paper_warm", "paper_scratch", "no_adas", "certified", "none", "traffic_paper",
-    "traffic_certified",
+    "traffic_certified", "traffic_certified_clone",
 )  # fmt: skip
 ARTEFACTS = ("model.zip", "vecnormalize.pkl", "config.yaml", "metrics.json", "training_curves.png")
 #: Shipped too when the run wrote them: the training log (the report's Fig. 5) and the
@@ -35,6 +35,7 @@ def policy_readme(
     traffic: str | None = None,
     teacher: str = "planner",
     logs: tuple[str, ...] = (),
+    named: tuple[str, ...] = (),
 ) -> str:
     t, e, warm = metrics["training"], metrics["evaluation"], metrics.get("warm_start")
     warm_note = ""
@@ -56,6 +57,7 @@ def policy_readme(
             f"{selected['validation_seed']}), at {selected['best_timesteps']:,} steps."
         )
     logs_text = "".join(f", `{name}`" for name in logs)
+    logs_text += "".join(f", `{name}` (the go predictor its observation reads)" for name in named)
     scene, horizon = "random scenarios", "12 s"
     if traffic:
         scene, horizon = f"random scenes of the `{traffic}` traffic family", "30 s"
@@ -100,14 +102,15 @@ def ship(name: str) -> None:
     for artefact in OPTIONAL_ARTEFACTS:
         if (run / artefact).is_file():
             shutil.copy2(run / artefact, target / artefact)
-    for _, _, named in named_files(yaml.safe_load((run / "config.yaml").read_text())):
+    files = tuple(n for _, _, n in named_files(yaml.safe_load((run / "config.yaml").read_text())))
+    for named in files:
         shutil.copy2(run / named, target / named)  # the run's copy (a go predictor)
     metrics = json.loads((run / "metrics.json").read_text())
     config = load_config(run / "config.yaml")
     traffic = config.traffic
     preset = traffic.get("preset", "custom") if isinstance(traffic, dict) else traffic
     logs = tuple(a for a in OPTIONAL_ARTEFACTS if (run / a).is_file())
-    readme = policy_readme(name, metrics, preset, config.warm_start.teacher, logs)
+    readme = policy_readme(name, metrics, preset, config.warm_start.teacher, logs, files)
     (target / "README.md").write_text(readme)
 
 

@@ -24,8 +24,8 @@ def family(safety, efficiency=0.40, failures=0):
     }
 
 
-def write(tmp_path, runs, planners):
-    (tmp_path / "train_seeds_traffic_certified.json").write_text(json.dumps({"runs": runs}))
+def write(tmp_path, runs, planners, config="traffic_certified"):
+    (tmp_path / f"train_seeds_{config}.json").write_text(json.dumps({"runs": runs}))
     (tmp_path / "traffic_certified.json").write_text(json.dumps({"rows": planners}))
 
 
@@ -37,7 +37,7 @@ PLANNERS = [
 ]  # fmt: skip
 
 
-def run(seed, warm=0, **families):
+def run(seed, warm=None, **families):
     densities = {f: family(20) for f in ("test", "light", "medium", "heavy")}
     densities.update(families)
     return {"seed": seed, "warm_start_collisions": warm, "training_collision_episodes": 0,
@@ -50,9 +50,13 @@ def test_the_traffic_row_checks_every_density_and_the_planner_under_the_same_fil
     write(tmp_path, [run(1), run(2), run(3)], PLANNERS)
     row = plants.traffic()
     checks = row["checks"]
-    # the shipped recipe is a clone: a run with a warm start is not "from a random start"
-    assert checks["from a random start (no demonstrations)"] is False
-    assert "clone of the gap planner" in row["method"] and row["seeds"] == [1, 2, 3]
+    # the shipped recipe is PPO from a random start; the clone shipped beside it is not
+    assert checks["from a random start (no demonstrations)"] is True and row["shipped"]
+    assert "PPO with R_ADAS from a random start" in row["method"] and row["seeds"] == [1, 2, 3]
+    write(tmp_path, [run(1, warm=0), run(2, warm=0)], PLANNERS, "traffic_certified_clone")
+    clone = plants.traffic("traffic_certified_clone", shipped=False)
+    assert clone["checks"]["from a random start (no demonstrations)"] is False
+    assert "clone of the gap planner" in clone["method"] and not clone["shipped"]
     assert checks["0 collisions in training and on 1,000 `test` scenes"] is True
     assert checks["safety action ≤ 5 % of episodes at every density"] is True
     # the recipe's narrower zones: compared with the planner under them (0.38), not 0.30

@@ -7,6 +7,7 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 import pytest
+import yaml
 
 from safeswitch.cli import main
 from safeswitch.deploy import export as export_module
@@ -123,8 +124,14 @@ def test_cli_exports_and_reports_parity(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_a_traffic_policy_exports_the_policy_and_says_the_runtime_does_not_run_it(exported):
-    manifest = json.loads((exported("traffic-certified") / "manifest.json").read_text())
+    """`traffic-certified` reads a learned go predictor (``traffic.go_model``): the export folds
+    it into the graph, as for the left turn's, and the scene it writes leaves it to the graph."""
+    folder = exported("traffic-certified")
+    manifest = json.loads((folder / "manifest.json").read_text())
     assert manifest["parity"]["max_abs_diff"] <= 1e-5
+    assert manifest["parity"]["go_probability_max_abs_diff"] <= 1e-5
+    assert "traffic.go_model" in manifest["policy"]["go_predictor"]
+    assert yaml.safe_load((folder / "scene.yaml").read_text())["traffic"]["go_model"] is None
     assert manifest["runtime"]["supported"] is False
     assert "traffic" in manifest["runtime"]["scope"]
 

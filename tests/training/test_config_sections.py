@@ -204,6 +204,28 @@ def test_the_shipped_certified_recipe_is_the_go_recipe_with_a_wide_predictor_and
     assert previous.env.episode.go_model is None and previous.timesteps == 3_000_000
 
 
+def test_the_shipped_traffic_recipe_is_ppo_from_a_random_start_with_the_curve_limiter():
+    """Since 2026-12-05 `traffic_certified` is PPO from a random start: the experiment record
+    whose seeds the docs quote (`traffic_certified_go_model_curve_select`: the go-predictor
+    recipe with the curve speed limiter, chosen on 1,000 validation scenes), its predictor the
+    same file, byte for byte, packaged beside the recipe; the clone it replaced is
+    `traffic_certified_clone`, unchanged."""
+    config = load_config("traffic_certified")
+    record = load_config("experimental/traffic_certified_go_model_curve_select")
+    assert config != record and comparable(config) == comparable(record)
+    assert config.traffic_settings is not None
+    go_model = Path(config.traffic_settings.go_model)
+    assert go_model.parent == Path(config_path("traffic_certified")).parent
+    assert go_model.read_bytes() == (
+        Path(config_path("experimental/traffic_certified_go_model_dagger_wide")).parent
+        / "go_model_dagger_wide.npz"
+    ).read_bytes()
+    assert config.warm_start.episodes == 0 and config.env.controllers.learned_curve_accel == 2.8
+    clone = load_config("traffic_certified_clone")
+    assert clone.warm_start.teacher == "gap_planner" and clone.warm_start.episodes > 0
+    assert comparable(clone) == comparable(load_config("experimental/traffic_certified_comfort"))
+
+
 def test_the_reference_describes_a_key_a_section_inherits():
     fields = {f.name: f for f in fields_of(EnvPolicyConfig)}
     assert fields["intervention_imitation"].default == "1.0"

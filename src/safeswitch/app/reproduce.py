@@ -274,12 +274,14 @@ def _reckless(episodes: int) -> list[dict[str, Any]]:
 TRAFFIC_PRESETS = ("light", "medium", "heavy", "test")
 TRAFFIC_CONTROLLERS = (
     ("ppo-paper", "paper"), ("ppo-paper", "certified"), ("ppo-traffic-paper", "paper"),
-    ("ppo-traffic-certified", "certified"), ("oracle", None),
+    ("ppo-traffic-certified", "certified"), ("clone-traffic-certified", "certified"),
+    ("oracle", None),
 )  # fmt: skip
 #: The shipped policy behind each trained controller of the traffic study (the paper policy:
 #: the one this report evaluates, trained or shipped).
 TRAFFIC_POLICIES = {"ppo-traffic-paper": "traffic_paper",
-                    "ppo-traffic-certified": "traffic_certified"}  # fmt: skip
+                    "ppo-traffic-certified": "traffic_certified",
+                    "clone-traffic-certified": "traffic_certified_clone"}  # fmt: skip
 #: The controller the traffic animation shows (in medium traffic).
 TRAFFIC_ANIMATED = ("ppo-traffic-certified", "certified")
 

@@ -256,15 +256,22 @@ def parity(
 
 
 def go_predictor(policy: Any) -> GoModel | None:
-    """The left-turn policy's go predictor (``episode.go_model``), which its export folds into
-    the graph; ``None`` for a policy without one or of another plant."""
+    """The left-turn policy's go predictor (``episode.go_model``, or in traffic
+    ``traffic.go_model``), which its export folds into the graph; ``None`` for a policy
+    without one or of another plant."""
     from safeswitch.training.config import TrainConfig
 
     config = policy.config
-    if not isinstance(config, TrainConfig) or config.env.episode.go_model is None:
+    if not isinstance(config, TrainConfig):
+        return None
+    setting, path = "episode.go_model", config.env.episode.go_model
+    traffic = config.traffic_settings
+    if traffic is not None and traffic.go_model is not None:
+        setting, path = "traffic.go_model", traffic.go_model
+    if path is None:
         return None
     space = policy.model.observation_space
-    return GoModel(config.env.episode.go_model, int(space.shape[0]) - 1, "episode.go_model")
+    return GoModel(path, int(space.shape[0]) - 1, setting)
 
 
 def runtime_support(policy: Any) -> tuple[bool, str]:
@@ -335,7 +342,10 @@ def export(
         scene = replace(scene, episode=replace(scene.episode, go_model=None))
         scene_dict: dict[str, Any] = to_dict(scene)
         if config.traffic is not None:
-            scene_dict = {"env": scene_dict, "traffic": to_dict(config.traffic_settings)}
+            traffic = config.traffic_settings
+            assert traffic is not None
+            # the graph computes the predictor's value here too
+            scene_dict = {"env": scene_dict, "traffic": to_dict(replace(traffic, go_model=None))}
         observation_layout = (
             left_turn_observation(scene.episode) if config.traffic is None else None
         )
@@ -389,7 +399,7 @@ def export(
             },
             "normalisation": "folded in" if policy.normalizer is not None else "none",
             "go_predictor": "folded in: the graph computes the policy's last observed value "
-            "(episode.go_model) from its input"
+            f"({go.setting}) from its input"
             if go is not None
             else "none",
             "deterministic": "the Gaussian's mean, clipped to the action bounds",

@@ -59,6 +59,7 @@ class GoModel:
                 f"other observation settings: traffic.observe / observed, "
                 f"episode.observe_time_left)"
             )
+        self.setting = setting
         self.mean, self.scale = arrays["mean"], 1.0 / arrays["std"]
         self.layers = [(arrays[f"w{i}"], arrays[f"b{i}"]) for i in range(layers)]
 
