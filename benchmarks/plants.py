@@ -430,8 +430,16 @@ def variants() -> list[Row]:
 
 def rows() -> list[Row]:
     sources: list[Callable[[], list[Row]]] = [
-        lambda: [r for r in (left_turn("paper"), left_turn("certified"), traffic(),
-                             traffic("traffic_certified_clone", shipped=False)) if r],  # fmt: skip
+        lambda: [
+            r
+            for r in (
+                left_turn("paper"),
+                left_turn("certified"),
+                traffic(),
+                traffic("traffic_certified_clone", shipped=False),
+            )
+            if r
+        ],
         variants,
         highway,
         lambda: own_plant(

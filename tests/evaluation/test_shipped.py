@@ -285,9 +285,11 @@ def test_the_certified_traffic_policy_never_collides_and_rarely_needs_the_filter
 def test_the_certified_traffic_policy_clears_more_scenes_than_the_rule_and_the_clone(traffic_runs):
     """PPO from a random start clears more of the `test` scenes than the rule under the same
     filter and than the clone of the gap planner it replaced, as efficiently at least."""
-    ours, rule, clone = traffic_runs["certified"], traffic_runs["rule_certified"], traffic_runs[
-        "clone"
-    ]
+    ours, rule, clone = (
+        traffic_runs["certified"],
+        traffic_runs["rule_certified"],
+        traffic_runs["clone"],
+    )
     assert ours["cleared_episodes"] > rule["cleared_episodes"]
     assert ours["cleared_episodes"] > clone["cleared_episodes"]
     assert ours["mean_efficiency"] >= clone["mean_efficiency"]

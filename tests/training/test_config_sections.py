@@ -216,10 +216,13 @@ def test_the_shipped_traffic_recipe_is_ppo_from_a_random_start_with_the_curve_li
     assert config.traffic_settings is not None
     go_model = Path(config.traffic_settings.go_model)
     assert go_model.parent == Path(config_path("traffic_certified")).parent
-    assert go_model.read_bytes() == (
-        Path(config_path("experimental/traffic_certified_go_model_dagger_wide")).parent
-        / "go_model_dagger_wide.npz"
-    ).read_bytes()
+    assert (
+        go_model.read_bytes()
+        == (
+            Path(config_path("experimental/traffic_certified_go_model_dagger_wide")).parent
+            / "go_model_dagger_wide.npz"
+        ).read_bytes()
+    )
     assert config.warm_start.episodes == 0 and config.env.controllers.learned_curve_accel == 2.8
     clone = load_config("traffic_certified_clone")
     assert clone.warm_start.teacher == "gap_planner" and clone.warm_start.episodes > 0

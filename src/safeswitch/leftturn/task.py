@@ -591,7 +591,9 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         ``progress`` [m]; without a limiter, ``throttle`` unchanged."""
         if self._limiter is None:
             return throttle
-        v_cap, hold, gain = self._limiter
+        top, held, gain = self._limiter
+        v_cap: FloatArray | float = top
+        hold: FloatArray | float = held
         if self._curve_caps is not None and progress is not None:
             spacing, caps, holds = self._curve_caps
             index = np.clip(np.rint(progress / spacing).astype(np.int64), 0, len(caps) - 1)
