@@ -212,8 +212,7 @@ class SwitchPPO(PPO):
     def _mean_and_allowed(self, observation: Any) -> tuple[torch.Tensor, torch.Tensor]:
         """The policy's Gaussian mean on ``observation`` and the nearest mean within
         ``action_bound_margin`` standard deviations of the bounds (not differentiated)."""
-        normal = self.policy.get_distribution(observation).distribution
-        assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
+        normal = self._normal(self.policy, observation)
         margin = self.action_bound_margin * normal.stddev.detach()
         low, high = self._bounds()
         allowed = torch.maximum(torch.minimum(normal.mean, high + margin), low - margin)
@@ -247,11 +246,16 @@ class SwitchPPO(PPO):
         target = torch.as_tensor(targets, dtype=torch.float32)
         self._fit_actor(states, target, self.intervention_imitation, "imitation")
 
+    @staticmethod
+    def _normal(policy: Any, observation: Any) -> torch.distributions.Normal:
+        """``policy``'s action distribution on ``observation`` (a Box action: a Gaussian)."""
+        normal = policy.get_distribution(observation).distribution
+        assert isinstance(normal, torch.distributions.Normal)
+        return normal
+
     def _mean(self, policy: Any, observation: Any) -> torch.Tensor:
         """``policy``'s Gaussian mean on ``observation`` (not clipped)."""
-        normal = policy.get_distribution(observation).distribution
-        assert isinstance(normal, torch.distributions.Normal)  # a Box action: Gaussian
-        return normal.mean
+        return self._normal(policy, observation).mean
 
     def _bounds(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The action space's lower and upper bounds (±inf where it has none)."""
