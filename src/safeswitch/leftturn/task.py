@@ -575,6 +575,11 @@ class LeftTurnTask(metaclass=_SceneThenLogic):
         """The curve limiter's cap along the ego's route: at each waypoint the highest speed
         [m/s] from which slowing at ``decel`` [m/s²] keeps ``v² |κ| <= accel`` at every
         waypoint ahead, and no more than ``top``; with the waypoint spacing [m]."""
+        # The same backward pass as the traffic drivers' curve envelope
+        # (safeswitch.sim.streams.curve_envelope), here on speeds, not their squares: the
+        # shipped traffic-certified policy was trained with these caps, and caps from the
+        # envelope differ in their last bits (23 of 517 waypoints), enough to change its run
+        # from the second rollout on. Merge the two when that policy is next retrained.
         spacing, kappa = self.ego_curvature()
         at_curve = np.sqrt(accel / np.maximum(kappa, 1e-9))
         caps = np.minimum(at_curve, top)
