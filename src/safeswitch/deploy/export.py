@@ -257,21 +257,16 @@ def parity(
 
 def go_predictor(policy: Any) -> GoModel | None:
     """The left-turn policy's go predictor (``episode.go_model``, or in traffic
-    ``traffic.go_model``), which its export folds into the graph; ``None`` for a policy
-    without one or of another plant."""
+    ``traffic.go_model``: the task's own, :attr:`~safeswitch.leftturn.task.LeftTurnTask.go_model`),
+    which its export folds into the graph; ``None`` for a policy without one or of another
+    plant."""
+    from safeswitch.leftturn.make import build_task
     from safeswitch.training.config import TrainConfig
 
     config = policy.config
     if not isinstance(config, TrainConfig):
         return None
-    setting, path = "episode.go_model", config.env.episode.go_model
-    traffic = config.traffic_settings
-    if traffic is not None and traffic.go_model is not None:
-        setting, path = "traffic.go_model", traffic.go_model
-    if path is None:
-        return None
-    space = policy.model.observation_space
-    return GoModel(path, int(space.shape[0]) - 1, setting)
+    return build_task(None, config.env, traffic=config.traffic_settings).go_model
 
 
 def runtime_support(policy: Any) -> tuple[bool, str]:
