@@ -19,7 +19,7 @@ from go_predictor import PredictedGo
 
 from safeswitch.evaluation.evaluate import run_controller, scenario_chunks, summary_against_oracle
 from safeswitch.evaluation.traffic_planner import GapPlanner
-from safeswitch.leftturn.config import POLICY_OBSERVATION, traffic_config
+from safeswitch.leftturn.config import observed_as, traffic_config
 from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import load_config
 
@@ -28,7 +28,7 @@ def main() -> None:
     name = sys.argv[1] if len(sys.argv) > 1 else "experimental/traffic_certified_go_model"
     config = load_config(name)
     trained = traffic_config(config.traffic)
-    test = replace(traffic_config("test"), **{k: getattr(trained, k) for k in POLICY_OBSERVATION})
+    test = observed_as(traffic_config("test"), trained)
     task = build_task(None, replace(config.env, switching="certified"), traffic=test)
     ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
     rules = [("gap planner (its simulated go check)", GapPlanner(task))]

@@ -12,7 +12,7 @@ from safeswitch.evaluation.adversaries import catalogue
 from safeswitch.evaluation.oracle import Oracle
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.leftturn import make_vec_env
-from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, traffic_config
+from safeswitch.leftturn.config import ConfigError, LeftTurnConfig, observed_as, traffic_config
 from safeswitch.leftturn.logics.certified import certified_logic
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.task import LeftTurnTask
@@ -361,12 +361,8 @@ def test_a_go_model_ends_the_observation_with_its_probability(tmp_path):
         state, _ = task.step(state, np.full(64, 0.4))
         before, _ = plain.step(before, np.full(64, 0.4))
     assert np.ptp(np.concatenate(probabilities)) > 0.01  # it reads the state, not a constant
-    from dataclasses import replace
-
-    from safeswitch.leftturn.config import POLICY_OBSERVATION
-
     trained = traffic_config({**traffic, "go_model": model})
-    other = replace(traffic_config("test"), **{k: getattr(trained, k) for k in POLICY_OBSERVATION})
+    other = observed_as(traffic_config("test"), trained)
     assert other.go_model == model and other.observe == "margins"
 
 

@@ -26,10 +26,10 @@ from safeswitch.evaluation.rollout import Policy
 from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.io import prepare_output_dir, write_json
 from safeswitch.leftturn.config import (
-    POLICY_OBSERVATION,
     SCENARIO_NAMES,
     LeftTurnConfig,
     TrafficConfig,
+    observed_as,
     traffic_config,
 )
 from safeswitch.leftturn.make import build_task
@@ -142,8 +142,7 @@ def traffic_setup(
         if settings is not None and trained is not None:
             seen = trained.traffic_settings
             assert seen is not None
-            kept = {k: getattr(seen, k) for k in POLICY_OBSERVATION}
-            settings = replace(settings, **kept)
+            settings = observed_as(settings, seen)
         return settings, None if settings is None else traffic
     if trained is not None:
         return trained.traffic_settings, str(trained.traffic)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal
 
@@ -560,6 +560,13 @@ def traffic_config(traffic: TrafficConfig | str | dict[str, Any] | None) -> Traf
             data = {**TRAFFIC_PRESETS[preset], **data}
         return from_dict(TrafficConfig, data, where="traffic")
     raise ConfigError(f"traffic must be None, a preset name or a dict, got {traffic!r}")
+
+
+def observed_as(traffic: TrafficConfig, seen: TrafficConfig) -> TrafficConfig:
+    """``traffic`` as a policy trained in ``seen`` observes it (``seen``'s
+    :data:`POLICY_OBSERVATION` settings): the observation belongs to the policy, not to the
+    scene."""
+    return replace(traffic, **{k: getattr(seen, k) for k in POLICY_OBSERVATION})
 
 
 @dataclass(frozen=True)
