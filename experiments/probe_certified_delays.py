@@ -12,9 +12,14 @@ predictor in the observation) on the 1,000 unseen scenarios of seed 1000003, dri
    ``DELAYS`` seconds of coasting gets through — the "coast, then go" drives that lift the
    ceiling (benchmarks/certified_ceiling.py) above the full-throttle driver and the planner.
 
-If 3 clears no more than the trained policies (983-985), a predictor of delayed drives in the
-observation is not the missing information. Run: ``python experiments/probe_certified_delays.py
-[DELAY ...]`` (default every 0.25 s from 0.25 to 7 s; one thread, about 3 min).
+4. 3, and the fast drive also wherever driving it for one more decision still leaves one of
+   those coast-then-go drives that gets through (drive, coast, then go: what the ceiling's
+   search does before it coasts).
+
+If 3 and 4 clear no more than the trained policies (983-985), a predictor of delayed drives in
+the observation is not the missing information. Run: ``python
+experiments/probe_certified_delays.py [DELAY ...]`` (default every 0.25 s from 0.25 to 7 s; one
+thread, about 3 min for 1-3 and 6 more for 4).
 """
 
 from __future__ import annotations
@@ -46,14 +51,16 @@ INTERVAL = TASK.config.episode.decision_interval
 DT = TASK.config.episode.dt
 
 
-def passes(state: TaskState, rows: np.ndarray, delay: int, now: int) -> np.ndarray:
+def passes(state: TaskState, rows: np.ndarray, delay: int, now: int, lead: int = 0) -> np.ndarray:
     """Whether the fast drive begun after ``delay`` ticks of a closed throttle takes the ego of
     ``rows`` past its certified zone with no collision, no safety action and before the
-    episode's end (tick ``now`` of ``HORIZON``); other rows get True."""
+    episode's end (tick ``now`` of ``HORIZON``); other rows get True. With ``lead``, the fast
+    drive first drives ``lead`` ticks before the throttle closes (drive, coast, then go)."""
 
     def act(current: TaskState, tick: int) -> np.ndarray:
         closed = np.full(current.batch_size, -1.0)
-        return DRIVE.action(current, tick) if tick >= delay else closed
+        driving = tick < lead or tick >= lead + delay
+        return DRIVE.action(current, tick) if driving else closed
 
     ok = np.ones(state.batch_size, dtype=bool)
     reached = np.zeros(state.batch_size, dtype=bool)
@@ -73,10 +80,12 @@ def passes(state: TaskState, rows: np.ndarray, delay: int, now: int) -> np.ndarr
 
 
 class Rule:
-    """The planner, overruled by the exact go check and (``delays``) the coast-then-go one."""
+    """The planner, overruled by the exact go check and (``delays``) the coast-then-go one;
+    with ``keep_going``, the fast drive also wherever driving it for one more decision still
+    leaves a coast-then-go drive that gets through (drive, coast, then go)."""
 
-    def __init__(self, delays: list[float]) -> None:
-        self.delays, self.base = delays, Planner(TASK)
+    def __init__(self, delays: list[float], keep_going: bool = False) -> None:
+        self.delays, self.base, self.keep_going = delays, Planner(TASK), keep_going
         self.go: np.ndarray | None = None
         self.coast: np.ndarray | None = None
 
@@ -90,6 +99,12 @@ class Rule:
                 now = passes(state, rows, 0, tick)
                 self.go[rows] = now[rows]
                 left = rows[~now[rows]]
+                for delay in self.delays if self.keep_going else ():
+                    if left.size == 0:
+                        break
+                    later = passes(state, left, round(delay / DT), tick, lead=INTERVAL)
+                    self.go[left[later[left]]] = True
+                    left = left[~later[left]]
                 for delay in self.delays:
                     if left.size == 0:
                         break
@@ -106,7 +121,9 @@ def main() -> None:
     delays = [float(a) for a in sys.argv[1:]] or list(np.arange(1, 29) * 0.25)
     ((_, scenes),) = scenario_chunks(TASK, "random", 1000, 1_000_003)
     rules = [("planner", Planner(TASK)), ("planner + exact go check", Rule([])),
-             ("planner + exact go check + coast-then-go checks", Rule(delays))]  # fmt: skip
+             ("planner + exact go check + coast-then-go checks", Rule(delays)),
+             ("… + drive while a drive-coast-go check passes",
+              Rule(delays, keep_going=True))]  # fmt: skip
     score_rules(TASK, rules, scenes)
 
 
