@@ -3,7 +3,8 @@ collides — the shipped traffic policies beside the gap planner and the rule.
 
 On the same random scenes (seed 1000003, the README's) of the ``train`` and ``test`` traffic
 families: the gap planner (``--controller gap_planner``, under ``certified``, with the filter's
-default zones and with the zones of the shipped ``traffic-certified`` policy's recipe), the
+default zones, with the zones of the shipped ``traffic-certified`` policy's recipe, and in that
+recipe's whole scene: its zones, limiters and decision rate), the
 rule-based system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the
 shipped ``traffic-certified`` (PPO from a random start), ``traffic-certified-clone`` (the clone
 of the gap planner shipped before it) and ``traffic-paper`` policies (each under the logic it
@@ -49,6 +50,21 @@ def recipe_zones() -> tuple[str, ...]:
             f"env.certified.zone_margin_m={zones.zone_margin_m}")  # fmt: skip
 
 
+def recipe_scene() -> tuple[str, ...]:
+    """The rest of the shipped ``traffic-certified`` recipe's scene, as ``--set`` settings:
+    each learned action held for ``episode.decision_interval`` ticks (the gap planner
+    rechecks its go decision every 0.1 s, the policy decides every 0.3 s), and the speed and
+    curve limiters and the learned brake its policy drives with (a held throttle would
+    otherwise overshoot the speed limit)."""
+    env = load_config("traffic_certified").env
+    c = env.controllers
+    return (*recipe_zones(), f"env.episode.decision_interval={env.episode.decision_interval}",
+            f"env.controllers.learned_speed_limiter_kmh={c.learned_speed_limiter_kmh}",
+            f"env.controllers.learned_curve_accel={c.learned_curve_accel}",
+            f"env.controllers.learned_curve_decel={c.learned_curve_decel}",
+            f"env.controllers.learned_brake={str(c.learned_brake).lower()}")  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=1000)
@@ -61,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     runs: list[tuple[str, str, str | None, str | None, tuple[str, ...]]] = [
         ("gap_planner", "gap_planner", None, None, ()),
         ("gap_planner (narrower zones)", "gap_planner", None, None, recipe_zones()),
+        ("gap_planner (the recipe's scene)", "gap_planner", None, None, recipe_scene()),
         ("rule", "rule", None, "certified", ()),
         ("rule", "rule", None, "paper", ()),
         shipped,
