@@ -55,7 +55,8 @@ def passes(state: TaskState, rows: np.ndarray, delay: int, now: int, lead: int =
     """Whether the fast drive begun after ``delay`` ticks of a closed throttle takes the ego of
     ``rows`` past its certified zone with no collision, no safety action and before the
     episode's end (tick ``now`` of ``HORIZON``); other rows get True. With ``lead``, the fast
-    drive first drives ``lead`` ticks before the throttle closes (drive, coast, then go)."""
+    drive first drives ``lead`` ticks before the throttle closes (drive, coast, then go). Each
+    action is held from one decision to the next, as the scene holds the learned one."""
 
     def act(current: TaskState, tick: int) -> np.ndarray:
         closed = np.full(current.batch_size, -1.0)
@@ -66,16 +67,19 @@ def passes(state: TaskState, rows: np.ndarray, delay: int, now: int, lead: int =
     reached = np.zeros(state.batch_size, dtype=bool)
     reached[np.setdiff1d(np.arange(state.batch_size), rows)] = True
     sim, index = state.take(rows), rows.copy()
+    held = act(sim, 0)
     for tick in range(HORIZON - now):
         if index.size == 0:
             break
+        if (now + tick) % INTERVAL == 0:
+            held = act(sim, tick)
         inside = sim.world.progress[:, 0] <= EXIT
-        sim, record = CHECK.step(sim, act(sim, tick), observe=False)
+        sim, record = CHECK.step(sim, held, observe=False)
         ok[index[inside & (record.safety_active | record.collision)]] = False
         past = sim.world.progress[:, 0] > EXIT
         reached[index[past]] = True
         keep = np.flatnonzero(ok[index] & ~past)
-        index, sim = index[keep], sim.take(keep)
+        index, sim, held = index[keep], sim.take(keep), held[keep]
     return ok & reached
 
 
