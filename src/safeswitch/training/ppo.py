@@ -214,9 +214,7 @@ class SwitchPPO(PPO):
         ``action_bound_margin`` standard deviations of the bounds (not differentiated)."""
         normal = self._normal(self.policy, observation)
         margin = self.action_bound_margin * normal.stddev.detach()
-        low, high = self._bounds()
-        allowed = torch.maximum(torch.minimum(normal.mean, high + margin), low - margin)
-        return normal.mean, allowed.detach()
+        return normal.mean, self._clip_to_bounds(normal.mean, margin).detach()
 
     def _bound_loss(self, observation: Any, rows: np.ndarray) -> torch.Tensor:
         mean, allowed = self._mean_and_allowed(observation)
@@ -257,17 +255,15 @@ class SwitchPPO(PPO):
         """``policy``'s Gaussian mean on ``observation`` (not clipped)."""
         return self._normal(policy, observation).mean
 
-    def _bounds(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """The action space's lower and upper bounds (±inf where it has none)."""
+    def _clip_to_bounds(
+        self, action: torch.Tensor, margin: torch.Tensor | float = 0.0
+    ) -> torch.Tensor:
+        """``action`` clipped to the action space's bounds, as the environment clips it; with
+        ``margin``, to the bounds widened by it on both sides."""
         space = self.action_space
         low = torch.as_tensor(np.asarray(getattr(space, "low", -np.inf)), dtype=torch.float32)
         high = torch.as_tensor(np.asarray(getattr(space, "high", np.inf)), dtype=torch.float32)
-        return low, high
-
-    def _clip_to_bounds(self, action: torch.Tensor) -> torch.Tensor:
-        """``action`` clipped to the action space's bounds, as the environment clips it."""
-        low, high = self._bounds()
-        return torch.maximum(torch.minimum(action, high), low)
+        return torch.maximum(torch.minimum(action, high + margin), low - margin)
 
     def _executed_mean(self, policy: Any, observation: Any) -> torch.Tensor:
         """``policy``'s mean action on ``observation``, clipped to the action bounds as the
