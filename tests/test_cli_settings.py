@@ -82,6 +82,24 @@ def test_evaluate_drives_the_scene_the_settings_describe(tmp_path, capsys):
     assert not far.exists()
 
 
+def test_evaluate_tunes_the_gap_planner_and_refuses_its_settings_for_others(capsys):
+    """``gap_planner.KEY=VALUE`` tunes the gap planner (validated like a file, bad keys and
+    values named); for any other controller it is refused in one line."""
+    from safeswitch.app.evaluate import controller_setup
+
+    settings = ["gap_planner.approach=brake", "gap_planner.coast_decel=2",
+                "env.controllers.learned_brake=true"]  # fmt: skip
+    config, planner = controller_setup("gap_planner", None, None, settings)
+    assert planner.config.approach == "brake" and planner.config.coast_decel == 2.0
+    assert planner.config.stop_extra_m == 4.0 and config.controllers.learned_brake
+    with pytest.raises(ConfigError, match="gap_planner has no key 'aproach'"):
+        controller_setup("gap_planner", None, None, ["gap_planner.aproach=brake"])
+    with pytest.raises(ConfigError, match="approach: invalid value 'slide'"):
+        controller_setup("gap_planner", None, None, ["gap_planner.approach=slide"])
+    assert main(["evaluate", "--controller", "rule", "--set", "gap_planner.approach=brake"]) == 2
+    assert "tunes --controller gap_planner, not --controller rule" in error_line(capsys)
+
+
 def test_campaign_cells_run_in_the_scene_the_settings_describe(tmp_path, capsys):
     pq = pytest.importorskip("pyarrow.parquet")
     folder = tmp_path / "c"

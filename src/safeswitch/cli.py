@@ -806,7 +806,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--set", action="append", metavar="KEY=VALUE",
         help="change the scene (repeatable): env.KEY=VALUE with a dotted key of the left "
-        "turn's configuration and a YAML value, e.g. env.scenarios.north_speed_kmh=[30,44]",
+        "turn's configuration and a YAML value, e.g. env.scenarios.north_speed_kmh=[30,44]; "
+        "gap_planner.KEY=VALUE tunes --controller gap_planner, e.g. gap_planner.approach=brake",
     )  # fmt: skip
     _perception(ev)
     ev.add_argument(

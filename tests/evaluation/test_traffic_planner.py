@@ -14,10 +14,11 @@ SCENES = 24
 CERTIFIED = {"switching": "certified", "episode": {"learned_scope": "episode"}}
 
 
-def drive_scenes(config=None):
-    """24 `train` scenes (20 s) under `certified` driven by the gap planner, with each tick's
-    ego progress, whether the planner had decided to go, and its action."""
-    task = build_task(None, CERTIFIED, traffic={"preset": "train", "horizon_s": 20.0})
+def drive_scenes(config=None, env=CERTIFIED, speeds=None):
+    """24 `train` scenes (20 s) under `certified` (``env``) driven by the gap planner, with
+    each tick's ego progress, whether the planner had decided to go, and its action (and, into
+    a list ``speeds``, the ego's speed)."""
+    task = build_task(None, env, traffic={"preset": "train", "horizon_s": 20.0})
     planner = GapPlanner(task, config)
     scenes = task.draw_scenarios(7, np.arange(SCENES), np.zeros(SCENES, dtype=np.int64))
     progress, going, actions = [], [], []
@@ -27,6 +28,8 @@ def drive_scenes(config=None):
         progress.append(state.world.progress[:, 0].copy())
         going.append(planner._decision.copy())
         actions.append(action)
+        if speeds is not None:
+            speeds.append(state.world.vehicles.speed[:, 0].copy())
         return action
 
     result = rollout(task, scenes, drive_and_record)
@@ -115,6 +118,43 @@ def test_an_observed_foresight_ignores_what_no_car_could_see():
     np.testing.assert_array_equal(state.traffic.schedule.time, before[1])
 
 
+#: The ``traffic-certified`` recipe's pedals: one action for both, each held 0.3 s.
+BRAKE_SCENE = {**CERTIFIED, "controllers": {"learned_brake": True},
+               "episode": {"learned_scope": "episode", "decision_interval": 15}}  # fmt: skip
+
+
+@pytest.mark.slow
+def test_a_braked_approach_stops_nearer_its_stop_and_the_filter_never_acts():
+    """``approach: brake``: the wait brakes (a negative action) only while waiting, holds the
+    car at its stop, and stops it nearer ``stop_extra_m`` before the zone than the closed
+    throttle's coast, which stops short of it; the filter never acts on either."""
+
+    def stops(config):
+        speeds: list = []
+        planner, result, progress, going, actions = drive_scenes(config, BRAKE_SCENE, speeds)
+        assert result.collision.sum() == 0 and np.all(result.safety_steps == 0)
+        waiting = ~going & (progress <= planner.first_entry)
+        stopped = waiting & (np.array(speeds) < 0.1)
+        where = np.array([progress[stopped[:, b], b].max() for b in range(SCENES)
+                          if stopped[:, b].any()])  # fmt: skip
+        return planner, where, actions, waiting
+
+    planner, coasted, coast_actions, _ = stops(None)
+    assert np.all(coast_actions >= 0.0)  # the coast never brakes
+    _, braked, actions, waiting = stops(GapPlannerConfig(approach="brake", coast_decel=2.0))
+    assert np.any(actions < 0.0) and np.all(actions[~waiting] >= 0.0)
+    stop = planner.first_entry - planner.config.stop_extra_m
+    assert len(coasted) >= 5 and len(braked) >= 5
+    assert np.median(braked) > np.median(coasted) + 1.0
+    assert np.all(braked <= stop + 0.5) and np.median(braked) > stop - 1.0
+
+
+def test_a_braked_approach_needs_a_learned_brake():
+    task = build_task(None, CERTIFIED, traffic={"preset": "train", "horizon_s": 20.0})
+    with pytest.raises(ValueError, match=r"env\.controllers\.learned_brake=false"):
+        GapPlanner(task, GapPlannerConfig(approach="brake"))
+
+
 def test_it_needs_a_task_in_traffic():
     with pytest.raises(ValueError, match="needs a task in traffic"):
         GapPlanner(build_task(None, None))
@@ -128,6 +168,7 @@ def test_it_needs_a_task_in_traffic():
         ("go_margin_s", -0.1),
         ("recheck_ticks", 0),
         ("foresight", "perfect"),
+        ("approach", "slide"),
     ],
 )
 def test_bad_tuning_is_refused_by_name(field, value):

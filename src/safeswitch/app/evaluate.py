@@ -22,6 +22,7 @@ from safeswitch.evaluation.evaluate import (
 )
 from safeswitch.evaluation.metrics import SummaryAccumulator
 from safeswitch.evaluation.oracle import Oracle
+from safeswitch.evaluation.planner_config import GapPlannerConfig
 from safeswitch.evaluation.rollout import Policy
 from safeswitch.evaluation.traffic_planner import UnboundGapPlanner
 from safeswitch.io import prepare_output_dir, write_json
@@ -40,6 +41,9 @@ from safeswitch.training.config import TrainConfig
 
 #: Prefix of ``--scenarios`` naming OpenSCENARIO files (``safeswitch export-scenario``).
 OPENSCENARIO = "openscenario:"
+
+#: Prefix of the ``--set`` settings that tune the gap planner.
+GAP_PLANNER = "gap_planner."
 
 #: Every ``--sim``.
 SIMULATORS = ("embedded", "sumo")
@@ -71,7 +75,8 @@ def scene_settings(config: LeftTurnConfig, specs: Sequence[str]) -> LeftTurnConf
         if not spec.startswith("env."):
             raise ConfigError(
                 f"--set {spec!r}: this command changes the scene the controller drives in: "
-                "env.KEY=VALUE (training settings are train's)"
+                "env.KEY=VALUE (the gap planner's tuning: gap_planner.KEY=VALUE; training "
+                "settings are train's)"
             )
         scene.append(spec[len("env.") :])
     return with_settings(config, scene, prefix="env.")
@@ -87,9 +92,24 @@ def controller_setup(
     plans instead of acting): a trained policy (``learned``, from ``model``) with the
     environment it was trained in, or a baseline (see
     :func:`~safeswitch.evaluation.evaluate.baseline_setup`); ``switching`` overrides the
-    logic, ``settings`` (``env.KEY=VALUE``) change the scene (:func:`scene_settings`)."""
+    logic, ``settings`` (``env.KEY=VALUE``) change the scene (:func:`scene_settings`), and
+    for the gap planner ``gap_planner.KEY=VALUE`` its tuning
+    (:class:`~safeswitch.evaluation.planner_config.GapPlannerConfig`).
+
+    Raises:
+        ConfigError: A bad setting (named), or ``gap_planner.`` for another controller.
+    """
+    tuning = [spec[len(GAP_PLANNER) :] for spec in settings if spec.startswith(GAP_PLANNER)]
+    scene = [spec for spec in settings if not spec.startswith(GAP_PLANNER)]
     config, policy = _controller_setup(controller, model, switching)
-    return scene_settings(config, settings), policy
+    if tuning:
+        if controller != "gap_planner":
+            raise ConfigError(
+                f"--set {GAP_PLANNER + tuning[0]!r} tunes --controller gap_planner, not "
+                f"--controller {controller}"
+            )
+        policy = UnboundGapPlanner(with_settings(GapPlannerConfig(), tuning, prefix=GAP_PLANNER))
+    return scene_settings(config, scene), policy
 
 
 def _controller_setup(

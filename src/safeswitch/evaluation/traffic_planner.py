@@ -16,13 +16,15 @@ every ``recheck_ticks`` ticks:
 - **Otherwise wait**: roll towards the first conflict zone of any crossing movement and stop
   ``stop_extra_m`` before it, never faster than a closed throttle (``coast_decel``) can still
   stop from and with the throttle closed for the last ``coast_band_m``, so that the filter's
-  stop backup stays available and never has to act.
+  stop backup stays available and never has to act. With ``approach: brake`` (a scene with a
+  learned brake) the wait brakes instead, at ``coast_decel``, to its stop and holds it there.
 - **Once in a conflict zone** the car drives fast: slowing down there can only make things
   worse (for a cloned policy that hesitated: labels of states the planner itself never
   reaches).
 
 It is a reference and a teacher, not a deployable controller: it sees the future of the other
-vehicles through the simulation. The certified filter still runs around it, so it is
+vehicles through the simulation. Its actions are throttles (the brake released), but for a
+braked approach's. The certified filter still runs around it, so it is
 collision-free by the filter's guarantee whatever it does; what it adds is that the filter
 (nearly) never needs to act.
 """
@@ -41,6 +43,15 @@ from safeswitch.leftturn.task import LeftTurnTask, TaskState
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask, TrafficTaskState
 
 FloatArray = NDArray[np.float64]
+
+#: A braked approach's brake per m/s above its target speed [m/s² per m/s], on top of the
+#: approach's deceleration (the action may be held for several ticks).
+APPROACH_BRAKE_GAIN = 1.0
+
+#: Below this target speed [m/s] a braked approach is at its stop, and holds the car there
+#: with at least ``STOP_BRAKE`` of the pedal.
+STOP_SPEED = 0.05
+STOP_BRAKE = 0.2
 
 
 class GapPlanner:
@@ -62,6 +73,13 @@ class GapPlanner:
             )
         self.config = c = config or GapPlannerConfig()
         tc = task.config
+        if c.approach == "brake" and not tc.controllers.learned_brake:
+            raise ValueError(
+                "gap_planner.approach='brake' brakes with the learned controller's brake; this "
+                "scene has none (env.controllers.learned_brake=false)"
+            )
+        #: The deceleration of a full brake on a level road [m/s²] (a braked approach's scale).
+        self._full_brake = tc.vehicle.max_brake_force / tc.vehicle.mass
         self._drive = FastDrive(
             task, c.top_speed_kmh, c.accel_lat, c.curve_decel, c.preview_s, c.speed_gain
         )
@@ -81,23 +99,33 @@ class GapPlanner:
         """Its actions in [-1, 1] for every episode of ``state`` (throttles, as the scene's
         learned action: :attr:`~safeswitch.evaluation.planner.FastDrive.to_scene`)."""
         speed = state.world.vehicles.speed[:, 0]
-        target, closed = self.plan(state, tick)
-        return self._drive.to_scene(np.where(closed, -1.0, self._drive.track(target, speed)))
+        target, closed, waiting = self.plan(state, tick)
+        actions = self._drive.to_scene(np.where(closed, -1.0, self._drive.track(target, speed)))
+        if self.config.approach == "coast":
+            return actions
+        stopped = target <= STOP_SPEED
+        demand = self.config.coast_decel + APPROACH_BRAKE_GAIN * (speed - target)
+        brake = np.clip(demand / self._full_brake, np.where(stopped, STOP_BRAKE, 0.0), 1.0)
+        return np.where(waiting & ((speed > target) | stopped), -brake, actions)
 
-    def plan(self, state: TaskState, tick: int) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """The speed the planner steers for [m/s] and where it closes the throttle instead
-        (waiting within ``coast_band_m`` of its stop, or at it), each ``[B]``."""
+    def plan(
+        self, state: TaskState, tick: int
+    ) -> tuple[FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
+        """The speed the planner steers for [m/s], where it closes the throttle instead
+        (waiting within ``coast_band_m`` of its stop, or at it; a braked approach only at it)
+        and where it waits, each ``[B]``."""
         c = self.config
         s, v = state.world.progress[:, 0], state.world.vehicles.speed[:, 0]
         fast = self._drive.speed(s, v)
         if self._decision is None or self._decision.shape != s.shape or tick % c.recheck_ticks == 0:
             self._decision = self.goes(state, self._decision if tick > 0 else None)
-        go = self._decision | (s > self.first_entry)
+        waiting = ~(self._decision | (s > self.first_entry))
         room = np.maximum(self.first_entry - c.stop_extra_m - s, 0.0)
         wait = np.minimum(fast, np.sqrt(2.0 * c.coast_decel * room))
         # the throttle that holds a low speed would creep on: closed near and at the stop
-        closed = ~go & ((room < c.coast_band_m) | (wait <= 0.0))
-        return np.where(go, fast, wait), closed
+        band = c.coast_band_m if c.approach == "coast" else 0.0
+        closed = waiting & ((room < band) | (wait <= 0.0))
+        return np.where(waiting, wait, fast), closed, waiting
 
     def goes(self, state: TaskState, going: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
         """Whether the fast drive from ``state`` gets past the last conflict zone with no
