@@ -4,7 +4,8 @@ collides — the shipped traffic policies beside the gap planner and the rule.
 On the same random scenes (seed 1000003, the README's) of the ``train`` and ``test`` traffic
 families: the gap planner (``--controller gap_planner``, under ``certified``, with the filter's
 default zones, with the zones of the shipped ``traffic-certified`` policy's recipe, and in that
-recipe's whole scene: its zones, limiters and decision rate), the
+recipe's whole scene: its zones, limiters and decision rate — there also with a braked approach,
+``gap_planner.approach=brake`` at 2 m/s², as the recipe's learned brake allows), the
 rule-based system (``PID_th`` proposing throughout) under ``certified`` and under ``paper``, the
 shipped ``traffic-certified`` (PPO from a random start), ``traffic-certified-clone`` (the clone
 of the gap planner shipped before it) and ``traffic-paper`` policies (each under the logic it
@@ -13,7 +14,7 @@ was trained with) and any trained runs given with ``--model``; and the shipped
 ``safeswitch evaluate``'s summary, cut to the fields the README quotes.
 
 Run: ``python benchmarks/traffic_certified.py [--episodes N] [--model RUN ...] [--json]``
-(about eight minutes at the default 1,000 scenes per family, one core); writes
+(about nine minutes at the default 1,000 scenes per family, one core); writes
 ``benchmarks/results/traffic_certified.json``.
 """
 
@@ -39,6 +40,11 @@ FIELDS = (
     "cleared_episodes", "stops", "comfort_violation_fraction", "comfort_violation_episodes",
     "speeding_episodes", "max_speed_kmh", "mean_efficiency", "mean_time_to_clear_s",
 )  # fmt: skip
+
+
+#: The gap planner's wait braked to its stop (``GapPlannerConfig.approach``), at the best of
+#: ``experiments/probe_traffic_approach.py``'s approaches.
+BRAKED_APPROACH = ("gap_planner.approach=brake", "gap_planner.coast_decel=2.0")
 
 
 def recipe_zones() -> tuple[str, ...]:
@@ -78,6 +84,13 @@ def main(argv: list[str] | None = None) -> int:
         ("gap_planner", "gap_planner", None, None, ()),
         ("gap_planner (narrower zones)", "gap_planner", None, None, recipe_zones()),
         ("gap_planner (the recipe's scene)", "gap_planner", None, None, recipe_scene()),
+        (
+            "gap_planner (the recipe's scene, braked approach)",
+            "gap_planner",
+            None,
+            None,
+            (*recipe_scene(), *BRAKED_APPROACH),
+        ),
         ("rule", "rule", None, "certified", ()),
         ("rule", "rule", None, "paper", ()),
         shipped,

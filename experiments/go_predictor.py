@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from safeswitch.evaluation.planner_config import GapPlannerConfig
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.io import write_bytes_atomic
@@ -62,10 +63,11 @@ class PredictedGo(GapPlanner):
         threshold: The probability above which it goes.
         probability: The predictor on the task's observation (default: the observation's
             last value, the task's own ``traffic.go_model``).
+        config: The gap planner's tuning (its wait and drive; default: the default tuning).
     """
 
-    def __init__(self, task, threshold, probability=None):
-        super().__init__(task)
+    def __init__(self, task, threshold, probability=None, config=None):
+        super().__init__(task, config)
         self.task, self.threshold = task, threshold
         self.probability = probability or (lambda obs: obs[:, -1])
 
@@ -94,10 +96,11 @@ class RandomDrivers:
 
 
 def samples(
-    config: str, seed: int, episodes: int, model: Path | None = None
+    config: str, seed: int, episodes: int, model: Path | None = None, approach: str = "coast"
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Observations, labels and episode ids of the decisions before the junction: of random
-    drivers, or (``model``) of drivers that go on that predictor's verdict."""
+    drivers, or (``model``) of drivers that go on that predictor's verdict and wait as the gap
+    planner's ``approach`` does."""
     cfg = load_config(config)
     task = build_task(None, cfg.env, traffic=cfg.traffic)
     planner = GapPlanner(task)
@@ -109,7 +112,10 @@ def samples(
     if model is not None:  # the predictor's own drivers: a threshold and a pedal noise each
         width = task.observation_bounds[0].shape[0]
         predictor = GoModel(str(model), width, "traffic.go_model")
-        rule = PredictedGo(task, rng.uniform(0.2, 0.8, episodes), predictor)
+        tuning = (
+            GapPlannerConfig(approach=approach, coast_decel=2.0) if approach == "brake" else None
+        )
+        rule = PredictedGo(task, rng.uniform(0.2, 0.8, episodes), predictor, tuning)
         noise = rng.uniform(0.0, 0.4, episodes) * (rng.random(episodes) < 0.5)
     live = np.ones(episodes, dtype=bool)
     obs_rows: list[np.ndarray] = []
@@ -208,6 +214,13 @@ def main() -> None:
         "(a threshold and a pedal noise drawn per episode), not random ones",
     )
     parser.add_argument(
+        "--approach",
+        choices=("coast", "brake"),
+        default="coast",
+        help="how the predictor's drivers wait: the gap planner's coast, or its braked "
+        "approach at 2 m/s² (a scene with a learned brake)",
+    )
+    parser.add_argument(
         "--data",
         type=Path,
         nargs="*",
@@ -220,6 +233,8 @@ def main() -> None:
     start = time.time()
     seeds = [args.seed + 100 * b for b in range(args.batches)]
     drivers = str(args.drivers) if args.drivers else "random"
+    if args.drivers and args.approach != "coast":
+        drivers += f" ({args.approach} approach)"
     if args.data and all(p.is_file() for p in args.data):
         loaded = [np.load(p) for p in args.data]
         x = np.concatenate([d["x"] for d in loaded])
@@ -234,7 +249,8 @@ def main() -> None:
             for p, d in zip(args.data, loaded, strict=True)
         ]
     else:
-        parts = [samples(args.config, seed, args.episodes, args.drivers) for seed in seeds]
+        parts = [samples(args.config, seed, args.episodes, args.drivers, args.approach)
+                 for seed in seeds]  # fmt: skip
         x = np.concatenate([p[0] for p in parts])
         y = np.concatenate([p[1] for p in parts])
         g = np.concatenate([p[2] + b * args.episodes for b, p in enumerate(parts)])
