@@ -23,10 +23,10 @@ every ``recheck_ticks`` ticks:
   reaches).
 
 It is a reference and a teacher, not a deployable controller: it sees the future of the other
-vehicles through the simulation. Its actions are throttles (the brake released), but for a
-braked approach's. The certified filter still runs around it, so it is
-collision-free by the filter's guarantee whatever it does; what it adds is that the filter
-(nearly) never needs to act.
+vehicles through the simulation. Its actions are throttles, the brake released, except where a
+braked approach brakes. The certified filter still runs around it, so it is collision-free by
+the filter's guarantee whatever it does; what it adds is that the filter (nearly) never needs
+to act.
 """
 
 from __future__ import annotations
@@ -96,8 +96,9 @@ class GapPlanner:
         self._decision: NDArray[np.bool_] | None = None
 
     def __call__(self, obs: NDArray[np.float32], state: TaskState, tick: int) -> FloatArray:
-        """Its actions in [-1, 1] for every episode of ``state`` (throttles, as the scene's
-        learned action: :attr:`~safeswitch.evaluation.planner.FastDrive.to_scene`)."""
+        """Its actions in [-1, 1] for every episode of ``state``: throttles, as the scene's
+        learned action (:attr:`~safeswitch.evaluation.planner.FastDrive.to_scene`), and with
+        ``approach: brake`` the scene's brake (``-brake``) where its wait brakes."""
         speed = state.world.vehicles.speed[:, 0]
         target, closed, waiting = self.plan(state, tick)
         actions = self._drive.to_scene(np.where(closed, -1.0, self._drive.track(target, speed)))
