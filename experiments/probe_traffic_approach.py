@@ -12,7 +12,8 @@ policy's) on the 1,000 `test` scenes of seed 1000003, its wait replaced by one t
 — with the brake wherever it is faster than that, and holds the brake at the stop
 (`gap_planner.approach: brake`, safeswitch.evaluation.planner_config.GapPlannerConfig).
 
-Then the best approach with each action held 0.1 s and every tick. ``--waits``: how the gap
+Then the best approach with a go check that sees only what a car could (`foresight: observed`),
+and with each action held 0.1 s and every tick. ``--waits``: how the gap
 planner, its braked approach and the shipped policy wait (speeds before the zone, where they
 stand). ``--predictors MODEL.npz ...``: each go predictor (fitted on the recipe's observation
 without one, e.g. by ``experiments/go_predictor.py --config
@@ -116,6 +117,9 @@ def main() -> None:
         name = f"braked approach at {decel} m/s², {extra} m before the zone"
         tuning = GapPlannerConfig(approach="brake", coast_decel=decel, stop_extra_m=extra)
         rules.append((name, GapPlanner(task, tuning)))
+    seen = replace(BEST, foresight="observed")  # only the vehicles in the scene, none yielding
+    rules.append(("braked approach at 2.0 m/s², 4.0 m, its check seeing only what a car could",
+                  GapPlanner(task, seen)))  # fmt: skip
     score_rules(task, rules, scenes)
     for ticks in (5, 1):
         held = build_task(None, replace(env, episode=replace(env.episode, decision_interval=ticks)),
