@@ -18,8 +18,9 @@ planner, its braked approach and the shipped policy wait (speeds before the zone
 stand). ``--predictors MODEL.npz ...``: each go predictor (fitted on the recipe's observation
 without one, e.g. by ``experiments/go_predictor.py --config
 experimental/traffic_certified_go_scene``) as the planner's go check, coasting and braked, at
-several thresholds. Run: ``python experiments/probe_traffic_approach.py [--waits |
---predictors MODEL ...]`` (one core: about 10, 2 and 1 minutes per model).
+several thresholds (``--config NAME`` first: predictors on that configuration's observation).
+Run: ``python experiments/probe_traffic_approach.py [--waits | --predictors [--config NAME]
+MODEL ...]`` (one core: about 10, 2 and 1 minutes per model).
 """
 
 import sys
@@ -84,14 +85,15 @@ def waits(episodes: int = 300) -> None:
               f"zone {np.median(nearest):.1f} m before it (median)", flush=True)  # fmt: skip
 
 
-def predictors(paths: list[str]) -> None:
-    """Each go predictor of ``paths`` (``.npz``, fitted on the recipe's observation without a
-    predictor) as the gap planner's go check in the recipe's scene, coasting and braked, on the
-    1,000 `test` scenes."""
+def predictors(paths: list[str], observation: str = "traffic_certified") -> None:
+    """Each go predictor of ``paths`` (``.npz``, fitted on the observation of the configuration
+    ``observation`` without a predictor) as the gap planner's go check in the recipe's scene,
+    coasting and braked, on the 1,000 `test` scenes."""
     config = load_config("traffic_certified")
     env = replace(config.env, switching="certified")
+    observed = traffic_config(load_config(observation).traffic)
     for path in paths:
-        seen = replace(traffic_config(config.traffic), go_model=str(Path(path).resolve()))
+        seen = replace(observed, go_model=str(Path(path).resolve()))
         task = build_task(None, env, traffic=observed_as(traffic_config("test"), seen))
         ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
         rules = [(f"{path} > {threshold}, {label}", PredictedGo(task, threshold, config=tuning))
@@ -105,7 +107,10 @@ def main() -> None:
         waits()
         return
     if sys.argv[1:2] == ["--predictors"]:
-        predictors(sys.argv[2:])
+        if sys.argv[2:3] == ["--config"]:  # the predictors' observation: another recipe's
+            predictors(sys.argv[4:], sys.argv[3])
+        else:
+            predictors(sys.argv[2:])
         return
     config = load_config("traffic_certified")
     test = observed_as(traffic_config("test"), traffic_config(config.traffic))
