@@ -184,3 +184,10 @@ def test_the_gap_planner_teaches_only_in_traffic_and_unknown_teachers_are_refuse
         from_dict(TrainConfig, {"warm_start": {**ws, "teacher": "oracle"}, "traffic": "light"})
     config = from_dict(TrainConfig, {"warm_start": ws, "traffic": "light"})
     assert config.warm_start.teacher == "gap_planner"
+    # a teacher whose wait brakes needs a scene with the learned brake, refused when read
+    braking = {**ws, "gap_planner": {"approach": "brake"}}
+    with pytest.raises(ConfigError, match=r"needs env\.controllers\.learned_brake"):
+        from_dict(TrainConfig, {"warm_start": braking, "traffic": "light"})
+    scene = {"controllers": {"learned_brake": True}}
+    config = from_dict(TrainConfig, {"warm_start": braking, "traffic": "light", "env": scene})
+    assert config.warm_start.gap_planner.approach == "brake"
