@@ -13,27 +13,16 @@ the planner does. Run: ``python experiments/probe_decision_rate.py [traffic_cert
 """
 
 import sys
-from dataclasses import replace
 
-from probe_go_rule import score_rules
+from probe_go_rule import score_rules, test_scenes
 
-from safeswitch.evaluation.evaluate import scenario_chunks
 from safeswitch.evaluation.traffic_planner import GapPlanner
-from safeswitch.leftturn.config import observed_as, traffic_config
-from safeswitch.leftturn.make import build_task
-from safeswitch.training.config import load_config
 
 
 def main() -> None:
     name = sys.argv[1] if len(sys.argv) > 1 else "traffic_certified"
-    config = load_config(name)
-    trained = traffic_config(config.traffic)
-    test = observed_as(traffic_config("test"), trained)
-    env = replace(config.env, switching="certified")
     for ticks in (1, 5, 15):
-        held = replace(env, episode=replace(env.episode, decision_interval=ticks))
-        task = build_task(None, held, traffic=test)
-        ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
+        task, scenes = test_scenes(name, decision_interval=ticks)
         rule = (f"gap planner, each action held {ticks} ticks", GapPlanner(task))
         score_rules(task, [rule], scenes)
 

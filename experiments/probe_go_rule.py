@@ -24,13 +24,27 @@ from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import load_config
 
 
+def test_scenes(
+    name: str, episodes: int = 1000, seen: Any = None, decision_interval: int | None = None
+) -> tuple[Any, Any]:
+    """The task and scenes the traffic probes drive: ``episodes`` `test` scenes of seed
+    1000003 in the scene of the configuration ``name`` under `certified`, observed as its
+    policy observes (``seen``: as a policy trained in that traffic does instead), each action
+    held ``decision_interval`` ticks if given (also ``experiments/probe_decision_rate.py``'s
+    and ``experiments/probe_traffic_approach.py``'s)."""
+    config = load_config(name)
+    env = replace(config.env, switching="certified")
+    if decision_interval is not None:
+        env = replace(env, episode=replace(env.episode, decision_interval=decision_interval))
+    observed = traffic_config(config.traffic) if seen is None else seen
+    task = build_task(None, env, traffic=observed_as(traffic_config("test"), observed))
+    ((_, scenes),) = scenario_chunks(task, "random", episodes, 1_000_003)
+    return task, scenes
+
+
 def main() -> None:
     name = sys.argv[1] if len(sys.argv) > 1 else "experimental/traffic_certified_go_model"
-    config = load_config(name)
-    trained = traffic_config(config.traffic)
-    test = observed_as(traffic_config("test"), trained)
-    task = build_task(None, replace(config.env, switching="certified"), traffic=test)
-    ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
+    task, scenes = test_scenes(name)
     rules = [("gap planner (its simulated go check)", GapPlanner(task))]
     rules += [(f"learned predictor > {t}", PredictedGo(task, t)) for t in (0.3, 0.5, 0.7)]
     score_rules(task, rules, scenes)

@@ -29,20 +29,22 @@ from pathlib import Path
 
 import numpy as np
 from go_predictor import PredictedGo
-from probe_go_rule import score_rules
+from probe_go_rule import score_rules, test_scenes
 
 from safeswitch.app.evaluate import controller_setup, fit_observations
-from safeswitch.evaluation.evaluate import run_controller, scenario_chunks
+from safeswitch.evaluation.evaluate import run_controller
 from safeswitch.evaluation.planner_config import GapPlannerConfig
 from safeswitch.evaluation.traffic_planner import GapPlanner
-from safeswitch.leftturn.config import observed_as, traffic_config
+from safeswitch.leftturn.config import traffic_config
 from safeswitch.leftturn.make import build_task
 from safeswitch.training.config import load_config
+
+#: The recipe whose scene the probe drives in.
+RECIPE = "traffic_certified"
 
 #: The approaches tried: (deceleration [m/s²], where it stops before the first zone [m]).
 SWEEP = ((1.0, 4.0), (1.5, 3.0), (1.5, 4.0), (2.0, 4.0), (2.0, 5.0), (2.0, 6.0), (2.5, 2.0),
          (2.5, 4.0), (3.5, 2.0), (3.5, 1.0))  # fmt: skip
-
 
 #: The go predictors' thresholds tried (``--predictors``).
 THRESHOLDS = (0.05, 0.1, 0.2, 0.3, 0.5)
@@ -56,14 +58,11 @@ def waits(episodes: int = 300) -> None:
     `test` scenes: their mean speed where the ego passes 20 and 10 m before the first crossing
     zone, and where the episodes in which the ego stands (below 0.3 m/s) before it stand
     nearest the zone (median, m before it)."""
-    config = load_config("traffic_certified")
-    test = observed_as(traffic_config("test"), traffic_config(config.traffic))
-    task = build_task(None, replace(config.env, switching="certified"), traffic=test)
-    ((_, scenes),) = scenario_chunks(task, "random", episodes, 1_000_003)
+    task, scenes = test_scenes(RECIPE, episodes)
     planner = GapPlanner(task)
     entry = planner.first_entry
     policy_config, policy = controller_setup("learned", "traffic-certified", None)
-    policy_task = build_task(None, policy_config, traffic=test)
+    policy_task = build_task(None, policy_config, traffic=task.traffic)
     drivers = (("gap planner", task, planner), ("braked approach", task, GapPlanner(task, BEST)),
                ("traffic-certified", policy_task,
                 fit_observations(policy, "traffic-certified", policy_task)))  # fmt: skip
@@ -89,13 +88,10 @@ def predictors(paths: list[str], observation: str = "traffic_certified") -> None
     """Each go predictor of ``paths`` (``.npz``, fitted on the observation of the configuration
     ``observation`` without a predictor) as the gap planner's go check in the recipe's scene,
     coasting and braked, on the 1,000 `test` scenes."""
-    config = load_config("traffic_certified")
-    env = replace(config.env, switching="certified")
     observed = traffic_config(load_config(observation).traffic)
     for path in paths:
         seen = replace(observed, go_model=str(Path(path).resolve()))
-        task = build_task(None, env, traffic=observed_as(traffic_config("test"), seen))
-        ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
+        task, scenes = test_scenes(RECIPE, seen=seen)
         rules = [(f"{path} > {threshold}, {label}", PredictedGo(task, threshold, config=tuning))
                  for threshold in THRESHOLDS
                  for label, tuning in (("coast", None), ("braked approach", BEST))]  # fmt: skip
@@ -112,11 +108,7 @@ def main() -> None:
         else:
             predictors(sys.argv[2:])
         return
-    config = load_config("traffic_certified")
-    test = observed_as(traffic_config("test"), traffic_config(config.traffic))
-    env = replace(config.env, switching="certified")
-    task = build_task(None, env, traffic=test)
-    ((_, scenes),) = scenario_chunks(task, "random", 1000, 1_000_003)
+    task, scenes = test_scenes(RECIPE)
     rules = [("gap planner (a closed throttle's approach, 0.6 m/s², 4 m before)", GapPlanner(task))]
     for decel, extra in SWEEP:
         name = f"braked approach at {decel} m/s², {extra} m before the zone"
@@ -127,8 +119,7 @@ def main() -> None:
                   GapPlanner(task, seen)))  # fmt: skip
     score_rules(task, rules, scenes)
     for ticks in (5, 1):
-        held = build_task(None, replace(env, episode=replace(env.episode, decision_interval=ticks)),
-                          traffic=test)  # fmt: skip
+        held, scenes = test_scenes(RECIPE, decision_interval=ticks)
         name = f"braked approach at 2.0 m/s², 4.0 m before, each action held {ticks} ticks"
         score_rules(held, [(name, GapPlanner(held, BEST))], scenes)
 
