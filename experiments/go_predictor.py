@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Callable
 from io import BytesIO
 from pathlib import Path
 
@@ -49,6 +50,7 @@ from safeswitch.evaluation.traffic_planner import GapPlanner
 from safeswitch.io import write_bytes_atomic
 from safeswitch.leftturn.go_model import GoModel
 from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.training.config import load_config
 
 CONFIG = "experimental/traffic_certified_time_left_terminal_g997"
@@ -96,11 +98,17 @@ class RandomDrivers:
 
 
 def samples(
-    config: str, seed: int, episodes: int, model: Path | None = None, approach: str = "coast"
+    config: str,
+    seed: int,
+    episodes: int,
+    model: Path | None = None,
+    approach: str = "coast",
+    extra: Callable[[LeftTurnTask, object], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Observations, labels and episode ids of the decisions before the junction: of random
     drivers, or (``model``) of drivers that go on that predictor's verdict and wait as the gap
-    planner's ``approach`` does."""
+    planner's ``approach`` does. ``extra(task, state)``: columns appended to each sample's
+    observation (``[B, E]`` for the sampled episodes' ``state``)."""
     cfg = load_config(config)
     task = build_task(None, cfg.env, traffic=cfg.traffic)
     planner = GapPlanner(task)
@@ -125,8 +133,10 @@ def samples(
     def drive(obs: np.ndarray, state: object, tick: int) -> np.ndarray:
         rows = np.flatnonzero(live & (state.world.progress[:, 0] <= planner.first_entry))
         if rows.size:
-            ok = planner._passes(state.take(rows), 0)
-            obs_rows.append(obs[rows].copy())
+            taken = state.take(rows)
+            ok = planner._passes(taken, 0)
+            columns = [obs[rows]] if extra is None else [obs[rows], extra(task, taken)]
+            obs_rows.append(np.concatenate(columns, axis=1))
             labels.append(ok)
             which.append(rows)
         if rule is not None:
