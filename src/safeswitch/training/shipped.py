@@ -37,11 +37,11 @@ MISSING_TARGETS = {
         "benchmarks/certified_ceiling.py, docs/learning_experiments.md)"
     ),
     "traffic_certified": (
-        "PPO from a random start that reaches 0.370 of the oracle on 1,000 test-family scenes, "
+        "PPO from a random start that reaches 0.371 of the oracle on 1,000 test-family scenes, "
         "short of issue #39's target, the gap planner's 0.384 under the same filter; it needs "
-        "the filter in 2.9-4.4 % of the scenes at every density, within the 5 %, but its "
-        "recipe's seed 2 needs it in 5.8 % of the light ones (benchmarks/traffic_certified.py, "
-        "docs/traffic.md)"
+        "the filter in 1.3-2.0 % of the scenes at every density, within the 5 %, but its "
+        "recipe's seed 3 needs it in 5.1 % of the test-family ones "
+        "(benchmarks/traffic_certified.py, docs/traffic.md)"
     ),
     "traffic_certified_clone": (
         "a clone of the gap planner, not PPO from a random start (the shipped traffic-certified "
