@@ -285,8 +285,8 @@ def test_the_certified_traffic_policy_never_collides_and_rarely_needs_the_filter
 @pytest.mark.parametrize("density", ["light", "medium", "heavy"])
 def test_the_certified_traffic_policy_needs_the_filter_rarely_at_every_density(density):
     """Issue #39's traffic row: the safety action in at most 5 % of the episodes at every
-    density, with no collision (the recipe shipped before 2026-12-05's predictor needed it in
-    4.4 % of the medium scenes; its seed 2 in 5.8 % of the light ones)."""
+    density, with no collision (the policy shipped before its larger go predictor needed it in
+    4.4 % of the medium scenes, its recipe's seed 2 in 5.8 % of the light ones)."""
     ours = evaluate("learned", "traffic-certified", switching=None, **{**EVAL, "traffic": density})
     assert ours["episodes"] == 1000 and ours["failures"] == 0
     assert ours["safety_activation_episodes"] <= 50
