@@ -84,7 +84,7 @@ def waits(episodes: int = 300) -> None:
               f"zone {np.median(nearest):.1f} m before it (median)", flush=True)  # fmt: skip
 
 
-def predictors(paths: list[str], observation: str = "traffic_certified") -> None:
+def predictors(paths: list[str], observation: str = RECIPE) -> None:
     """Each go predictor of ``paths`` (``.npz``, fitted on the observation of the configuration
     ``observation`` without a predictor) as the gap planner's go check in the recipe's scene,
     coasting and braked, on the 1,000 `test` scenes."""
