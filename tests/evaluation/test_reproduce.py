@@ -136,6 +136,9 @@ def test_the_report_defines_its_columns_and_says_how_each_policy_was_made(report
     assert "training filter assumed" not in made["ppo-certified"]
     assert made["ppo-paper-warm"].startswith("warm start (behaviour cloning of the planner")
     assert made["ppo-paper-scratch"].startswith("PPO from a random initialisation, 1,200,")
+    # the policies trained in traffic, after the comparison's controllers
+    assert made["ppo-traffic-certified"].startswith("in traffic from every leg: PPO from a random")
+    assert "behaviour cloning of the gap planner" in made["clone-traffic-certified"]
     story = tables(page)[STORY]  # the training curves beside what the paper says of its own
     assert story[0][0] == ["the paper (Section V-B)", "this run"] and len(story) == 6
     comparison_header = tables(page)[COMPARED][0][0]

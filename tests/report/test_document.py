@@ -1,8 +1,10 @@
 """The report's tables mark a failure — a loss of control as much as a collision — the way
 they mark a collision."""
 
+from safeswitch.app.reproduce import TRAFFIC_POLICIES, training_record
 from safeswitch.report.document import (
     comparison_table,
+    policy_table,
     reckless_table,
     sumo_table,
     traffic_table,
@@ -29,6 +31,41 @@ def test_the_reckless_table_shows_and_marks_a_loss_of_control():
     paper = table.rows[1]
     assert paper[table.header.index("lost control")] == "7"
     assert table.alert == [True, True, False]
+
+
+def made(method, collisions):
+    return {"method": method, "adas_penalty": True, "collisions": collisions}
+
+
+def test_the_policy_table_lists_the_traffic_policies_and_marks_collisions_in_training():
+    summary = {
+        "controllers": {
+            "rule": {"label": "PID_th", "switching": "paper", "training": None},
+            "ppo-unshielded": {"switching": "none", "training": made("PPO", 853)},
+        },
+        "traffic": {"policies": {
+            "ppo-traffic-certified": {"switching": "certified", "training": made("PPO", 0)},
+        }},
+    }  # fmt: skip
+    table = policy_table(summary)
+    assert [r[0] for r in table.rows] == ["rule", "ppo-unshielded", "ppo-traffic-certified"]
+    assert table.rows[2][2] == "certified"
+    assert table.alert == [False, True, False]
+    del summary["traffic"]["policies"]  # a summary.json written before the traffic rows
+    assert len(policy_table(summary).rows) == 2
+
+
+def test_the_shipped_traffic_policies_say_how_they_were_made():
+    from safeswitch.training.shipped import SHIPPED_DIR
+
+    method = {name: training_record(SHIPPED_DIR / shipped)["method"]
+              for name, shipped in TRAFFIC_POLICIES.items()}  # fmt: skip
+    certified = method["ppo-traffic-certified"]
+    assert certified.startswith("in traffic from every leg: PPO from a random initialisation")
+    assert "a learned go predictor in its observation" in certified
+    assert "curve speed limiter (2.8 m/s² sideways)" in certified
+    assert "behaviour cloning of the gap planner" in method["clone-traffic-certified"]
+    assert "go predictor" not in method["clone-traffic-certified"]
 
 
 def test_traffic_and_simulator_rows_are_marked_for_a_loss_of_control_alone():

@@ -154,8 +154,9 @@ def training_record(model_dir: str | Path) -> dict[str, Any]:
     warm = metrics.get("warm_start")
     steps = metrics["timesteps"]
     if config.warm_start.episodes:
+        teacher = "the gap planner" if config.warm_start.teacher == "gap_planner" else "the planner"
         method = (
-            f"warm start (behaviour cloning of the planner: {config.warm_start.episodes:,} "
+            f"warm start (behaviour cloning of {teacher}: {config.warm_start.episodes:,} "
             f"episodes, {config.warm_start.rounds} DAgger rounds), then PPO to {steps:,} steps"
         )
     else:
@@ -168,9 +169,22 @@ def training_record(model_dir: str | Path) -> dict[str, Any]:
     constrained = config.constraints.active()
     if constrained:
         method += f", constrained ({', '.join(constrained)}: Lagrange multipliers, learning only)"
-    limiter = config.deployed_env.controllers.learned_speed_limiter_kmh
-    if limiter is not None:
-        method += f", its throttle through a speed limiter at {limiter:g} km/h"
+    traffic = config.traffic_settings
+    if traffic is not None:
+        method = f"in traffic from every leg: {method}"
+    go_model = traffic.go_model if traffic is not None else config.env.episode.go_model
+    if go_model is not None:
+        method += ", a learned go predictor in its observation"
+    controllers = config.deployed_env.controllers
+    if controllers.learned_brake:
+        method += ", a learned brake"
+    if controllers.learned_speed_limiter_kmh is not None:
+        method += (
+            f", its throttle through a speed limiter at {controllers.learned_speed_limiter_kmh:g} "
+            "km/h"
+        )
+    if controllers.learned_curve_accel is not None:
+        method += f" and a curve speed limiter ({controllers.learned_curve_accel:g} m/s² sideways)"
     if config.deployed_env.switching != config.env.switching:
         method += (
             f"; trained under {config.env.switching}, deployed under "
@@ -538,7 +552,15 @@ def reproduce(
         "paper_findings": [{"finding": f, "reproduced": ok} for f, ok in findings],
         "training_curves": curves,
         "reckless_full_throttle": reckless,
-        "traffic": {"episodes": traffic_episodes, "rows": traffic},
+        "traffic": {
+            "episodes": traffic_episodes,
+            "rows": traffic,
+            "policies": {
+                name: {"switching": logic, "training": training_record(SHIPPED_DIR / shipped)}
+                for name, logic in TRAFFIC_CONTROLLERS
+                if (shipped := TRAFFIC_POLICIES.get(name)) is not None
+            },
+        },
         "sumo": sumo,
         "perception": perception,
         "wall_time_s": round(time.perf_counter() - began, 1),

@@ -259,19 +259,25 @@ def scenario_table(summary: dict[str, Any]) -> Table:
 
 
 def policy_table(summary: dict[str, Any]) -> Table:
+    """Every controller of the comparison, then the policies trained in traffic: how each was
+    made, the logic it is evaluated under, R_ADAS and its collisions in training (red if
+    any)."""
     header = ["controller", "how it was made", "switching (evaluated under)", "R_ADAS",
               "collisions in training"]  # fmt: skip
-    rows = []
-    for name, result in summary["controllers"].items():
+    traffic = summary["traffic"].get("policies", {})  # absent from reports made before it
+    rows, alert = [], []
+    for name, result in [*summary["controllers"].items(), *traffic.items()]:
         t = result.get("training")
         if t is None:
             rows.append([name, result["label"], result["switching"] or "–", "–", "–"])
+            alert.append(False)
             continue
         rows.append(
             [name, t["method"], result["switching"], "on" if t["adas_penalty"] else "off",
              str(t["collisions"])]
         )  # fmt: skip
-    return Table(header, rows, [False] * len(rows), text_columns=(0, 1, 2, 3))
+        alert.append(t["collisions"] > 0)
+    return Table(header, rows, alert, text_columns=(0, 1, 2, 3))
 
 
 def reckless_table(summary: dict[str, Any]) -> Table:
