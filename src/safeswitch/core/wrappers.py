@@ -161,7 +161,57 @@ class _Supervisor:
         info["action_clipped"] = bool(sup.clipped[i])
 
 
-class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
+class _Switched:
+    """What both wrappers hold: the supervisor, where the state comes from, the last
+    observation and executed action, and the last step's supervision."""
+
+    supervisor: _Supervisor
+    state_fn: StateFn | None
+    _observation: Any
+    _held: FloatArray | None
+    last_supervision: Supervision | None
+
+    def _switch(
+        self,
+        plant: Any,
+        what: str,
+        safety_controller: SafetyController,
+        logic: SwitchingLogic[Any] | str,
+        penalty: float,
+        state_fn: StateFn | None,
+        logic_params: Mapping[str, Any] | None,
+    ) -> None:
+        """Check ``plant``'s spaces (``what`` names the wrapper in an error) and set up the
+        supervisor; nothing observed or held yet."""
+        space = _box(plant.action_space, what)
+        if state_fn is None:
+            _default_state(plant.observation_space, what)
+        self.supervisor = _Supervisor(
+            space,
+            safety_controller,
+            resolve_logic(logic, plant, logic_params),
+            check_penalty(penalty),
+        )
+        self.state_fn = state_fn
+        self._observation = None
+        self._held = None
+        self.last_supervision = None
+
+    @property
+    def logic(self) -> SwitchingLogic[Any]:
+        return self.supervisor.logic
+
+    def _state(self, plant: Any, rows: int) -> Any:
+        """``state_fn(plant)``, or the last observation as a ``[rows, obs_dim]`` float64
+        array."""
+        if self.state_fn is not None:
+            return self.state_fn(plant)
+        if self._observation is None:
+            raise RuntimeError("call reset() before step()")
+        return np.asarray(self._observation, dtype=np.float64).reshape(rows, -1)
+
+
+class SafeSwitch(_Switched, gym.Wrapper[Any, Any, Any, Any]):
     """The paper's framework around any Gymnasium environment with a ``Box`` action space.
 
     Args:
@@ -192,31 +242,11 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
         logic_params: Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__(env)
-        space = _box(env.action_space, "SafeSwitch")
-        if state_fn is None:
-            _default_state(env.observation_space, "SafeSwitch")
-        self.supervisor = _Supervisor(
-            space,
-            safety_controller,
-            resolve_logic(logic, env, logic_params),
-            check_penalty(penalty),
-        )
-        self.state_fn = state_fn
-        self._observation: Any = None
-        self._held: FloatArray | None = None
-        self.last_supervision: Supervision | None = None
-
-    @property
-    def logic(self) -> SwitchingLogic[Any]:
-        return self.supervisor.logic
+        self._switch(env, "SafeSwitch", safety_controller, logic, penalty, state_fn, logic_params)
 
     def state(self) -> Any:
         """What the Safety controller and the logic see now."""
-        if self.state_fn is not None:
-            return self.state_fn(self.env)
-        if self._observation is None:
-            raise RuntimeError("call reset() before step()")
-        return np.asarray(self._observation, dtype=np.float64).reshape(1, -1)
+        return self._state(self.env, 1)
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         observation, info = self.env.reset(**kwargs)
@@ -238,7 +268,7 @@ class SafeSwitch(gym.Wrapper[Any, Any, Any, Any]):
         return observation, reward, terminated, truncated, info
 
 
-class SafeSwitchVecEnv(VecEnvWrapper):
+class SafeSwitchVecEnv(_Switched, VecEnvWrapper):
     """:class:`SafeSwitch` for a Stable-Baselines3 ``VecEnv``, batched over its environments:
     one Safety-controller call and one ``decide`` per step.
 
@@ -270,38 +300,20 @@ class SafeSwitchVecEnv(VecEnvWrapper):
         logic_params: Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__(venv)
-        space = _box(venv.action_space, "SafeSwitchVecEnv")
-        if state_fn is None:
-            _default_state(venv.observation_space, "SafeSwitchVecEnv")
-            if _normalized_inside(venv):
-                raise SwitchingError(
-                    "SafeSwitchVecEnv wraps a VecNormalize: the Safety controller and the logic "
-                    "would see normalised observations; put VecNormalize outside "
-                    "(VecNormalize(SafeSwitchVecEnv(venv, ...))) or pass state_fn"
-                )
-        self.supervisor = _Supervisor(
-            space,
-            safety_controller,
-            resolve_logic(logic, venv, logic_params),
-            check_penalty(penalty),
+        if state_fn is None and _normalized_inside(venv):
+            raise SwitchingError(
+                "SafeSwitchVecEnv wraps a VecNormalize: the Safety controller and the logic "
+                "would see normalised observations; put VecNormalize outside "
+                "(VecNormalize(SafeSwitchVecEnv(venv, ...))) or pass state_fn"
+            )
+        self._switch(
+            venv, "SafeSwitchVecEnv", safety_controller, logic, penalty, state_fn, logic_params
         )
-        self.state_fn = state_fn
-        self._observation: Any = None
-        self._held: FloatArray | None = None
         self._pending: Supervision | None = None
-        self.last_supervision: Supervision | None = None
-
-    @property
-    def logic(self) -> SwitchingLogic[Any]:
-        return self.supervisor.logic
 
     def state(self) -> Any:
         """What the Safety controller and the logic see now, for every environment."""
-        if self.state_fn is not None:
-            return self.state_fn(self.venv)
-        if self._observation is None:
-            raise RuntimeError("call reset() before step()")
-        return np.asarray(self._observation, dtype=np.float64).reshape(self.num_envs, -1)
+        return self._state(self.venv, self.num_envs)
 
     def reset(self) -> VecEnvObs:
         observation = self.venv.reset()
