@@ -151,7 +151,7 @@ def test_a_braked_approach_stops_nearer_its_stop_and_the_filter_never_acts():
 
 def test_a_braked_approach_needs_a_learned_brake():
     task = build_task(None, CERTIFIED, traffic={"preset": "train", "horizon_s": 20.0})
-    with pytest.raises(ValueError, match=r"env\.controllers\.learned_brake=false"):
+    with pytest.raises(ConfigError, match=r"gap_planner\.approach .*learned_brake=true"):
         GapPlanner(task, GapPlannerConfig(approach="brake"))
 
 
@@ -186,7 +186,7 @@ def test_the_gap_planner_teaches_only_in_traffic_and_unknown_teachers_are_refuse
     assert config.warm_start.teacher == "gap_planner"
     # a teacher whose wait brakes needs a scene with the learned brake, refused when read
     braking = {**ws, "gap_planner": {"approach": "brake"}}
-    with pytest.raises(ConfigError, match=r"needs env\.controllers\.learned_brake"):
+    with pytest.raises(ConfigError, match=r"warm_start\.gap_planner\.approach .*learned_brake"):
         from_dict(TrainConfig, {"warm_start": braking, "traffic": "light"})
     scene = {"controllers": {"learned_brake": True}}
     config = from_dict(TrainConfig, {"warm_start": braking, "traffic": "light", "env": scene})

@@ -143,3 +143,14 @@ class GapPlannerConfig(FastDriveConfig):
               f"must be one of {', '.join(FORESIGHTS)}")  # fmt: skip
         check(self.approach in APPROACHES, "gap_planner", "approach", self.approach,
               f"must be one of {', '.join(APPROACHES)}")  # fmt: skip
+
+    def check_scene(self, learned_brake: bool, owner: str = "gap_planner") -> None:
+        """Refuse a braked approach in a scene without the learned brake (``owner`` names
+        this section where the message says so).
+
+        Raises:
+            ConfigError: ``approach`` is ``brake`` and ``learned_brake`` is false.
+        """
+        check(self.approach == "coast" or learned_brake, owner, "approach", self.approach,
+              "brakes with the learned controller's brake: needs "
+              "env.controllers.learned_brake=true")  # fmt: skip

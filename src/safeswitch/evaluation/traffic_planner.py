@@ -73,11 +73,7 @@ class GapPlanner:
             )
         self.config = c = config or GapPlannerConfig()
         tc = task.config
-        if c.approach == "brake" and not tc.controllers.learned_brake:
-            raise ValueError(
-                "gap_planner.approach='brake' brakes with the learned controller's brake; this "
-                "scene has none (env.controllers.learned_brake=false)"
-            )
+        c.check_scene(tc.controllers.learned_brake)
         #: The deceleration of a full brake on a level road [m/s²] (a braked approach's scale).
         self._full_brake = tc.vehicle.max_brake_force / tc.vehicle.mass
         self._drive = FastDrive(

@@ -706,10 +706,9 @@ class TrainConfig:
         if self.warm_start.episodes and self.warm_start.teacher == "gap_planner":
             check(self.traffic is not None, "warm_start", "teacher", self.warm_start.teacher,
                   "needs traffic (the single-car scene has teacher: planner)")  # fmt: skip
-            approach = self.warm_start.gap_planner.approach
-            check(approach == "coast" or self.env.controllers.learned_brake,
-                  "warm_start.gap_planner", "approach", approach,
-                  "brakes with the learned brake: needs env.controllers.learned_brake")  # fmt: skip
+            self.warm_start.gap_planner.check_scene(
+                self.env.controllers.learned_brake, "warm_start.gap_planner"
+            )
         if self.deploy_switching is not None:
             known = ", ".join(logic_names())
             check(self.deploy_switching in logic_names(), o, "deploy_switching",
