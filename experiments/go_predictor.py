@@ -134,7 +134,7 @@ def samples(
         rows = np.flatnonzero(live & (state.world.progress[:, 0] <= planner.first_entry))
         if rows.size:
             taken = state.take(rows)
-            ok = planner._passes(taken, 0)
+            ok = planner.passes(taken)
             columns = [obs[rows]] if extra is None else [obs[rows], extra(task, taken)]
             obs_rows.append(np.concatenate(columns, axis=1))
             labels.append(ok)

@@ -130,20 +130,22 @@ class GapPlanner:
         not already ``going`` starts only if the drive would also pass when begun that much
         later (the throttle closed until then); one that is going keeps going while the
         drive from where it is passes."""
-        ok = self._passes(state, 0)
+        ok = self.passes(state, 0)
         margin = round(self.config.go_margin_s / self._dt)
         if margin > 0:
             starting = ok & (state.world.progress[:, 0] <= self.first_entry)
             if going is not None and going.shape == ok.shape:
                 starting &= ~going
             rows = np.flatnonzero(starting)
-            ok[rows] &= self._passes(state.take(rows), margin)
+            ok[rows] &= self.passes(state.take(rows), margin)
         return ok
 
-    def _passes(self, state: TaskState, delay: int) -> NDArray[np.bool_]:
+    def passes(self, state: TaskState, delay: int = 0) -> NDArray[np.bool_]:
         """Whether the fast drive from ``state``, begun after ``delay`` ticks of a closed
-        throttle, passes (see :meth:`goes`); only episodes before their first zone are
-        simulated."""
+        throttle, gets past the last conflict zone with no collision and without the filter
+        acting — :meth:`goes` without its margin, and what a learned go predictor learns
+        (``experiments/go_predictor.py``). Only episodes before their first zone are
+        simulated; the others are true."""
 
         def act(now: TaskState, tick: int) -> FloatArray:
             closed = np.full(now.batch_size, -1.0)
