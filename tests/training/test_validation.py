@@ -373,3 +373,92 @@ def test_a_bad_stress_set_is_named():
     with pytest.raises(ConfigError, match=r"validation\.stress"):
         from_dict(TrainConfig, SMALL | {"traffic": "light", "validation": {
             **SMALL["validation"], "stress": STRESS}})  # fmt: skip
+
+
+# a small run in traffic, selected on its limits (the families need constraints_then_return)
+IN_TRAFFIC = SMALL | {
+    "traffic": {"preset": "train", "observe": "conflicts", "horizon_s": 4.0},
+    "env": {"switching": "certified", "episode": {"learned_scope": "episode"}},
+    "constraints": {"safety": {"budget": 0.03}, "uncleared": {"budget": 0.5}},
+}
+
+
+def with_families(families, **validation):
+    criterion = {"criterion": "constraints_then_return", "families": families}
+    return IN_TRAFFIC | {"validation": {**SMALL["validation"], **criterion, **validation}}
+
+
+def test_families_are_checked_when_read_and_named_when_wrong():
+    with pytest.raises(ConfigError, match=r"validation\.families .*traffic presets.*'busy'"):
+        from_dict(TrainConfig, with_families(["test", "busy"]))
+    with pytest.raises(ConfigError, match=r"validation\.families .*need traffic"):
+        from_dict(TrainConfig, {**with_families(["test"]), "traffic": None})
+    with pytest.raises(ConfigError, match=r"validation\.families .*constraints_then_return"):
+        from_dict(TrainConfig, with_families(["test"], criterion="return"))
+    config = from_dict(TrainConfig, with_families(["test", "light"]))
+    assert config.validation.families == ("test", "light")
+    from safeswitch.training.config import EnvTrainConfig  # a plant of its own has none
+
+    with pytest.raises(ConfigError, match=r"validation\.families must be null"):
+        from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "validation": {"families": ["test"]}})
+
+
+def test_a_family_validation_set_draws_the_familys_scenes_and_keeps_the_policys_view(tmp_path):
+    from safeswitch.training.validation import Validator
+
+    validator = Validator(from_dict(TrainConfig, with_families(["test"])), tmp_path)
+    own, family = validator.validation_set.task, validator.families["test"].task
+    assert own.traffic.main_flow_veh_h == (100.0, 500.0)  # the run's `train` family
+    assert family.traffic.main_flow_veh_h == (500.0, 800.0)  # the `test` family's scenes
+    assert family.traffic.observe == own.traffic.observe == "conflicts"  # the policy's view
+    assert family.observation_bounds[0].shape == own.observation_bounds[0].shape
+    assert len(validator.families["test"].scenarios.arrival_offset) == 30  # validation.episodes
+
+
+def test_families_hold_each_limit_at_the_worst_and_are_driven_only_for_a_would_be_best(tmp_path):
+    """A candidate's safety share counts at the worst of the validation set and the families;
+    clearing still ranks on the validation set; a policy that cannot become the best by the
+    validation set alone is not driven in the families (its key could only fall)."""
+    from types import SimpleNamespace
+
+    from stable_baselines3.common.logger import configure
+
+    from safeswitch.training.validation import Validator, constraint_key
+
+    config = from_dict(TrainConfig, with_families(["test", "light"]))
+    validator = Validator(config, tmp_path)
+    validator.model = SimpleNamespace(logger=configure(None, []))  # type: ignore[assignment]
+    validator._save_best = lambda: None  # type: ignore[method-assign]
+    validator._policy = lambda: None  # type: ignore[method-assign]
+    # per validation (1024, 2048, ...): its own summary, then each family's safety episodes
+    own = [canned(mean_return=100.0, cleared_episodes=60),  # within every budget
+           canned(mean_return=200.0, cleared_episodes=70),  # clears more, but 6 % in `test`
+           canned(mean_return=90.0, cleared_episodes=55),  # clears less: never driven there
+           canned(mean_return=150.0, cleared_episodes=65)]  # fmt: skip
+    family = {1024: {"test": 2, "light": 1}, 2048: {"test": 6, "light": 0},
+              4096: {"test": 3, "light": 2}}  # fmt: skip
+    driven = []
+
+    def family_summary(name):
+        def summary(policy):
+            driven.append((validator.num_timesteps, name))
+            return canned(safety_activation_episodes=family[validator.num_timesteps][name])
+
+        return summary
+
+    for name, validation_set in validator.families.items():
+        validation_set.summary = family_summary(name)  # type: ignore[method-assign]
+    for k, summary in enumerate(own):
+        validator.validate = lambda s=summary: dict(s)  # type: ignore[method-assign]
+        validator.num_timesteps = 1024 * (k + 1)
+        validator._on_rollout_end()
+    assert sorted({t for t, _ in driven}) == [1024, 2048, 4096]  # 3072 clears less: not driven
+    assert validator.state["best_timesteps"] == 4096  # 2048 clears the most, but not in `test`
+    table = rows(tmp_path)
+    assert [r["family_safety_episodes"] for r in table] == ["2", "6", "", "3"]
+    assert [r["worst_family"] for r in table] == ["test", "test", "", "test"]
+    assert [r["best"] for r in table] == ["1", "0", "0", "1"]
+    # the rule itself: the worst family's 6 % against the 3 % budget, clearing on its own set
+    worst = {**own[1], "families": {"test": canned(safety_activation_episodes=6)}}
+    assert constraint_key(config, worst, 4.0)[0] == pytest.approx(-1.0)
+    assert constraint_key(config, worst, 4.0)[1:] == constraint_key(config, own[1], 4.0)[1:]

@@ -11,6 +11,12 @@ statistics, written into a temporary folder and renamed); each validation is a r
 ``validation.csv`` with the evaluation's summary fields. At the end of the run the best policy
 becomes the run's ``model.zip`` and the last one is kept in ``last/``.
 
+With ``validation.families`` set (in traffic), a policy that would become the best is also
+driven on as many scenes of each of those traffic families, and each limit of
+``constraints_then_return`` (comfort, speeding, safety) counts at the worst of the validation
+set and the families (``family_safety_episodes`` and ``worst_family`` in ``validation.csv``;
+blank where it was not driven there).
+
 With ``validation.stress`` set, a policy that would become the best is also driven on a
 second, narrower set of scenarios where rare collisions concentrate, and its collisions there
 count with the validation set's (``stress_collisions`` in ``validation.csv``; blank where it
@@ -40,6 +46,7 @@ from safeswitch.evaluation.evaluate import run_controller, summary_against_oracl
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.io import POLICY_FILES, append_row, copy_policy_files, write_snapshot
+from safeswitch.leftturn.config import observed_as, traffic_config
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
@@ -65,6 +72,8 @@ VALIDATION_FIELDS = (
     "clear_time_s",
     "speeding_episodes",
     "stress_collisions",
+    "family_safety_episodes",
+    "worst_family",
     "best",
 )
 
@@ -192,6 +201,8 @@ class Validator(BestPolicy):
         super().__init__(config, run)
         v = config.validation
         self.validation_set = ValidationSet(config)
+        #: The traffic families a candidate must keep its limits in too (``validation.families``).
+        self.families = {name: ValidationSet(config, family=name) for name in v.families}
         env = self.task.config
         self.stress_task, self.stress_scenarios = None, None
         if v.stress is not None:
@@ -212,6 +223,15 @@ class Validator(BestPolicy):
         return self.validation_set.scenarios
 
     def refine(self, summary: dict[str, Any], best: list[float] | None) -> None:
+        if self.families:
+            policy = self._policy()
+            summary["families"] = {n: f.summary(policy) for n, f in self.families.items()}
+            worst = max(summary["families"].items(),
+                        key=lambda item: item[1]["safety_activation_episodes"])  # fmt: skip
+            summary["worst_family"] = worst[0]
+            summary["family_safety_episodes"] = worst[1]["safety_activation_episodes"]
+            if best is not None and tuple(self.key(summary)) <= tuple(best):
+                return  # ruled out in a family: the stress set cannot raise it again
         if self.stress_task is None:
             return
 
@@ -228,6 +248,9 @@ class Validator(BestPolicy):
                            summary["safety_activation_episodes"])  # fmt: skip
         if "stress_collisions" in summary:
             self.logger.record("validation/stress_collisions", summary["stress_collisions"])
+        if "family_safety_episodes" in summary:
+            self.logger.record("validation/family_safety_episodes",
+                               summary["family_safety_episodes"])  # fmt: skip
         horizon = self.task.config.episode.horizon_s
         return {"clear_time_s": constraint_measures(summary, horizon)["clear_time"]}
 
@@ -273,14 +296,22 @@ class ValidationSet:
 
     Args:
         config: The run's configuration.
+        family: A traffic preset to draw the scenes from instead of the run's traffic (what
+            the policy observes stays the run's, as ``safeswitch evaluate --traffic``).
     """
 
-    def __init__(self, config: TrainConfig) -> None:
+    def __init__(self, config: TrainConfig, family: str | None = None) -> None:
         v = config.validation
         env = config.deployed_env
         if v.switching is not None:
             env = dataclasses.replace(env, switching=v.switching)
-        self.task: LeftTurnTask = build_task(None, env, traffic=config.traffic_settings)
+        traffic = config.traffic_settings
+        if family is not None:
+            assert traffic is not None  # TrainConfig refuses families without traffic
+            scene = traffic_config(family)
+            assert scene is not None
+            traffic = observed_as(scene, traffic)
+        self.task: LeftTurnTask = build_task(None, env, traffic=traffic)
         self.scenarios = self.task.scenario_set(v.seed, v.episodes)
         self._plan: OraclePlan | None = None
 
@@ -318,8 +349,9 @@ def constraint_key(
 ) -> tuple[float, float, float]:
     """``constraints_then_return``'s order, to maximise: the safety constraints first (minus
     the summed excess ``max(0, measured / budget − 1)`` of ``comfort``, ``comfort_episodes``,
-    ``speeding`` and ``safety``, each
-    against its ``validation_budget``, by default its training budget), then the task's (the
+    ``speeding`` and ``safety``, each against its ``validation_budget``, by default its
+    training budget, and each at the worst of the summary and its ``families``), then the
+    task's (the
     summed excess of ``clear_time`` and ``uncleared``), then the mean return — the constrained
     problem's priorities: a policy that keeps its limits before a faster one, a faster one
     (until it is fast enough) before a better-rewarded one."""
@@ -339,6 +371,10 @@ def constraint_excess(
     """Each active constraint's excess over its selection budget, ``max(0, measured / budget
     − 1)``, by name (those :func:`constraint_measures` measures)."""
     measured = constraint_measures(summary, horizon_s)
+    for family in summary.get("families", {}).values():  # a limit counts where it is worst
+        theirs = constraint_measures(family, horizon_s)
+        for name in SAFETY_CONSTRAINTS:
+            measured[name] = max(measured[name], theirs[name])
     return {  # ``overrule`` has no measure outside ``guarded``: collisions come first anyway
         name: max(0.0, measured[name] / c.selection_budget - 1.0)
         for name, c in config.constraints.active().items()
