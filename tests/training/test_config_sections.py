@@ -206,14 +206,20 @@ def test_the_shipped_certified_recipe_is_the_go_recipe_with_a_wide_predictor_and
 
 def test_the_shipped_traffic_recipe_is_ppo_from_a_random_start_with_the_curve_limiter():
     """Since 2026-12-05 `traffic_certified` is PPO from a random start: the experiment record
-    whose seeds the docs quote (`traffic_certified_go_big`: the go-predictor recipe with the
-    curve speed limiter, chosen on 1,000 validation scenes, its predictor learned from 36,864
-    episodes), its predictor the same file, byte for byte, packaged beside the recipe; the
-    recipe before it differs only in its predictor; the clone it replaced is
+    whose seeds the docs quote (`traffic_certified_families`: the go-predictor recipe with the
+    curve speed limiter, its predictor learned from 36,864 episodes, chosen on 1,000 validation
+    scenes and on its limits in every traffic family), its predictor the same file, byte for
+    byte, packaged beside the recipe; the recipes before it differ only in their selection
+    (`traffic_certified_go_big`) and then in their predictor; the clone it replaced is
     `traffic_certified_clone`, unchanged."""
     config = load_config("traffic_certified")
-    record = load_config("experimental/traffic_certified_go_big")
+    record = load_config("experimental/traffic_certified_families")
     assert config != record and comparable(config) == comparable(record)
+    assert config.validation.families == ("test", "light", "medium", "heavy")
+    go_big = load_config("experimental/traffic_certified_go_big")
+    assert go_big.validation.families == ()
+    selected_alone = dataclasses.replace(go_big.validation, families=config.validation.families)
+    assert comparable(dataclasses.replace(go_big, validation=selected_alone)) == comparable(config)
     assert config.traffic_settings is not None
     go_model = Path(config.traffic_settings.go_model)
     assert go_model.parent == Path(config_path("traffic_certified")).parent
@@ -227,7 +233,7 @@ def test_the_shipped_traffic_recipe_is_ppo_from_a_random_start_with_the_curve_li
     assert isinstance(before.traffic, dict) and isinstance(config.traffic, dict)
     assert Path(before.traffic["go_model"]).name == "go_model_dagger_wide.npz"
     traffic = {**before.traffic, "go_model": config.traffic["go_model"]}
-    assert comparable(dataclasses.replace(before, traffic=traffic)) == comparable(config)
+    assert comparable(dataclasses.replace(before, traffic=traffic)) == comparable(go_big)
     assert config.warm_start.episodes == 0 and config.env.controllers.learned_curve_accel == 2.8
     clone = load_config("traffic_certified_clone")
     assert clone.warm_start.teacher == "gap_planner" and clone.warm_start.episodes > 0
