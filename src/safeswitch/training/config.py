@@ -502,8 +502,9 @@ class ValidationConfig:
             collisions (``null``: none; see :class:`StressConfig`).
         families: In traffic (ours): traffic presets (e.g. ``[test, light, medium, heavy]``)
             whose scenes the policy must keep its limits in as well. A policy about to become
-            the best is also driven on ``episodes`` scenes of each (the validation seed; what
-            it observes its own, as ``safeswitch evaluate --traffic FAMILY``), and
+            the best is also driven on ``episodes`` scenes of each (the validation seed; it
+            observes what it was trained to, as under ``safeswitch evaluate --traffic
+            FAMILY``), and
             ``constraints_then_return`` counts each limit (comfort, speeding, safety) at the
             worst of the validation set and these families — the issue's targets hold "at
             every density" — while clearing and the return still rank on the validation set.

@@ -351,10 +351,9 @@ def constraint_key(
     the summed excess ``max(0, measured / budget − 1)`` of ``comfort``, ``comfort_episodes``,
     ``speeding`` and ``safety``, each against its ``validation_budget``, by default its
     training budget, and each at the worst of the summary and its ``families``), then the
-    task's (the
-    summed excess of ``clear_time`` and ``uncleared``), then the mean return — the constrained
-    problem's priorities: a policy that keeps its limits before a faster one, a faster one
-    (until it is fast enough) before a better-rewarded one."""
+    task's (the summed excess of ``clear_time`` and ``uncleared``), then the mean return — the
+    constrained problem's priorities: a policy that keeps its limits before a faster one, a
+    faster one (until it is fast enough) before a better-rewarded one."""
     excess = constraint_excess(config, summary, horizon_s)
     safe = sum(excess.get(name, 0.0) for name in SAFETY_CONSTRAINTS)
     task = excess.get("clear_time", 0.0) + excess.get("uncleared", 0.0)
