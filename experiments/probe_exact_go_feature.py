@@ -16,13 +16,11 @@ with each check, for 1,000 scenes).
 """
 
 import sys
-import time
 
 import numpy as np
-from probe_go_rule import test_scenes
+from probe_go_rule import score_rules, test_scenes
 
 from safeswitch.app.evaluate import controller_setup, fit_observations
-from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
 from safeswitch.evaluation.planner_config import GapPlannerConfig
 from safeswitch.evaluation.traffic_planner import GapPlanner
 
@@ -42,7 +40,7 @@ def exact_go(task, foresight: str = "observed") -> None:
         if "go" not in held or held["go"].shape[0] != out.shape[0]:
             held["go"] = check.passes(state).astype(np.float32)
         else:
-            rows = np.flatnonzero(np.asarray(state.tick) % interval == 0)
+            rows = np.flatnonzero(state.tick % interval == 0)
             if rows.size:
                 held["go"][rows] = check.passes(state.take(rows))
         out[:, -1] = held["go"]
@@ -63,16 +61,7 @@ def main() -> None:
         policy = fit_observations(policy, MODEL, task)
         if foresight is not None:
             exact_go(task, foresight)
-        start = time.time()
-        result, plan = run_controller(task, policy, scenes, trace=False)
-        s = summary_against_oracle(result, plan, task.config.episode.horizon_s)
-        print(
-            f"{label}: collisions {s['collisions']}, safety episodes "
-            f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, efficiency "
-            f"{s['mean_efficiency']:.4f}, comfort exceeded {s['comfort_violation_fraction']:.4%} "
-            f"of ticks, max {s['max_speed_kmh']:.2f} km/h ({time.time() - start:.0f} s)",
-            flush=True,
-        )
+        score_rules(task, [(label, policy)], scenes)
 
 
 if __name__ == "__main__":

@@ -61,7 +61,7 @@ def score_rules(task: Any, rules: list[tuple[str, Any]], scenes: Any) -> None:
             f"{name}: collisions {s['collisions']}, safety episodes "
             f"{s['safety_activation_episodes']}, cleared {s['cleared_episodes']}, efficiency "
             f"{s['mean_efficiency']:.4f}, comfort exceeded {s['comfort_violation_fraction']:.4%} "
-            f"of ticks ({time.time() - start:.0f} s)",
+            f"of ticks, max {s['max_speed_kmh']:.2f} km/h ({time.time() - start:.0f} s)",
             flush=True,
         )
 
