@@ -39,8 +39,8 @@ MISSING_TARGETS = {
     "traffic_certified": (
         "PPO from a random start that reaches 0.371 of the oracle on 1,000 test-family scenes, "
         "short of issue #39's target, the gap planner's 0.384 under the same filter (it needs "
-        "the filter in 1.3-2.0 % of the scenes at every density, within the 5 %, as its "
-        "recipe's seeds 2 and 3 do; benchmarks/traffic_certified.py, docs/traffic.md)"
+        "the filter in 1.3-2.0 % of the scenes at every density and its recipe's seeds 2 and 3 "
+        "in at most 3.1 %, within the 5 %; benchmarks/traffic_certified.py, docs/traffic.md)"
     ),
     "traffic_certified_clone": (
         "a clone of the gap planner, not PPO from a random start (the shipped traffic-certified "
