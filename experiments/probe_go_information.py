@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from go_predictor import fit, samples
 
-from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.config import traffic_config
 from safeswitch.leftturn.traffic import _soonest_conflicts
 from safeswitch.training.config import load_config
 
@@ -69,10 +69,11 @@ def main() -> None:
     x = np.concatenate([p[0] for p in parts])
     y = np.concatenate([p[1] for p in parts])
     g = np.concatenate([p[2] + b * EPISODES for b, p in enumerate(parts)])
-    config = load_config(CONFIG)
-    task = build_task(None, config.env, traffic=config.traffic)
-    width, k = task.observation_bounds[0].shape[0], len(HIDDEN)
-    accel = [width + n * k for n in range(task.traffic.observed)]
+    traffic = traffic_config(load_config(CONFIG).traffic)
+    assert traffic is not None
+    per = len(HIDDEN)  # the hidden columns follow the observation, per observed vehicle
+    width = x.shape[1] - per * traffic.observed
+    accel = [width + n * per for n in range(traffic.observed)]
     print(
         f"{len(y):,} samples of {g.max() + 1:,} episodes, {y.mean():.1%} of them a go", flush=True
     )
