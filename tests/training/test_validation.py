@@ -391,6 +391,9 @@ def with_families(families, **validation):
 def test_families_are_checked_when_read_and_named_when_wrong():
     with pytest.raises(ConfigError, match=r"validation\.families .*traffic presets.*'busy'"):
         from_dict(TrainConfig, with_families(["test", "busy"]))
+    twice = r"validation\.families .*twice.*\['test', 'light', 'test'\]"
+    with pytest.raises(ConfigError, match=twice):
+        from_dict(TrainConfig, with_families(["test", "light", "test"]))
     with pytest.raises(ConfigError, match=r"validation\.families .*need traffic"):
         from_dict(TrainConfig, {**with_families(["test"]), "traffic": None})
     with pytest.raises(ConfigError, match=r"validation\.families .*constraints_then_return"):

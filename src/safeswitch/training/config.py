@@ -525,6 +525,8 @@ class ValidationConfig:
         for family in self.families:
             check(family in TRAFFIC_PRESETS, o, "families", list(self.families),
                   f"must name traffic presets ({', '.join(TRAFFIC_PRESETS)})")  # fmt: skip
+        check(len(set(self.families)) == len(self.families), o, "families", list(self.families),
+              "must not name a family twice (its scenes would be driven twice)")  # fmt: skip
         if self.switching is not None:
             known = ", ".join(logic_names())
             check(self.switching in logic_names(), o, "switching", self.switching,
