@@ -246,6 +246,11 @@ def test_bad_constraint_settings_are_named():
         ConstraintsConfig(safety=ConstraintConfig(budget=2.0))
     with pytest.raises(ConfigError, match=r"clear_time\.budget .*horizon \(12\.0 s\)"):
         from_dict(TrainConfig, {"constraints": {"clear_time": {"budget": 12.0}}})
+    # in traffic the traffic's horizon (30 s for the presets) is the episode's
+    in_traffic = {"traffic": "train", "constraints": {"clear_time": {"budget": 20.0}}}
+    assert from_dict(TrainConfig, in_traffic).constraints.clear_time.budget == 20.0
+    with pytest.raises(ConfigError, match=r"clear_time\.budget .*horizon \(20\.0 s\)"):
+        from_dict(TrainConfig, {**in_traffic, "traffic": {"preset": "train", "horizon_s": 20}})
     with pytest.raises(
         ConfigError, match=r"unknown configuration key constraints\.comfort\.'budgt'"
     ):

@@ -751,7 +751,10 @@ class TrainConfig:
             check(not refine.iterations, "refine", "iterations", refine.iterations, why)
         clear = self.constraints.clear_time
         if clear is not None:
+            traffic = self.traffic_settings  # in traffic its horizon replaces the episode's
             horizon = self.env.episode.horizon_s
+            if traffic is not None and traffic.horizon_s is not None:
+                horizon = traffic.horizon_s
             check(clear.budget < horizon, "constraints.clear_time", "budget", clear.budget,
                   f"is a mean time to clear [s]: must be below the horizon ({horizon} s)",
                   )  # fmt: skip
