@@ -751,10 +751,7 @@ class TrainConfig:
             check(not refine.iterations, "refine", "iterations", refine.iterations, why)
         clear = self.constraints.clear_time
         if clear is not None:
-            traffic = self.traffic_settings  # in traffic its horizon replaces the episode's
-            horizon = self.env.episode.horizon_s
-            if traffic is not None and traffic.horizon_s is not None:
-                horizon = traffic.horizon_s
+            horizon = self.horizon_s
             check(clear.budget < horizon, "constraints.clear_time", "budget", clear.budget,
                   f"is a mean time to clear [s]: must be below the horizon ({horizon} s)",
                   )  # fmt: skip
@@ -841,6 +838,16 @@ class TrainConfig:
     def traffic_settings(self) -> TrafficConfig | None:
         """:attr:`traffic` resolved."""
         return traffic_config(self.traffic)
+
+    @property
+    def horizon_s(self) -> float:
+        """How long the episodes last [s]: ``env.episode.horizon_s``, in traffic the traffic's
+        ``horizon_s`` where it sets one (as :func:`~safeswitch.leftturn.make.build_task`
+        builds the task)."""
+        traffic = self.traffic_settings
+        if traffic is not None and traffic.horizon_s is not None:
+            return traffic.horizon_s
+        return self.env.episode.horizon_s
 
 
 def _merged(base: dict[str, Any], over: Any, where: str) -> dict[str, Any]:

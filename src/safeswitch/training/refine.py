@@ -217,7 +217,7 @@ def selection_key(
     excess of the comfort, speeding and safety constraints over their selection budgets (as
     ``constraints_then_return`` ranks them; none without constraints or ``budgets`` off),
     then the efficiency against the oracle."""
-    excess = constraint_excess(config, summary, config.env.episode.horizon_s) if budgets else {}
+    excess = constraint_excess(config, summary, config.horizon_s) if budgets else {}
     efficiency = summary.get("mean_efficiency")
     return (
         -float(summary["collisions"]),
