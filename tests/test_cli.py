@@ -148,6 +148,12 @@ def test_bad_configs_are_refused_by_name(tmp_path, capsys):
     assert "broken.yaml is not valid YAML" in error_line(capsys)
     assert main(["train", "--config", "no_such_config", "--out", str(tmp_path / "r3")]) == 2
     assert "no configuration 'no_such_config'" in error_line(capsys)
+    # a typo is answered with the names it is near; the lab notebook's records are counted,
+    # not listed (they are hundreds)
+    assert main(["train", "--config", "traffic_certifed", "--out", str(tmp_path / "r4")]) == 2
+    line = error_line(capsys)
+    assert "did you mean traffic_certified" in line and "shipped: certified, " in line
+    assert "experiment records" in line and "experimental/paper_speeding" not in line
     assert not (tmp_path / "r1").exists() and not (tmp_path / "r2").exists()
 
 

@@ -9,6 +9,7 @@ configuration is saved with every run.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import hashlib
 import math
 import shutil
@@ -911,10 +912,17 @@ def config_path(name_or_path: str | Path) -> Path:
         packaged = PACKAGED_CONFIGS / f"{name}.yaml"
         if packaged.is_file():
             return packaged
+    known = packaged_config_names()
+    shipped = [n for n in known if not n.startswith(EXPERIMENT_PREFIX)]
+    records = len(known) - len(shipped)
+    close = difflib.get_close_matches(name, known, n=3, cutoff=0.75)
     raise FileNotFoundError(
-        f"no configuration {str(name_or_path)!r}: not a file, and not a packaged configuration "
-        f"({', '.join(packaged_config_names())})"
-    )
+        f"no configuration {str(name_or_path)!r}: not a file, and not a packaged configuration"
+        + (f"; did you mean {' or '.join(close)}?" if close else "")
+        + f" (shipped: {', '.join(shipped)}"
+        + (f"; and {records} experiment records, experimental/NAME for experiments/NAME.yaml)"
+           if records else ")")
+    )  # fmt: skip
 
 
 def _read_yaml(path: str | Path) -> dict[str, Any]:
