@@ -5,8 +5,9 @@ Importing the package registers the Gymnasium id ``safeswitch/LeftTurn-v0`` (and
 below) once Gymnasium is imported, before or after: the package itself does not import
 Gymnasium, so the deployment runtime (:mod:`safeswitch.runtime`) runs without it. The
 framework's public names (:class:`SafeSwitch`, :class:`SafeSwitchVecEnv`,
-:class:`SwitchingLogic`, :class:`Decision`, :func:`register_logic`, …) are imported on first
-use, so ``import safeswitch`` stays light.
+:class:`SwitchingLogic`, :class:`Decision`, :func:`register_logic`,
+:func:`register_safety_controller`, …) are imported on first use, so ``import safeswitch``
+stays light.
 """
 
 from __future__ import annotations
@@ -89,6 +90,7 @@ _EXPORTS = {
     "SwitchingError": "safeswitch.core.switching",
     "supervise": "safeswitch.core.switching",
     "register_logic": "safeswitch.core.registry",
+    "register_safety_controller": "safeswitch.core.registry",
     "make_logic": "safeswitch.core.registry",
     "logic_names": "safeswitch.core.registry",
     "adapt": "safeswitch.app.adapt",
@@ -111,12 +113,18 @@ __all__ = [
     "logic_names",
     "make_logic",
     "register_logic",
+    "register_safety_controller",
     "supervise",
 ]
 
 if TYPE_CHECKING:
     from safeswitch.app.adapt import adapt
-    from safeswitch.core.registry import logic_names, make_logic, register_logic
+    from safeswitch.core.registry import (
+        logic_names,
+        make_logic,
+        register_logic,
+        register_safety_controller,
+    )
     from safeswitch.core.switching import (
         Decision,
         Guarded,

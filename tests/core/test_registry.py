@@ -183,3 +183,19 @@ def test_parameters_are_refused_where_no_logic_takes_them(configurable):
         resolve_logic(NeverSwitch(), None, {"distance": 1.0})
     with pytest.raises(ValueError, match="must be a dataclass"):
         register_logic("x", NeverSwitch, config=dict)
+
+
+def test_the_public_names_are_the_package_s_own():
+    """SPEC's public interface: each name resolves on ``safeswitch`` itself, to the object its
+    module defines (imported on first use), and ``__all__`` lists it."""
+    from safeswitch.core import registry, switching, wrappers
+
+    for name, module in (
+        ("SafeSwitch", wrappers), ("SafeSwitchVecEnv", wrappers),
+        ("SwitchingLogic", switching), ("Decision", switching),
+        ("register_logic", registry), ("register_safety_controller", registry),
+    ):  # fmt: skip
+        assert getattr(safeswitch, name) is getattr(module, name), name
+        assert name in safeswitch.__all__, name
+    with pytest.raises(AttributeError, match="no attribute 'register_safety_controlers'"):
+        safeswitch.register_safety_controlers  # noqa: B018

@@ -6,7 +6,7 @@ pipeline (:mod:`safeswitch.training.pipeline`) and for evaluation.
 * an environment whose constructor takes ``switching=`` (and ``penalty=``) itself — a
   safeswitch-aware environment such as ``safeswitch/Highway-v0``; or
 * any environment with a ``Box`` action space for which a Safety controller is registered
-  (:func:`~safeswitch.core.registry.register_safety_controller`): it is wrapped in
+  (:func:`safeswitch.register_safety_controller`): it is wrapped in
   :class:`~safeswitch.core.wrappers.SafeSwitch` with the named logic.
 
 The run directory is the left turn's (``config.yaml``, ``progress.csv``, ``tb/``, checkpoints,
@@ -112,7 +112,8 @@ def _make_supervised(
     if registered is None:
         raise ConfigError(
             f"{env_id} takes no switching logic and no Safety controller is registered for it; "
-            "register one with safeswitch.core.registry.register_safety_controller"
+            "register one with safeswitch.register_safety_controller (SafeSwitch wraps "
+            "environments whose action space is a Box)"
         )
     env = gym.make(env_id, **kwargs)
     return SafeSwitch(
