@@ -535,6 +535,14 @@ TRAFFIC_PRESETS: dict[str, dict[str, Any]] = {
 }  # fmt: skip
 
 
+def episode_horizon_s(episode: EpisodeConfig, traffic: TrafficConfig | None) -> float:
+    """How long an episode lasts [s]: ``episode.horizon_s``, or in traffic the traffic's
+    ``horizon_s`` where it sets one (waiting in traffic takes longer than the paper's 12 s)."""
+    if traffic is not None and traffic.horizon_s is not None:
+        return traffic.horizon_s
+    return episode.horizon_s
+
+
 def traffic_config(traffic: TrafficConfig | str | dict[str, Any] | None) -> TrafficConfig | None:
     """A :class:`TrafficConfig` from itself, a preset's name, a dict (a preset may be named
     under ``preset``, the other keys override it) or ``None`` (no traffic: the paper's scene).

@@ -9,7 +9,13 @@ from __future__ import annotations
 from typing import Any
 
 from safeswitch.core.config import to_dict
-from safeswitch.leftturn.config import FROM_CONFIG, LeftTurnConfig, resolve_config, traffic_config
+from safeswitch.leftturn.config import (
+    FROM_CONFIG,
+    LeftTurnConfig,
+    episode_horizon_s,
+    resolve_config,
+    traffic_config,
+)
 from safeswitch.leftturn.task import LeftTurnTask
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 
@@ -35,8 +41,9 @@ def build_task(
     if settings is None:
         task = LeftTurnTask(resolved)
     else:
-        if settings.horizon_s is not None:
-            episode = {**to_dict(resolved.episode), "horizon_s": settings.horizon_s}
+        horizon = episode_horizon_s(resolved.episode, settings)
+        if horizon != resolved.episode.horizon_s:
+            episode = {**to_dict(resolved.episode), "horizon_s": horizon}
             resolved = resolve_config(resolved, episode=episode)
         task = LeftTurnTrafficTask(resolved, settings)
     task.go_model  # noqa: B018 -- read now: a model that does not fit fails before anything runs

@@ -36,6 +36,7 @@ from safeswitch.leftturn.config import (
     LeftTurnConfig,
     ScenarioConfig,
     TrafficConfig,
+    episode_horizon_s,
     traffic_config,
 )
 
@@ -845,10 +846,7 @@ class TrainConfig:
         """How long the episodes last [s]: ``env.episode.horizon_s``, in traffic the traffic's
         ``horizon_s`` where it sets one (as :func:`~safeswitch.leftturn.make.build_task`
         builds the task)."""
-        traffic = self.traffic_settings
-        if traffic is not None and traffic.horizon_s is not None:
-            return traffic.horizon_s
-        return self.env.episode.horizon_s
+        return episode_horizon_s(self.env.episode, self.traffic_settings)
 
 
 def _merged(base: dict[str, Any], over: Any, where: str) -> dict[str, Any]:
