@@ -318,3 +318,15 @@ def test_a_long_evaluation_is_announced(capsys, monkeypatch):
     monkeypatch.setattr(app, "LONG_PLAN_S", 0.001)
     assert main(["evaluate", "--controller", "rule", "--episodes", "3", "--json"]) == 0
     assert "warning: 3 episodes would take about" in capsys.readouterr().err
+
+
+def test_a_plant_the_switch_cannot_wrap_is_refused_with_its_reason(tmp_path, capsys):
+    out = tmp_path / "run"
+    refused(capsys, ["train", "--env", "Pendulum-v1", "--out", str(out)], "Pendulum-v1 takes no "
+            "switching logic and no Safety controller is registered for it",
+            "safeswitch.register_safety_controller")  # fmt: skip
+    line = refused(capsys, ["train", "--env", "CartPole-v1", "--switching", "none", "--out",
+                            str(out)], "CartPole-v1's action space is Discrete(2)",
+                   "SafeSwitch wraps environments whose action space is a Box")  # fmt: skip
+    assert "register_safety_controller" not in line  # registering one would not help
+    assert not out.exists()

@@ -109,13 +109,20 @@ def _make_supervised(
             extra["logic_params"] = logic_params
         return gym.make(env_id, **kwargs, **extra)
     registered = safety_controller_for(env_id)
+    env = gym.make(env_id, **kwargs)
+    if not isinstance(env.action_space, gym.spaces.Box):
+        env.close()
+        raise ConfigError(
+            f"{env_id}'s action space is {env.action_space}: SafeSwitch wraps environments "
+            "whose action space is a Box (a Safety controller's action and a learned one must "
+            "be comparable and checkable for range)"
+        )
     if registered is None:
+        env.close()
         raise ConfigError(
             f"{env_id} takes no switching logic and no Safety controller is registered for it; "
-            "register one with safeswitch.register_safety_controller (SafeSwitch wraps "
-            "environments whose action space is a Box)"
+            "register one with safeswitch.register_safety_controller"
         )
-    env = gym.make(env_id, **kwargs)
     return SafeSwitch(
         env,
         registered.factory(env),
