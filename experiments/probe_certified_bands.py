@@ -1,0 +1,96 @@
+"""Where the left-turn policies lose efficiency against the oracle, by the north car's arrival
+offset (issue #39; docs/learning_experiments.md, "Where the `certified` policy's efficiency
+goes").
+
+A one-off probe: `safeswitch evaluate` of the oracle and of each shipped left-turn policy on the
+1,000 unseen scenarios of seed 1000003 (each under the logic it is deployed with), then, per band
+of the arrival offset (how much later than the ego the north car would reach the conflict zone,
+as the scenarios draw it), the share of scenarios the oracle passes first in, and each policy's
+cuts, never-cleared scenarios, mean efficiency and share of the total loss (``1 - efficiency``
+summed over the band, over 1,000). No training.
+
+Run: ``python experiments/probe_certified_bands.py [--models certified paper]`` (one core,
+about 30 seconds); ``--out FILE`` writes the table as JSON.
+"""
+
+import argparse
+import contextlib
+import csv
+import io
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from safeswitch.cli import main as cli
+
+#: Band edges of the arrival offset [s].
+EDGES = (-10.0, -2.0, -1.0, 0.0, 1.0, 2.0, 2.5, 3.0, 3.5, 4.0, 10.0)
+EPISODES, SEED = 1000, 1_000_003
+#: The paper scene's horizon [s]: an episode that never clears counts with it, as in the
+#: evaluation's efficiency.
+HORIZON_S = 12.0
+
+
+def episodes(args: list[str], out: Path) -> dict[str, np.ndarray]:
+    """``safeswitch evaluate ARGS`` on the probe's scenarios; its ``episodes.csv`` as columns."""
+    with contextlib.redirect_stdout(io.StringIO()):  # its summary: the table below has it
+        status = cli(["evaluate", *args, "--episodes", str(EPISODES), "--seed", str(SEED),
+                      "--scenarios", "random", "--out", str(out)])  # fmt: skip
+    if status != 0:
+        raise SystemExit(f"safeswitch evaluate {' '.join(args)} exited with {status}")
+    with (out / "episodes.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    return {key: np.array([r[key] for r in rows]) for key in rows[0]}
+
+
+def number(column: np.ndarray) -> np.ndarray:
+    """A CSV column as floats (an empty cell: NaN)."""
+    return np.array([float(x) if x not in ("", "nan") else np.nan for x in column])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--models", nargs="+", default=["certified", "paper"])
+    parser.add_argument("--out", type=Path, help="write the table as JSON")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        oracle = episodes(["--controller", "oracle"], Path(tmp) / "oracle")
+        runs = {m: episodes(["--model", m], Path(tmp) / m) for m in args.models}
+    offset = number(oracle["arrival_offset_s"])
+    oracle_cuts = oracle["outcome"] == "cut"
+    table: list[dict[str, object]] = []
+    header = f"{'offset [s]':>13} {'n':>4} {'oracle cuts':>11}"
+    for m in args.models:
+        header += f" | {m}: cuts, never, efficiency, loss"
+    print(header)
+    for low, high in zip(EDGES[:-1], EDGES[1:], strict=True):
+        band = (offset >= low) & (offset < high)
+        row: dict[str, object] = {"offset_s": [low, high], "scenarios": int(band.sum()),
+                                  "oracle_cuts": int(oracle_cuts[band].sum())}  # fmt: skip
+        line = f"{low:>5.1f} – {high:>4.1f} {band.sum():>4} {oracle_cuts[band].sum():>11}"
+        for m, run in runs.items():
+            assert np.array_equal(number(run["arrival_offset_s"]), offset)  # the same scenarios
+            time = number(run["time_to_clear_s"])
+            oracle_time = number(run["oracle_time_to_clear_s"])
+            eff = oracle_time / np.where(np.isfinite(time), time, HORIZON_S)
+            cuts = int((run["outcome"][band] == "cut").sum())
+            never = int((run["outcome"][band] == "never_cleared").sum())
+            loss = float(np.nansum(1.0 - eff[band]) / EPISODES)
+            row[m] = {"cuts": cuts, "never_cleared": never,
+                      "efficiency": float(np.nanmean(eff[band])), "loss": loss}  # fmt: skip
+            line += f" | {cuts:>4} {never:>3} {np.nanmean(eff[band]):.3f} {loss:.4f}"
+        table.append(row)
+        print(line)
+    for m, run in runs.items():
+        time, oracle_time = number(run["time_to_clear_s"]), number(run["oracle_time_to_clear_s"])
+        eff = oracle_time / np.where(np.isfinite(time), time, HORIZON_S)
+        print(f"{m}: efficiency {np.nanmean(eff):.4f}")
+    if args.out:
+        args.out.write_text(json.dumps({"episodes": EPISODES, "seed": SEED, "bands": table},
+                                       indent=1) + "\n")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
