@@ -17,13 +17,14 @@ import argparse
 import contextlib
 import csv
 import io
-import json
+import itertools
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from safeswitch.cli import main as cli
+from safeswitch.io import write_json
 
 #: Band edges of the arrival offset [s].
 EDGES = (-10.0, -2.0, -1.0, 0.0, 1.0, 2.0, 2.5, 3.0, 3.5, 4.0, 10.0)
@@ -50,6 +51,12 @@ def number(column: np.ndarray) -> np.ndarray:
     return np.array([float(x) if x not in ("", "nan") else np.nan for x in column])
 
 
+def efficiency(run: dict[str, np.ndarray]) -> np.ndarray:
+    """Each scenario's oracle time over the policy's (a never-cleared one: the horizon's)."""
+    time = number(run["time_to_clear_s"])
+    return number(run["oracle_time_to_clear_s"]) / np.where(np.isfinite(time), time, HORIZON_S)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", nargs="+", default=["certified", "paper"])
@@ -65,16 +72,16 @@ def main() -> None:
     for m in args.models:
         header += f" | {m}: cuts, never, efficiency, loss"
     print(header)
-    for low, high in zip(EDGES[:-1], EDGES[1:], strict=True):
+    for run in runs.values():  # the same scenarios
+        assert np.array_equal(number(run["arrival_offset_s"]), offset)
+    effs = {m: efficiency(run) for m, run in runs.items()}
+    for low, high in itertools.pairwise(EDGES):
         band = (offset >= low) & (offset < high)
         row: dict[str, object] = {"offset_s": [low, high], "scenarios": int(band.sum()),
                                   "oracle_cuts": int(oracle_cuts[band].sum())}  # fmt: skip
         line = f"{low:>5.1f} – {high:>4.1f} {band.sum():>4} {oracle_cuts[band].sum():>11}"
         for m, run in runs.items():
-            assert np.array_equal(number(run["arrival_offset_s"]), offset)  # the same scenarios
-            time = number(run["time_to_clear_s"])
-            oracle_time = number(run["oracle_time_to_clear_s"])
-            eff = oracle_time / np.where(np.isfinite(time), time, HORIZON_S)
+            eff = effs[m]
             cuts = int((run["outcome"][band] == "cut").sum())
             never = int((run["outcome"][band] == "never_cleared").sum())
             loss = float(np.nansum(1.0 - eff[band]) / EPISODES)
@@ -83,13 +90,10 @@ def main() -> None:
             line += f" | {cuts:>4} {never:>3} {np.nanmean(eff[band]):.3f} {loss:.4f}"
         table.append(row)
         print(line)
-    for m, run in runs.items():
-        time, oracle_time = number(run["time_to_clear_s"]), number(run["oracle_time_to_clear_s"])
-        eff = oracle_time / np.where(np.isfinite(time), time, HORIZON_S)
+    for m, eff in effs.items():
         print(f"{m}: efficiency {np.nanmean(eff):.4f}")
     if args.out:
-        args.out.write_text(json.dumps({"episodes": EPISODES, "seed": SEED, "bands": table},
-                                       indent=1) + "\n")  # fmt: skip
+        write_json(args.out, {"episodes": EPISODES, "seed": SEED, "bands": table})
 
 
 if __name__ == "__main__":
