@@ -26,7 +26,9 @@ filter costing it 10 s — more than any difference in time to clear, so the ran
 then the fewest such ticks, then soonest. It reports how many scenes a sequence clears
 cleanly (no such tick), how many only by breaking a rule or leaning on the filter, and the
 careful driver's efficiency against the oracle (a scene not cleared cleanly counts as never
-cleared) — the ceiling of a policy that keeps the rules the shipped policies keep.
+cleared) — the ceiling of a policy that keeps the rules the shipped policies keep. Both
+efficiencies (with ``--from``, the policy's own too) are also given per band of the north car's
+arrival offset (``by_arrival_offset``), to show where a policy falls short of the search.
 
 On a recipe whose learned action works both pedals (``env.controllers.learned_brake``) the
 structured drivers keep their throttles (the action ``(a + 1) / 2``) and the search ranges over
@@ -39,6 +41,7 @@ both pedals.
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 from pathlib import Path
 from typing import Any
@@ -56,6 +59,10 @@ from safeswitch.evaluation.search import (
 )
 
 EVAL_SEED = 1_000_003
+
+#: Bands of the north car's arrival offset [s] in which ``--careful --from`` compares the
+#: policy with the search (as experiments/probe_certified_bands.py splits the evaluation).
+OFFSET_EDGES = (-10.0, -1.0, 1.0, 2.0, 2.5, 3.0, 3.5, 10.0)
 
 
 def main() -> None:
@@ -207,7 +214,7 @@ def _careful(
 
     horizon = env.episode.horizon_s
     to_scene = throttle_driver(task.config.controllers, "the coast-then-go drivers")
-    seeds, start, own = to_scene(family_of_drivers(segments)), None, None
+    seeds, start, own, own_clear = to_scene(family_of_drivers(segments)), None, None, None
     if args.model:
         from safeswitch.training.policies import load_policy
 
@@ -248,6 +255,13 @@ def _careful(
         "never_cleared": int((~cleared).sum()),
         "careful_efficiency": round(float(np.nanmean(careful_eff)), 4),
         "efficiency_of_the_best_found": round(float(np.nanmean(any_eff)), 4),
+        "by_arrival_offset": _bands(
+            scenarios.arrival_offset,
+            oracle_clear,
+            own_clear,
+            np.where(clean, clear, np.inf),
+            horizon,
+        ),
         "dirty_scenes": [
             {
                 "scenario": int(i),
@@ -275,7 +289,36 @@ def _careful(
     print(f"  efficiency, careful (others: never cleared) {result['careful_efficiency']:.3f}")
     print(f"  efficiency, the best found                  "
           f"{result['efficiency_of_the_best_found']:.3f}")  # fmt: skip
+    for band in result["by_arrival_offset"]:
+        low, high = band["arrival_offset_s"]
+        mine = "" if own is None else f"{args.model} {band['policy_efficiency']:.3f}, "
+        print(f"  north car {low:+5.1f} to {high:+5.1f} s behind ({band['scenarios']:3d} scenes): "
+              f"{mine}careful {band['careful_efficiency']:.3f}")  # fmt: skip
     print(f"  {result['wall_time_s']} s")
+
+
+def _bands(
+    offset: np.ndarray, oracle_clear: np.ndarray, own_clear: np.ndarray | None,
+    careful_clear: np.ndarray, horizon: float,
+) -> list[dict[str, Any]]:  # fmt: skip
+    """Per band of :data:`OFFSET_EDGES`: the scenes, and the mean efficiency of the policy
+    (with ``--from``) and of the careful driver (a scene it does not clear cleanly: never)."""
+    from safeswitch.evaluation.oracle import efficiency
+
+    careful = efficiency(oracle_clear, careful_clear, horizon)
+    own = None if own_clear is None else efficiency(oracle_clear, own_clear, horizon)
+    rows = []
+    for low, high in itertools.pairwise(OFFSET_EDGES):
+        band = (offset >= low) & (offset < high)
+        row: dict[str, Any] = {
+            "arrival_offset_s": [low, high],
+            "scenarios": int(band.sum()),
+            "careful_efficiency": round(float(np.nanmean(careful[band])), 4),
+        }
+        if own is not None:
+            row["policy_efficiency"] = round(float(np.nanmean(own[band])), 4)
+        rows.append(row)
+    return rows
 
 
 if __name__ == "__main__":
