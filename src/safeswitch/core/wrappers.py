@@ -51,7 +51,9 @@ SafetyController = Callable[[Any], Any]
 StateFn = Callable[[Any], Any]
 
 
-def _box(space: gym.Space[Any], what: str) -> spaces.Box:
+def require_box(space: gym.Space[Any], what: str) -> spaces.Box:
+    """``space`` if it is a ``Box``: the only action space the switch wraps (``what`` names the
+    wrapper, or the plant, in the error)."""
     if not isinstance(space, spaces.Box):
         raise SwitchingError(
             f"{what} needs a Box action space (continuous actions), got {space!r}; a discrete "
@@ -183,7 +185,7 @@ class _Switched:
     ) -> None:
         """Check ``plant``'s spaces (``what`` names the wrapper in an error) and set up the
         supervisor; nothing observed or held yet."""
-        space = _box(plant.action_space, what)
+        space = require_box(plant.action_space, what)
         if state_fn is None:
             _default_state(plant.observation_space, what)
         self.supervisor = _Supervisor(

@@ -38,8 +38,9 @@ from safeswitch.core.registry import (
     plain_env_id,
     safety_controller_for,
 )
+from safeswitch.core.switching import SwitchingError
 from safeswitch.core.tally import StepTally
-from safeswitch.core.wrappers import SafeSwitch
+from safeswitch.core.wrappers import SafeSwitch, require_box
 from safeswitch.training.callbacks import RunMonitor
 from safeswitch.training.config import EnvTrainConfig, dump_env_config
 from safeswitch.training.constraints import (
@@ -110,19 +111,16 @@ def _make_supervised(
         return gym.make(env_id, **kwargs, **extra)
     registered = safety_controller_for(env_id)
     env = gym.make(env_id, **kwargs)
-    if not isinstance(env.action_space, gym.spaces.Box):
+    try:  # a plant the switch cannot wrap is refused for that, not for its missing controller
+        require_box(env.action_space, f"SafeSwitch around {env_id}")
+        if registered is None:
+            raise ConfigError(
+                f"{env_id} takes no switching logic and no Safety controller is registered for "
+                "it; register one with safeswitch.register_safety_controller"
+            )
+    except (SwitchingError, ConfigError):
         env.close()
-        raise ConfigError(
-            f"{env_id}'s action space is {env.action_space}: SafeSwitch wraps environments "
-            "whose action space is a Box (a Safety controller's action and a learned one must "
-            "be comparable and checkable for range)"
-        )
-    if registered is None:
-        env.close()
-        raise ConfigError(
-            f"{env_id} takes no switching logic and no Safety controller is registered for it; "
-            "register one with safeswitch.register_safety_controller"
-        )
+        raise
     return SafeSwitch(
         env,
         registered.factory(env),
