@@ -92,10 +92,20 @@ def main() -> None:
             line += f" | {cuts:>4} {never:>3} {np.nanmean(eff[band]):.3f} {loss:.4f}"
         table.append(row)
         print(line)
-    for m, eff in effs.items():
-        print(f"{m}: efficiency {np.nanmean(eff):.4f}")
+    totals = {}
+    for m, run in runs.items():
+        totals[m] = {
+            "efficiency": float(np.nanmean(effs[m])),
+            "collisions": int(number(run["collision"]).sum()),
+            "lost_control": int(number(run["lost_control"]).sum()),
+            "speeding_episodes": int((number(run["speeding_steps"]) > 0).sum()),
+            "comfort_violation_episodes": int((number(run["comfort_violation_steps"]) > 0).sum()),
+        }
+        print(f"{m}: " + ", ".join(f"{k} {v:.4f}" if isinstance(v, float) else f"{k} {v}"
+                                   for k, v in totals[m].items()))  # fmt: skip
     if args.out:
-        write_json(args.out, {"episodes": EPISODES, "seed": SEED, "bands": table})
+        write_json(args.out, {"episodes": EPISODES, "seed": SEED, "totals": totals,
+                              "bands": table})  # fmt: skip
 
 
 if __name__ == "__main__":
