@@ -6,7 +6,7 @@ import csv
 import json
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -74,12 +74,19 @@ def copy_policy_files(source: str | Path, folder: str | Path) -> None:
             shutil.copyfile(Path(source) / name, tmp)
 
 
-def write_snapshot(folder: str | Path, model: Any, normalizer: Any, state: dict[str, Any]) -> Path:
+def write_snapshot(
+    folder: str | Path,
+    model: Any,
+    normalizer: Any,
+    state: dict[str, Any],
+    extra: Callable[[Path], None] | None = None,
+) -> Path:
     """A policy snapshot ``folder/{model.zip, vecnormalize.pkl, state.json}`` (a checkpoint, the
     best policy so far), written into ``.NAME.tmp`` beside it and renamed whole; the folder it
     replaces is kept until the new one is in place. Interrupted, it leaves the old snapshot
     and no temporary folder. ``model`` and ``normalizer`` are anything with ``save(path)``
-    (Stable-Baselines3's models and ``VecNormalize``)."""
+    (Stable-Baselines3's models and ``VecNormalize``); ``extra(folder)`` writes further files
+    into the temporary folder before it is renamed."""
     folder = Path(folder)
     tmp = folder.with_name(f".{folder.name}.tmp")
     old = folder.with_name(f".{folder.name}.old")
@@ -89,6 +96,8 @@ def write_snapshot(folder: str | Path, model: Any, normalizer: Any, state: dict[
         model.save(tmp / "model.zip")
         normalizer.save(str(tmp / "vecnormalize.pkl"))
         (tmp / "state.json").write_text(json.dumps(state), encoding="utf-8")
+        if extra is not None:
+            extra(tmp)
         shutil.rmtree(old, ignore_errors=True)
         if folder.exists():
             os.replace(folder, old)

@@ -5,14 +5,18 @@ import json
 
 import numpy as np
 import pytest
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.cli import main
 from safeswitch.core.config import ConfigError, from_dict
 from safeswitch.evaluation.evaluate import run_controller
+from safeswitch.io import complete_checkpoints
 from safeswitch.leftturn.make import build_task
 from safeswitch.training import train
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
+from safeswitch.training.validation import Validator
 
 SMALL = {
     "timesteps": 4096,
@@ -465,3 +469,114 @@ def test_families_hold_each_limit_at_the_worst_and_are_driven_only_for_a_would_b
     worst = {**own[1], "families": {"test": canned(safety_activation_episodes=6)}}
     assert constraint_key(config, worst, 4.0)[0] == pytest.approx(-1.0)
     assert constraint_key(config, worst, 4.0)[1:] == constraint_key(config, own[1], 4.0)[1:]
+
+
+def weights_of(model):
+    """A copy of the model's policy weights, by name."""
+    return {k: v.detach().clone() for k, v in model.policy.state_dict().items()}
+
+
+class WeightsAtRolloutEnd(BaseCallback):
+    """The policy's weights at the end of every rollout: what the validator averages there
+    (a user's callback runs before the validator, and nothing trains in between)."""
+
+    def __init__(self):
+        super().__init__()
+        self.seen = []
+
+    def _on_step(self):
+        return True
+
+    def _on_rollout_end(self):
+        self.seen.append(weights_of(self.model))
+
+
+@pytest.fixture
+def validated(monkeypatch):
+    """Every validated candidate, in order: (whether it is the average, its weights)."""
+    seen = []
+    original = Validator.validate
+
+    def validate(self):
+        seen.append((self.scalars == "validation_average", weights_of(self.model)))
+        return original(self)
+
+    monkeypatch.setattr(Validator, "validate", validate)
+    return seen
+
+
+def assert_same_weights(actual, expected):
+    assert actual.keys() == expected.keys()
+    for name in expected:
+        torch.testing.assert_close(actual[name], expected[name], rtol=1e-6, atol=1e-7)
+
+
+AVERAGED = SMALL | {"validation": SMALL["validation"] | {"average": 0.6}}
+
+
+def test_the_weights_average_is_validated_beside_the_policy_and_can_be_the_runs(
+    tmp_path, validated
+):
+    """``validation.average``: each validation drives the current policy, then the moving
+    average of the weights over every update so far (``decay × average + (1 − decay) ×
+    weights``); training itself is the same run as without it, and the run's policy is
+    whichever candidate validated best, saved with the weights it was validated with."""
+    decay = AVERAGED["validation"]["average"]
+    recorder = WeightsAtRolloutEnd()
+    run = tmp_path / "run"
+    train(from_dict(TrainConfig, AVERAGED), run, progress_bar=False, callbacks=[recorder])
+    table = rows(run)
+    assert [(int(r["timesteps"]), r["averaged"]) for r in table] == [
+        (t, a) for t in (1024, 2048, 3072, 4096) for a in ("0", "1")
+    ]
+    assert len(recorder.seen) == 4 and len(validated) == 8
+    average = None
+    for k, current in enumerate(recorder.seen):
+        average = current if average is None else {
+            n: decay * average[n] + (1 - decay) * current[n] for n in average
+        }  # fmt: skip
+        (first, policy), (second, averaged) = validated[2 * k], validated[2 * k + 1]
+        assert (first, second) == (False, True)
+        assert_same_weights(policy, current)
+        assert_same_weights(averaged, average)
+    assert any(  # the average is a different policy from the current one
+        not torch.equal(validated[k][1][n], validated[k + 1][1][n])
+        for k in range(2, 8, 2) for n in recorder.seen[0]
+    )  # fmt: skip
+    # the run's policy is the last row flagged best, with the weights it was validated with
+    chosen = max(k for k, r in enumerate(table) if r["best"] == "1")
+    assert_same_weights(weights_of(load_policy(run).model), validated[chosen][1])
+    state = json.loads((run / "best" / "state.json").read_text())
+    assert state.get("best_averaged", False) == (table[chosen]["averaged"] == "1")
+    # without the average, training goes through the same weights (the validator puts the
+    # policy's own weights back after driving the average)
+    plain = WeightsAtRolloutEnd()
+    train(from_dict(TrainConfig, SMALL), tmp_path / "plain", progress_bar=False, callbacks=[plain])
+    for ours, theirs in zip(recorder.seen, plain.seen, strict=True):
+        assert_same_weights(ours, theirs)
+
+
+def test_a_resumed_run_goes_on_with_the_weights_average_of_its_checkpoint(
+    tmp_path, interrupted_training, validated
+):
+    decay = AVERAGED["validation"]["average"]
+    config = from_dict(TrainConfig, AVERAGED)
+    run = tmp_path / "run"
+    interrupted_training(config, run, at=2048)
+    (checkpoint,) = [c for c in complete_checkpoints(run) if c.name.endswith("2048")]
+    saved = torch.load(checkpoint / "average.pt", weights_only=True)
+    validated.clear()
+    recorder = WeightsAtRolloutEnd()
+    train(config, run, resume=True, progress_bar=False, callbacks=[recorder])
+    first, averaged = validated[1]
+    assert first
+    assert_same_weights(averaged, {
+        n: decay * saved[n] + (1 - decay) * recorder.seen[0][n] for n in saved
+    })  # fmt: skip
+    assert not all(torch.equal(saved[n], recorder.seen[0][n]) for n in saved)
+
+
+def test_a_weights_average_outside_0_to_1_is_refused():
+    for decay in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ConfigError, match=r"validation\.average"):
+            from_dict(TrainConfig, SMALL | {"validation": SMALL["validation"] | {"average": decay}})

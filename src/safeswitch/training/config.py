@@ -511,6 +511,13 @@ class ValidationConfig:
             worst of the validation set and these families — the issue's targets hold "at
             every density" — while clearing and the return still rank on the validation set.
             Empty: the validation set alone.
+        average: The decay of an exponential moving average of the policy's weights, updated
+            after every PPO update (Polyak averaging; Nikishin et al. 2018 average PPO's
+            weights over its last updates in the same spirit); 0: none. Above 0 every
+            validation drives the averaged policy as well as the current one (rows of
+            ``validation.csv`` with ``averaged`` 1 and 0), and either can become the run's
+            policy. A decay of 0.98 averages over about the last 50 updates. The average is
+            kept in every checkpoint and resumed with it.
     """
 
     every: Annotated[int, Bounds(0)] = 0
@@ -521,6 +528,7 @@ class ValidationConfig:
     criterion: Literal["return", "collisions_then_return", "constraints_then_return"] = "return"
     stress: StressConfig | None = None
     families: tuple[str, ...] = ()
+    average: Annotated[float, Bounds(0, 1, high_open=True)] = 0.0
 
     def __post_init__(self) -> None:
         o = "validation"

@@ -323,8 +323,8 @@ class EpisodeValidator(BestPolicy):
 
     def record(self, summary: dict[str, Any]) -> dict[str, Any]:
         super().record(summary)
-        self.logger.record("validation/failures", summary["failures"])
-        self.logger.record("validation/safety_share", summary["safety_share"])
+        self.logger.record(f"{self.scalars}/failures", summary["failures"])
+        self.logger.record(f"{self.scalars}/safety_share", summary["safety_share"])
         return {}
 
 

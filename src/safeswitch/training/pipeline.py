@@ -132,14 +132,18 @@ def train(
     else:
         model = build_model(config, learner_env(env, config), run / "tb")
 
+    validator = plant.validator(run)
+    if validator is not None and checkpoint is not None:
+        validator.resume(checkpoint)
+
     def save(monitor: Any) -> Path:
         state = {"totals": monitor.totals, **plant.vec_state(vec), **learning.state()}
-        return save_checkpoint(run, model, env, state)
+        extra = validator.save_average if validator is not None else None
+        return save_checkpoint(run, model, env, state, extra)
 
     monitor = plant.monitor(run, save, checkpoint["totals"] if checkpoint else None)
     if checkpoint is None and plant.warm_start(model, env, run):
         save(monitor)  # --resume starts after the warm start
-    validator = plant.validator(run)
     extra: list[BaseCallback] = [*(callbacks or [])]
     extra += [validator] if validator is not None else []
     extra += learning.schedules(run)

@@ -219,15 +219,22 @@ def build_model(
 INTERRUPTED = "interrupted"
 
 
-def save_checkpoint(run: Path, model: SwitchPPO, env: VecNormalize, state: dict[str, Any]) -> Path:
-    """A resumable checkpoint ``run/checkpoints/step_N`` (model, normaliser and ``state`` as
-    ``state.json``), written into a temporary folder and renamed whole; the last two are
-    kept."""
+def save_checkpoint(
+    run: Path,
+    model: SwitchPPO,
+    env: VecNormalize,
+    state: dict[str, Any],
+    extra: Callable[[Path], None] | None = None,
+) -> Path:
+    """A resumable checkpoint ``run/checkpoints/step_N`` (model, normaliser, ``state`` as
+    ``state.json`` and what ``extra(folder)`` writes), written into a temporary folder and
+    renamed whole; the last two are kept."""
     final = write_snapshot(
         run / "checkpoints" / f"step_{model.num_timesteps:09d}",
         model,
         env,
         {"timesteps": model.num_timesteps, **state},
+        extra,
     )
     for old in complete_checkpoints(run)[:-2]:  # keep the last two, and every interrupt's
         if not (old / INTERRUPTED).is_file():

@@ -31,15 +31,17 @@ without the ego), so a validation costs one batched rollout.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.evaluation.evaluate import run_controller, summary_against_oracle
@@ -56,6 +58,9 @@ from safeswitch.training.policies import TrainedPolicy
 #: Scenarios of the stress set driven at once (a candidate that collides there is rejected
 #: after the first chunk with enough collisions, not after the whole set).
 STRESS_CHUNK = 5000
+
+#: The file of a checkpoint holding the moving average of the policy's weights.
+AVERAGE_FILE = "average.pt"
 
 #: Columns of ``validation.csv``: when, the score, then the evaluation's summary fields.
 VALIDATION_FIELDS = (
@@ -109,6 +114,10 @@ class BestPolicy(BaseCallback):
         #: The best score and when it was reached (``None``: no validation yet).
         self.state: dict[str, Any] = best_so_far(run)
         self._next = 0
+        #: The TensorBoard section :meth:`record` writes the validation's scalars into.
+        self.scalars = "validation"
+        #: The moving average of the policy's weights (``validation.average``), by name.
+        self.average: dict[str, torch.Tensor] | None = None
 
     def validate(self) -> dict[str, Any]:
         """The current deterministic policy's summary on the validation set."""
@@ -123,7 +132,7 @@ class BestPolicy(BaseCallback):
 
     def record(self, summary: dict[str, Any]) -> dict[str, Any]:
         """Further columns of the validation's row, and its TensorBoard scalars."""
-        self.logger.record("validation/return", float(summary["mean_return"]))
+        self.logger.record(f"{self.scalars}/return", float(summary["mean_return"]))
         return {}
 
     def _on_training_start(self) -> None:
@@ -134,10 +143,61 @@ class BestPolicy(BaseCallback):
         return True
 
     def _on_rollout_end(self) -> None:
+        decay = self.config.validation.average
+        if decay:
+            self._update_average(decay)
         if self.num_timesteps < self._next:
             return
         every = self.config.validation.every
         self._next = (self.num_timesteps // every + 1) * every
+        self._validate_candidate(averaged=False)
+        if decay:
+            with self.averaged_weights():
+                self._validate_candidate(averaged=True)
+
+    def _update_average(self, decay: float) -> None:
+        """One step of the weights' moving average (:attr:`average`; its first value is the
+        policy's weights at the first update it sees)."""
+        weights = self.model.policy.state_dict()
+        if self.average is None:
+            self.average = {k: v.detach().clone() for k, v in weights.items()
+                            if v.is_floating_point()}  # fmt: skip
+            return
+        with torch.no_grad():
+            for name, value in self.average.items():
+                value.mul_(decay).add_(weights[name], alpha=1.0 - decay)
+
+    @contextlib.contextmanager
+    def averaged_weights(self) -> Iterator[None]:
+        """The model's policy holds the averaged weights inside the block (copied into its
+        parameters, so the optimiser's references stay valid) and its own after it."""
+        assert self.average is not None
+        policy = self.model.policy
+        own = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+        policy.load_state_dict(self.average, strict=False)
+        try:
+            yield
+        finally:
+            policy.load_state_dict(own)
+
+    def save_average(self, folder: Path) -> None:
+        """Write the weights' average into a checkpoint being written (``folder``; nothing
+        before the first update or without ``validation.average``)."""
+        if self.average is not None:
+            torch.save(self.average, folder / AVERAGE_FILE)
+
+    def resume(self, checkpoint: dict[str, Any]) -> None:
+        """Continue the weights' average from the checkpoint resumed from (if it holds one)."""
+        path = Path(checkpoint["path"]) / AVERAGE_FILE
+        if self.config.validation.average and path.is_file():
+            self.average = torch.load(path, weights_only=True)
+
+    def _validate_candidate(self, averaged: bool) -> None:
+        """Validate the policy the model holds now and keep it if it is the best so far
+        (``averaged``: it is the weights' average; a column of ``validation.csv`` and the
+        TensorBoard scalars' section ``validation_average`` when ``validation.average`` is
+        on)."""
+        self.scalars = "validation_average" if averaged else "validation"
         summary = self.validate()
         score = float(summary["mean_return"])
         key = self.key(summary)
@@ -155,6 +215,7 @@ class BestPolicy(BaseCallback):
                 "best_collisions": int(summary.get("collisions", summary.get("failures", 0))),
                 "best_timesteps": int(self.num_timesteps),
                 "best_key": list(key),
+                **({"best_averaged": True} if averaged else {}),
                 **(
                     {"best_stress_collisions": int(summary["stress_collisions"])}
                     if "stress_collisions" in summary
@@ -164,8 +225,11 @@ class BestPolicy(BaseCallback):
             self._save_best()
         row = {"timesteps": self.num_timesteps, **summary, **self.record(summary),
                "best": int(better)}  # fmt: skip
-        path = self.run / "validation.csv"
         fields = tuple(self.fields)
+        if self.config.validation.average:
+            row["averaged"] = int(bool(averaged))
+            fields += ("averaged",)
+        path = self.run / "validation.csv"
         if path.exists():  # a resumed run keeps its file's columns (an older version's too)
             with open(path, newline="", encoding="utf-8") as handle:
                 fields = tuple(next(csv.reader(handle), fields))
@@ -243,13 +307,13 @@ class Validator(BestPolicy):
 
     def record(self, summary: dict[str, Any]) -> dict[str, Any]:
         super().record(summary)
-        self.logger.record("validation/efficiency", summary.get("mean_efficiency", np.nan))
-        self.logger.record("validation/safety_activation_episodes",
+        self.logger.record(f"{self.scalars}/efficiency", summary.get("mean_efficiency", np.nan))
+        self.logger.record(f"{self.scalars}/safety_activation_episodes",
                            summary["safety_activation_episodes"])  # fmt: skip
         if "stress_collisions" in summary:
-            self.logger.record("validation/stress_collisions", summary["stress_collisions"])
+            self.logger.record(f"{self.scalars}/stress_collisions", summary["stress_collisions"])
         if "family_safety_episodes" in summary:
-            self.logger.record("validation/family_safety_episodes",
+            self.logger.record(f"{self.scalars}/family_safety_episodes",
                                summary["family_safety_episodes"])  # fmt: skip
         horizon = self.task.config.episode.horizon_s
         return {"clear_time_s": constraint_measures(summary, horizon)["clear_time"]}
