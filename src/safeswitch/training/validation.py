@@ -24,6 +24,12 @@ was not driven there: its rank could only have fallen). It is driven in chunks a
 soon as its collisions there rule it out, so a rejected policy's count is the collisions found
 until then (at least that many).
 
+With ``validation.average`` set, the callback also keeps a moving average of the policy's
+weights over PPO's updates (one step at the end of every rollout, before the next update) and
+drives it at every validation after the current policy; either can become the best (the row's
+``averaged`` column says which was driven). The average is written into every checkpoint and
+read back on ``--resume``.
+
 The oracle's plan of the validation scenarios is made once (the other vehicles never react to
 the ego's policy in the paper's scene; in traffic the oracle plans against the others' world
 without the ego), so a validation costs one batched rollout.
@@ -227,7 +233,7 @@ class BestPolicy(BaseCallback):
                "best": int(better)}  # fmt: skip
         fields = tuple(self.fields)
         if self.config.validation.average:
-            row["averaged"] = int(bool(averaged))
+            row["averaged"] = int(averaged)
             fields += ("averaged",)
         path = self.run / "validation.csv"
         if path.exists():  # a resumed run keeps its file's columns (an older version's too)
