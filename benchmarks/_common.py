@@ -20,6 +20,7 @@ def machine() -> dict[str, object]:
         "python": platform.python_version(),
         "machine": platform.machine(),
         "cpu": cpu_model(),
+        "simd": cpu_simd(),
         "cpus": os.cpu_count(),
         "threads": 1,
         "date": datetime.date.today().isoformat(),
@@ -38,6 +39,28 @@ def cpu_model() -> str:
     name = fields.get("model name", platform.processor() or "unknown")
     mhz = fields.get("cpu MHz")
     return f"{name} @ {float(mhz):.0f} MHz" if mhz else name
+
+
+#: The vector instruction sets numpy's and torch's CPU kernels choose between at run time: two
+#: CPUs of one model name with different sets round differently in the last bits (docs/
+#: training.md, "Reproducing a run").
+SIMD_FLAGS = ("avx2", "avx512f", "avx512_bf16", "avx512_fp16", "amx_tile")
+
+
+def cpu_simd(cpuinfo: str | None = None) -> list[str]:
+    """Which of :data:`SIMD_FLAGS` the CPU offers (the ``flags`` of Linux's ``/proc/cpuinfo``,
+    or ``cpuinfo`` given; empty where it cannot be read)."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text(encoding="utf-8")
+        except OSError:
+            return []
+    for line in cpuinfo.splitlines():
+        key, _, value = line.partition(":")
+        if key.strip() == "flags":
+            offered = set(value.split())
+            return [flag for flag in SIMD_FLAGS if flag in offered]
+    return []
 
 
 def publish(result: dict[str, object], out: Path | None, as_json: bool) -> bool:
