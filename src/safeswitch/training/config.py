@@ -512,8 +512,8 @@ class ValidationConfig:
             every density" — while clearing and the return still rank on the validation set.
             Empty: the validation set alone.
         average: The decay of an exponential moving average of the policy's weights, updated
-            after every PPO update (Polyak averaging; Nikishin et al. 2018 average PPO's
-            weights over its last updates in the same spirit); 0: none. Above 0 every
+            after every PPO update (Polyak averaging of the weights, as Nikishin et al. 2018
+            do for A2C and DDPG); 0: none. Above 0 every
             validation drives the averaged policy as well as the current one (rows of
             ``validation.csv`` with ``averaged`` 1 and 0), and either can become the run's
             policy. A decay of 0.98 averages over about the last 50 updates. The average is
