@@ -27,15 +27,24 @@ def machine() -> dict[str, object]:
     }
 
 
+def cpuinfo_fields(cpuinfo: str | None = None) -> dict[str, str] | None:
+    """The fields of Linux's ``/proc/cpuinfo`` (or of ``cpuinfo`` given), by name (a field the
+    CPUs repeat: the last one's); ``None`` where it cannot be read."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text(encoding="utf-8")
+        except OSError:
+            return None
+    pairs = (line.split(":", 1) for line in cpuinfo.splitlines() if ":" in line)
+    return {key.strip(): value.strip() for key, value in pairs}
+
+
 def cpu_model() -> str:
     """The CPU's model name and current clock (Linux's ``/proc/cpuinfo``), else the platform's
     processor string."""
-    try:
-        info = Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines()
-    except OSError:
+    fields = cpuinfo_fields()
+    if fields is None:
         return platform.processor() or "unknown"
-    fields = dict(line.split(":", 1) for line in info if ":" in line)
-    fields = {k.strip(): v.strip() for k, v in fields.items()}
     name = fields.get("model name", platform.processor() or "unknown")
     mhz = fields.get("cpu MHz")
     return f"{name} @ {float(mhz):.0f} MHz" if mhz else name
@@ -50,17 +59,8 @@ SIMD_FLAGS = ("avx2", "avx512f", "avx512_bf16", "avx512_fp16", "amx_tile")
 def cpu_simd(cpuinfo: str | None = None) -> list[str]:
     """Which of :data:`SIMD_FLAGS` the CPU offers (the ``flags`` of Linux's ``/proc/cpuinfo``,
     or ``cpuinfo`` given; empty where it cannot be read)."""
-    if cpuinfo is None:
-        try:
-            cpuinfo = Path("/proc/cpuinfo").read_text(encoding="utf-8")
-        except OSError:
-            return []
-    for line in cpuinfo.splitlines():
-        key, _, value = line.partition(":")
-        if key.strip() == "flags":
-            offered = set(value.split())
-            return [flag for flag in SIMD_FLAGS if flag in offered]
-    return []
+    offered = set(((cpuinfo_fields(cpuinfo) or {}).get("flags") or "").split())
+    return [flag for flag in SIMD_FLAGS if flag in offered]
 
 
 def publish(result: dict[str, object], out: Path | None, as_json: bool) -> bool:
