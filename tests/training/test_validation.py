@@ -16,7 +16,7 @@ from safeswitch.leftturn.make import build_task
 from safeswitch.training import train
 from safeswitch.training.config import TrainConfig
 from safeswitch.training.policies import load_policy
-from safeswitch.training.validation import Validator
+from safeswitch.training.validation import Validator, copied
 
 SMALL = {
     "timesteps": 4096,
@@ -473,7 +473,7 @@ def test_families_hold_each_limit_at_the_worst_and_are_driven_only_for_a_would_b
 
 def weights_of(model):
     """A copy of the model's policy weights, by name."""
-    return {k: v.detach().clone() for k, v in model.policy.state_dict().items()}
+    return copied(model.policy.state_dict())
 
 
 class WeightsAtRolloutEnd(BaseCallback):
@@ -568,8 +568,8 @@ def test_a_resumed_run_goes_on_with_the_weights_average_of_its_checkpoint(
     validated.clear()
     recorder = WeightsAtRolloutEnd()
     train(config, run, resume=True, progress_bar=False, callbacks=[recorder])
-    first, averaged = validated[1]
-    assert first
+    is_average, averaged = validated[1]
+    assert is_average
     assert_same_weights(averaged, {
         n: decay * saved[n] + (1 - decay) * recorder.seen[0][n] for n in saved
     })  # fmt: skip

@@ -166,8 +166,7 @@ class BestPolicy(BaseCallback):
         policy's weights at the first update it sees)."""
         weights = self.model.policy.state_dict()
         if self.average is None:
-            self.average = {k: v.detach().clone() for k, v in weights.items()
-                            if v.is_floating_point()}  # fmt: skip
+            self.average = copied(weights, floating_only=True)
             return
         with torch.no_grad():
             for name, value in self.average.items():
@@ -179,7 +178,7 @@ class BestPolicy(BaseCallback):
         parameters, so the optimiser's references stay valid) and its own after it."""
         assert self.average is not None
         policy = self.model.policy
-        own = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+        own = copied(policy.state_dict())
         policy.load_state_dict(self.average, strict=False)
         try:
             yield
@@ -259,6 +258,15 @@ class BestPolicy(BaseCallback):
 
     def _save_best(self) -> None:
         write_snapshot(self.run / "best", self.model, self.model.get_env(), self.state)
+
+
+def copied(
+    weights: dict[str, torch.Tensor], floating_only: bool = False
+) -> dict[str, torch.Tensor]:
+    """A copy of a module's ``state_dict`` that later updates leave alone (with
+    ``floating_only``, its floating-point tensors alone: what an average can hold)."""
+    return {name: value.detach().clone() for name, value in weights.items()
+            if value.is_floating_point() or not floating_only}  # fmt: skip
 
 
 class Validator(BestPolicy):
