@@ -515,8 +515,9 @@ class ValidationConfig:
             after every PPO update (Polyak averaging of the weights, as Nikishin et al. 2018
             do for A2C and DDPG); 0: none. Above 0 every validation drives the averaged
             policy as well as the current one (rows of ``validation.csv`` with ``averaged`` 1
-            and 0), and either can become the run's policy. A decay of 0.98 averages over about the last 50 updates. The average is
-            kept in every checkpoint and resumed with it.
+            and 0), and either can become the run's policy. A decay of 0.98 averages over
+            about the last 50 updates. The average is kept in every checkpoint and resumed
+            with it.
     """
 
     every: Annotated[int, Bounds(0)] = 0
