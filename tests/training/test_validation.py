@@ -471,6 +471,74 @@ def test_families_hold_each_limit_at_the_worst_and_are_driven_only_for_a_would_b
     assert constraint_key(config, worst, 4.0)[1:] == constraint_key(config, own[1], 4.0)[1:]
 
 
+# the paper's scene, selected on its limits with the north car at every speed as well
+IN_THE_PAPERS_SCENE = SMALL | {
+    "env": {**SMALL["env"], "switching": "certified"},
+    "constraints": {"safety": {"budget": 0.03}},
+}
+NORTH_ANY = {"north_any": {"north_speed_kmh": [6.0, 44.0]}}
+
+
+def with_scenes(scenes, **validation):
+    criterion = {"criterion": "constraints_then_return", "scenes": scenes}
+    return IN_THE_PAPERS_SCENE | {"validation": {**SMALL["validation"], **criterion, **validation}}
+
+
+def test_scenes_are_checked_when_read_and_named_when_wrong():
+    with pytest.raises(ConfigError, match=r"north_speed_kmh"):
+        from_dict(TrainConfig, with_scenes({"bad": {"north_speed_kmh": [44.0, 6.0]}}))
+    with pytest.raises(ConfigError, match=r"validation\.scenes .*traffic.*\['north_any'\]"):
+        from_dict(TrainConfig, with_scenes(NORTH_ANY) | IN_TRAFFIC_SCENE)
+    with pytest.raises(ConfigError, match=r"validation\.scenes .*constraints_then_return"):
+        from_dict(TrainConfig, with_scenes(NORTH_ANY, criterion="return"))
+    config = from_dict(TrainConfig, with_scenes(NORTH_ANY))
+    assert config.validation.scenes["north_any"].north_speed_kmh == (6.0, 44.0)
+    from safeswitch.training.config import EnvTrainConfig  # a plant of its own has none
+
+    with pytest.raises(ConfigError, match=r"validation\.scenes must be null"):
+        from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "validation": {"scenes": NORTH_ANY}})
+
+
+IN_TRAFFIC_SCENE = {"traffic": IN_TRAFFIC["traffic"]}
+
+
+def test_a_scene_is_drawn_from_its_distribution_under_the_deployment_logic(tmp_path):
+    """A scene's validation set: its own distribution (keys not given at their defaults), the
+    run's validation seed and size, the logic the policy is deployed under, and what the policy
+    observes unchanged."""
+    validator = Validator(from_dict(TrainConfig, with_scenes(NORTH_ANY)), tmp_path)
+    own, scene = validator.validation_set, validator.families["north_any"]
+    north = scene.scenarios.north_speed * 3.6
+    assert north.min() >= 6.0 and north.max() <= 44.0
+    assert north.min() < 20.0 and north.max() > 32.0  # beyond the default 20-32 km/h
+    assert (own.scenarios.north_speed * 3.6).min() >= 20.0
+    np.testing.assert_array_equal(scene.scenarios.ego_speed, own.scenarios.ego_speed)
+    assert len(scene.scenarios.arrival_offset) == 30  # validation.episodes
+    assert scene.task.config.switching == own.task.config.switching == "certified"
+    assert scene.task.observation_bounds[0].shape == own.task.observation_bounds[0].shape
+
+
+def test_a_run_selected_on_its_scenes_records_the_worst_and_ranks_by_it(tmp_path):
+    """A small run with a scene: each would-be best validation is driven there too, the row
+    names the worst set's safety episodes, and the key the run ranked by counts the safety
+    share at the worst of the validation set and the scene."""
+    from safeswitch.training.validation import constraint_key
+
+    config = from_dict(TrainConfig, with_scenes(NORTH_ANY))
+    train(config, tmp_path / "run", progress_bar=False)
+    table = rows(tmp_path / "run")
+    driven = [r for r in table if r["worst_family"]]
+    assert driven and all(r["worst_family"] == "north_any" for r in driven)
+    assert all(int(r["family_safety_episodes"]) >= 0 for r in driven)
+    within = canned(episodes=30)
+    beyond = {
+        **within,
+        "families": {"north_any": canned(episodes=30, safety_activation_episodes=3)},
+    }
+    assert constraint_key(config, beyond, 2.0)[0] == pytest.approx(-(0.1 / 0.03 - 1.0))
+    assert constraint_key(config, within, 2.0)[0] == 0.0
+
+
 def weights_of(model):
     """A copy of the model's policy weights, by name."""
     return copied(model.policy.state_dict())

@@ -511,6 +511,15 @@ class ValidationConfig:
             worst of the validation set and these families — the issue's targets hold "at
             every density" — while clearing and the return still rank on the validation set.
             Empty: the validation set alone.
+        scenes: In the paper's scene (ours): named scenario distributions (each a whole
+            :class:`~safeswitch.leftturn.config.ScenarioConfig`; keys not given keep its
+            defaults, as the stress set's) whose scenarios the policy must keep its limits in
+            as well, counted as ``families`` are: a would-be best policy is driven on
+            ``episodes`` scenarios of each (the validation seed, the deployment logic), and
+            each limit counts at the worst of the validation set and these scenes
+            (``worst_family`` in ``validation.csv`` names the scene). For a policy trained on
+            a wider scene than it is validated on: a candidate that needs the filter only
+            where the wider scene differs is not the run's policy. Empty: none.
         average: The decay of an exponential moving average of the policy's weights, updated
             after every PPO update (Polyak averaging of the weights, as Nikishin et al. 2018
             do for A2C and DDPG); 0: none. Above 0 every validation drives the averaged
@@ -528,6 +537,7 @@ class ValidationConfig:
     criterion: Literal["return", "collisions_then_return", "constraints_then_return"] = "return"
     stress: StressConfig | None = None
     families: tuple[str, ...] = ()
+    scenes: dict[str, ScenarioConfig] = field(default_factory=dict)
     average: Annotated[float, Bounds(0, 1, high_open=True)] = 0.0
 
     def __post_init__(self) -> None:
@@ -784,6 +794,12 @@ class TrainConfig:
                   "need traffic (the paper's scene has no traffic families)")  # fmt: skip
             check(v.criterion == "constraints_then_return", "validation", "families",
                   list(v.families),
+                  "count only under criterion: constraints_then_return")  # fmt: skip
+        if v.scenes:
+            check(self.traffic is None, "validation", "scenes", list(v.scenes),
+                  "are the paper's scene's (in traffic: validation.families)")  # fmt: skip
+            check(v.criterion == "constraints_then_return", "validation", "scenes",
+                  list(v.scenes),
                   "count only under criterion: constraints_then_return")  # fmt: skip
         if self.refine.iterations:
             check(self.env.scenario is None, "refine", "iterations", self.refine.iterations,
@@ -1171,6 +1187,7 @@ class EnvTrainConfig:
             ("switching", v.switching, "a plant is validated under its own logic"),
             ("stress", v.stress, "stress sets are scenario sets of the left turn"),
             ("families", v.families or None, "traffic families are the left turn's"),
+            ("scenes", v.scenes or None, "validation scenes are the left turn's"),
         ):
             check(value is None, "validation", name, value, f"must be null ({why})")
         check(v.criterion != "constraints_then_return", "validation", "criterion", v.criterion,

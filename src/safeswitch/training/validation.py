@@ -15,7 +15,8 @@ With ``validation.families`` set (in traffic), a policy that would become the be
 driven on as many scenes of each of those traffic families, and each limit of
 ``constraints_then_return`` (comfort, speeding, safety) counts at the worst of the validation
 set and the families (``family_safety_episodes`` and ``worst_family`` in ``validation.csv``;
-blank where it was not driven there).
+blank where it was not driven there). ``validation.scenes`` does the same in the paper's scene
+with named scenario distributions.
 
 With ``validation.stress`` set, a policy that would become the best is also driven on a
 second, narrower set of scenarios where rare collisions concentrate, and its collisions there
@@ -54,7 +55,7 @@ from safeswitch.evaluation.evaluate import run_controller, summary_against_oracl
 from safeswitch.evaluation.oracle import OraclePlan
 from safeswitch.evaluation.rollout import rollout
 from safeswitch.io import POLICY_FILES, append_row, copy_policy_files, write_snapshot
-from safeswitch.leftturn.config import observed_as, traffic_config
+from safeswitch.leftturn.config import ScenarioConfig, observed_as, traffic_config
 from safeswitch.leftturn.make import build_task
 from safeswitch.leftturn.scenarios import Scenarios
 from safeswitch.leftturn.task import LeftTurnTask
@@ -279,8 +280,12 @@ class Validator(BestPolicy):
         super().__init__(config, run)
         v = config.validation
         self.validation_set = ValidationSet(config)
-        #: The traffic families a candidate must keep its limits in too (``validation.families``).
+        #: Where a candidate must keep its limits too, by name: the traffic families
+        #: (``validation.families``) or the paper scene's distributions (``validation.scenes``).
         self.families = {name: ValidationSet(config, family=name) for name in v.families}
+        self.families |= {
+            name: ValidationSet(config, scenarios=scene) for name, scene in v.scenes.items()
+        }
         env = self.task.config
         self.stress_task, self.stress_scenarios = None, None
         if v.stress is not None:
@@ -376,13 +381,22 @@ class ValidationSet:
         config: The run's configuration.
         family: A traffic preset to draw the scenes from instead of the run's traffic (what
             the policy observes stays the run's, as ``safeswitch evaluate --traffic``).
+        scenarios: The paper scene's distribution to draw the scenarios from instead of the
+            deployment's (``validation.scenes``).
     """
 
-    def __init__(self, config: TrainConfig, family: str | None = None) -> None:
+    def __init__(
+        self,
+        config: TrainConfig,
+        family: str | None = None,
+        scenarios: ScenarioConfig | None = None,
+    ) -> None:
         v = config.validation
         env = config.deployed_env
         if v.switching is not None:
             env = dataclasses.replace(env, switching=v.switching)
+        if scenarios is not None:
+            env = dataclasses.replace(env, scenarios=scenarios)
         traffic = config.traffic_settings
         if family is not None:
             assert traffic is not None  # TrainConfig refuses families without traffic
