@@ -158,13 +158,25 @@ def test_the_certified_policy_has_learned_not_to_need_the_filter(certified):
     assert certified["cut_episodes"] >= 0.20 * EVAL["episodes"]
 
 
+@pytest.fixture(scope="module")
+def certified_on_the_issues_scenarios():
+    """Issue #39 states its targets on the 1,000 unseen scenarios of seed 1000003 (what
+    ``metrics.json``, the README and ``MISSING_TARGETS`` quote), not on the tests' own set."""
+    return evaluate("learned", "certified", switching=None, **{**EVAL, "seed": 1_000_003})
+
+
+def test_the_certified_policy_is_as_quick_as_the_target(certified_on_the_issues_scenarios):
+    """Issue #39's `certified` row, its efficiency: 0.85 of the oracle or better (since the
+    recipe's noise is annealed, 2026-12-06)."""
+    assert certified_on_the_issues_scenarios["mean_efficiency"] >= 0.85
+
+
 @missing("certified")
-def test_the_certified_policy_clears_the_crossing(certified):
-    """Issue #39's `certified` row: it clears the crossing in at least 99 % of the scenarios at
-    0.85 of the oracle or better (an oracle under the filter's rules clears 997 of 1,000 with
-    the recipe's zones: ``benchmarks/certified_ceiling.py``)."""
-    assert certified["cleared_episodes"] >= 0.99 * EVAL["episodes"]
-    assert certified["mean_efficiency"] >= 0.85
+def test_the_certified_policy_clears_the_crossing(certified_on_the_issues_scenarios):
+    """Issue #39's `certified` row: it clears the crossing in at least 99 % of the scenarios (an
+    oracle under the filter's rules clears 997 of 1,000 with the recipe's zones, a careful
+    driver 989: ``benchmarks/certified_ceiling.py``)."""
+    assert certified_on_the_issues_scenarios["cleared_episodes"] >= 0.99 * EVAL["episodes"]
 
 
 @missing("paper")

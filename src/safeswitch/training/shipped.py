@@ -31,10 +31,10 @@ SHIPPED = {
 #: summary of them says so.
 MISSING_TARGETS = {
     "certified": (
-        "clears 984 of 1,000 scenarios at 0.846 of the oracle, short of issue #39's 99 % and "
-        "0.85 (it needs the filter in 5; its recipe's seeds 2 and 3 clear 982 and 982 at 0.845 "
-        "and 0.845; an oracle under the filter's rules clears 997: "
-        "benchmarks/certified_ceiling.py, docs/learning_experiments.md)"
+        "clears 983 of 1,000 scenarios at 0.850 of the oracle, short of issue #39's 99 % cleared "
+        "(it needs the filter in 1; its recipe's seeds 2 and 3 clear 983 and 979 at "
+        "0.854 and 0.854; an oracle under the filter's rules clears 997, a careful driver "
+        "989: benchmarks/certified_ceiling.py, docs/learning_experiments.md)"
     ),
     "traffic_certified": (
         "PPO from a random start that reaches 0.371 of the oracle on 1,000 test-family scenes, "
