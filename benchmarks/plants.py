@@ -120,6 +120,14 @@ def left_turn(
 #: held to, its method, and the command that makes what it needs.
 LEFT_TURN_VARIANTS = (
     (
+        "experimental/certified_go_wide_mix",
+        "certified",
+        "PPO with R_ADAS from a random start, the wide go predictor, half of its training scenes "
+        "wide, the exploration noise learned, 8 epochs, 4 M steps (the recipe shipped from "
+        "2026-12-05 to 2026-12-06, `experiments/certified_go_wide_mix.yaml`)",
+        None,
+    ),
+    (
         "experimental/certified_go_plain",
         "certified",
         "PPO with R_ADAS from a random start and a go predictor fitted on the training scene, "
