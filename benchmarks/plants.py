@@ -120,14 +120,6 @@ def left_turn(
 #: held to, its method, and the command that makes what it needs.
 LEFT_TURN_VARIANTS = (
     (
-        "experimental/certified_go_wide_mix",
-        "certified",
-        "PPO with R_ADAS from a random start, the wide go predictor, half of its training scenes "
-        "wide, the exploration noise learned, 8 epochs, 4 M steps (the recipe shipped from "
-        "2026-12-05 to 2026-12-06, `experiments/certified_go_wide_mix.yaml`)",
-        None,
-    ),
-    (
         "experimental/certified_go_plain",
         "certified",
         "PPO with R_ADAS from a random start and a go predictor fitted on the training scene, "
@@ -159,6 +151,14 @@ LEFT_TURN_VARIANTS = (
         "go predictor (`experiments/certified_go_wide_train.yaml`)",
         "python experiments/go_leftturn.py --config experimental/go_leftturn_wide_scene "
         "--out experiments/go_model_leftturn_wide.npz",
+    ),
+    (
+        "experimental/certified_go_wide_mix",
+        "certified",
+        "PPO with R_ADAS from a random start, the wide go predictor, half of its training scenes "
+        "wide, the exploration noise learned, 8 epochs, 4 M steps (the recipe shipped from "
+        "2026-12-05 to 2026-12-06, `experiments/certified_go_wide_mix.yaml`)",
+        None,
     ),
     (
         "experimental/certified_ablate_noise",
