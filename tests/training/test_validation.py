@@ -477,6 +477,7 @@ IN_THE_PAPERS_SCENE = SMALL | {
     "constraints": {"safety": {"budget": 0.03}},
 }
 NORTH_ANY = {"north_any": {"north_speed_kmh": [6.0, 44.0]}}
+IN_TRAFFIC_SCENE = {"traffic": IN_TRAFFIC["traffic"]}
 
 
 def with_scenes(scenes, **validation):
@@ -497,9 +498,6 @@ def test_scenes_are_checked_when_read_and_named_when_wrong():
 
     with pytest.raises(ConfigError, match=r"validation\.scenes must be null"):
         from_dict(EnvTrainConfig, {"env_id": "CartPole-v1", "validation": {"scenes": NORTH_ANY}})
-
-
-IN_TRAFFIC_SCENE = {"traffic": IN_TRAFFIC["traffic"]}
 
 
 def test_a_scene_is_drawn_from_its_distribution_under_the_deployment_logic(tmp_path):
@@ -529,7 +527,8 @@ def test_a_run_selected_on_its_scenes_records_the_worst_and_ranks_by_it(tmp_path
     table = rows(tmp_path / "run")
     driven = [r for r in table if r["worst_family"]]
     assert driven and all(r["worst_family"] == "north_any" for r in driven)
-    assert all(int(r["family_safety_episodes"]) >= 0 for r in driven)
+    # a policy becomes the best only once it has been driven in the scene too
+    assert all(r["worst_family"] for r in table if r["best"] == "1")
     within = canned(episodes=30)
     beyond = {
         **within,
