@@ -153,6 +153,15 @@ LEFT_TURN_VARIANTS = (
         "--out experiments/go_model_leftturn_wide.npz",
     ),
     (
+        "experimental/certified_go_annealed_e6_5m_slow",
+        "certified",
+        "PPO with R_ADAS from a random start, the wide go predictor, half of its training scenes "
+        "wide, the exploration noise annealed, 6 epochs, 5 M steps, selected on slow oncoming "
+        "cars too, the throttle alone (the recipe shipped earlier on 2026-12-06, "
+        "`experiments/certified_go_annealed_e6_5m_slow.yaml`)",
+        None,
+    ),
+    (
         "experimental/certified_go_wide_mix",
         "certified",
         "PPO with R_ADAS from a random start, the wide go predictor, half of its training scenes "

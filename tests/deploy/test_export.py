@@ -68,7 +68,10 @@ def test_manifest_states_layout_units_logic_assumptions_and_versions(exported):
     assert manifest["versions"]["onnxruntime"] != "not installed"
     assert manifest["runtime"]["supported"] is True
     assert manifest["policy"]["opset"] == OPSET
-    assert "throttle = (a + 1) / 2" in manifest["action"]["layout"][0]["meaning"]
+    # `certified` works both pedals (controllers.learned_brake); `paper` has the paper's throttle
+    assert "a < 0 the brake -a" in manifest["action"]["layout"][0]["meaning"]
+    paper = json.loads((exported("paper") / "manifest.json").read_text())
+    assert "throttle = (a + 1) / 2" in paper["action"]["layout"][0]["meaning"]
 
 
 def test_a_speed_set_point_action_is_stated_as_one():

@@ -176,23 +176,37 @@ def test_the_left_turns_shipped_recipes_use_a_plants_ppo_section_and_its_learned
     assert config.constraints.uncleared == load_config("certified").constraints.uncleared
 
 
-def test_the_shipped_certified_recipe_is_the_wide_go_recipe_annealed_and_selected_on_slow_cars():
-    """Since 2026-12-06 the `certified` recipe is the one before it (`certified_go_wide_mix`:
-    the learned go predictor fitted on the shifts' wider scene, half of the training episodes
-    drawn from it) with its exploration noise fixed and annealed from std 1 to e^-2, six epochs
-    per rollout instead of eight, 5 M steps instead of 4 M, and its selection keeping the
-    limits with the slower oncoming cars it trains on as well: the experiment record whose
-    seeds the docs quote (`certified_go_annealed_e6_5m_slow`), its predictor the same file,
-    byte for byte, packaged beside the recipe. The evaluation's scene is unchanged."""
+def test_the_shipped_certified_recipe_is_the_annealed_wide_go_recipe_with_a_learned_brake():
+    """Since 2026-12-06 the `certified` recipe is `certified_go_wide_mix` (the learned go
+    predictor fitted on the shifts' wider scene, half of the training episodes drawn from it)
+    with its exploration noise fixed and annealed from std 1 to e^-2, six epochs per rollout
+    instead of eight, 5 M steps instead of 4 M, its selection keeping the limits with the slower
+    oncoming cars it trains on as well (`certified_go_annealed_e6_5m_slow`, shipped before it on
+    the same day) and the learned action on both pedals, its exploring mean starting at full
+    throttle: the experiment record whose seeds the docs quote (`certified_annealed_brake`), its
+    predictor the same file, byte for byte, packaged beside the recipe. The evaluation's scene
+    is unchanged."""
     config = load_config("certified")
-    record = load_config("experimental/certified_go_annealed_e6_5m_slow")
+    record = load_config("experimental/certified_annealed_brake")
     assert Path(config.env.episode.go_model).parent == Path(config_path("certified")).parent
     assert (
         Path(config.env.episode.go_model).read_bytes()
         == Path(record.env.episode.go_model).read_bytes()
         == Path(load_config("experimental/certified_go_wide").env.episode.go_model).read_bytes()
     )
-    assert config != record and comparable(config) == comparable(record)
+    assert comparable(config) == comparable(record)
+    throttle_only = load_config("experimental/certified_go_annealed_e6_5m_slow")
+    assert not throttle_only.env.controllers.learned_brake
+    assert throttle_only.policy.initial_action == 0.0
+    assert config.env.controllers.learned_brake and config.policy.initial_action == 1.0
+    two_pedals = {
+        "policy": dataclasses.replace(throttle_only.policy, initial_action=1.0),
+        "env": dataclasses.replace(
+            throttle_only.env,
+            controllers=dataclasses.replace(throttle_only.env.controllers, learned_brake=True),
+        ),
+    }
+    assert comparable(dataclasses.replace(throttle_only, **two_pedals)) == comparable(config)
     before = load_config("experimental/certified_go_wide_mix")
     assert before.policy.learn_log_std and before.ppo.n_epochs == 8
     assert before.timesteps == 4_000_000 and not before.validation.scenes
@@ -210,7 +224,7 @@ def test_the_shipped_certified_recipe_is_the_wide_go_recipe_annealed_and_selecte
         ),
         "validation": dataclasses.replace(before.validation, scenes={"north_slow": slow}),
     }
-    assert comparable(dataclasses.replace(before, **changed)) == comparable(config)
+    assert comparable(dataclasses.replace(before, **changed)) == comparable(throttle_only)
     wide = config.train_env.scenarios
     assert wide.focus_share == 0.5 and wide.focus_north_speed_kmh == (6.0, 44.0)
     assert config.env.scenarios == load_config("experimental/certified_ablate_noise").env.scenarios
