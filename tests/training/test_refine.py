@@ -16,6 +16,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from safeswitch.core.config import ConfigError, from_dict, to_dict
 from safeswitch.evaluation.search import SEGMENT_S, family_of_drivers
+from safeswitch.io import write_policy_files
 from safeswitch.leftturn.traffic import LeftTurnTrafficTask
 from safeswitch.training import refine as refine_module
 from safeswitch.training import train
@@ -47,6 +48,19 @@ def shipped_run(folder, policy="certified"):
     # its config.yaml with the file it names (its go predictor)
     write_config_with_files(folder, dump_config(load_config(run_config_path(source))))
     return folder
+
+
+def slowed_run(folder, by=0.3):
+    """The shipped `certified` policy as a run, its action lowered by ``by`` wherever it is not
+    clipped (the action head's bias): a policy the small searches below can beat, so that the
+    fine-tune phase, which starts from the search's best iteration, has one to start from (the
+    shipped policy itself is faster than what those searches find)."""
+    run = shipped_run(folder)
+    policy = load_policy(run)
+    with torch.no_grad():
+        policy.model.policy.action_net.bias.sub_(by)
+    write_policy_files(run, policy.model, policy.normalizer)
+    return run
 
 
 def small_config(**refine):
@@ -333,7 +347,7 @@ FINETUNE = {
 
 @pytest.fixture(scope="module")
 def finetuned(tmp_path_factory):
-    run = shipped_run(tmp_path_factory.mktemp("finetune") / "run")
+    run = slowed_run(tmp_path_factory.mktemp("finetune") / "run")
     original = (run / "model.zip").read_bytes()
     config = small_config(iterations=2, finetune=FINETUNE)
     return run, config, refine_run(run, config, train), original
@@ -395,7 +409,7 @@ class InterruptAt(BaseCallback):
 
 @pytest.mark.slow
 def test_an_interrupted_fine_tune_phase_continues_from_its_checkpoint(tmp_path, capsys):
-    run = shipped_run(tmp_path / "run")
+    run = slowed_run(tmp_path / "run")
     original = (run / "model.zip").read_bytes()
     config = small_config(iterations=1, finetune=FINETUNE)
     with pytest.raises(KeyboardInterrupt):
@@ -450,8 +464,9 @@ def test_safeswitch_train_runs_the_phase_and_says_which_policy_it_kept(tmp_path,
     from safeswitch.cli import main
 
     run = tmp_path / "run"
+    start = slowed_run(tmp_path / "slowed")
     settings = [
-        "timesteps=2048", "n_envs=16", "eval_episodes=50", "warm_start.policy=certified",
+        "timesteps=2048", "n_envs=16", "eval_episodes=50", f"warm_start.policy={start}",
         "validation={start: 1024, every: 1024, episodes: 200}",
         "refine={iterations: 2, scenes: 60, population: 16, rounds: 3, speed_scenes: 40, "
         "speed_population: 8, speed_rounds: 3, finetune: {timesteps: 2048, n_envs: 16, "
