@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import datetime
 import json
+import multiprocessing
 import os
 import platform
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 # One core: pin every numeric library before it is imported anywhere.
 for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+
+def pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` (at least one) spawned processes, not forked ones: a fork of a
+    process whose threads hold locks (Ray's, torch's: an earlier run in the same process may have
+    started them) can crash or hang. A worker imports the script's module by name, so what it
+    runs must live at a module's top level."""
+    return ProcessPoolExecutor(max(1, workers), mp_context=multiprocessing.get_context("spawn"))
 
 
 def machine() -> dict[str, object]:

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -118,7 +117,7 @@ def main() -> None:
             for s in args.shifts
             for seed in args.seeds
         ]
-        with ProcessPoolExecutor(2) as pool:
+        with _common.pool(2) as pool:
             runs = list(pool.map(one, jobs))
     rows = []
     for run in runs:

@@ -31,10 +31,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -125,8 +123,7 @@ def safety(episodes: int) -> list[dict[str, object]]:
 def traffic_safety(episodes: int, workers: int = 2) -> list[dict[str, object]]:
     jobs = [(s, name, episodes, preset) for preset in TRAFFIC_PRESETS
             for s in ("certified", "paper") for name in ADVERSARIES]  # fmt: skip
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+    with _common.pool(workers) as pool:
         rows = list(pool.map(safety_cell, *zip(*jobs, strict=True)))
     for row in rows:
         print(f"  {row}", file=sys.stderr)

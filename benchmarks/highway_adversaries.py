@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
-    with ProcessPoolExecutor(max_workers=len(args.logics)) as pool:
+    with _common.pool(len(args.logics)) as pool:
         futures = [pool.submit(run_logic, logic, args.episodes, args.seed) for logic in args.logics]
         rows = [row for future in futures for row in future.result()]
     result = {"benchmark": "highway_adversaries", **_common.machine(), "episodes": args.episodes,

@@ -38,12 +38,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import statistics
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -440,8 +438,7 @@ def main(argv: list[str] | None = None) -> int:
     done = {run_key(r) for r in runs}
     wanted = methods(args.logics, args.imitation, args.imitation_only)
     jobs = [(lg, w, seed) for seed in args.seeds for lg, w in wanted if (lg, w, seed) not in done]
-    spawn = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=max(1, args.parallel), mp_context=spawn) as pool:
+    with _common.pool(args.parallel) as pool:
         evaluations = [pool.submit(reevaluate, run, args.keep, args.eval_episodes) for run in again]
         futures = [
             pool.submit(

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import _common
@@ -88,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     jobs = [(s, w) for s in args.seeds for w in (0.0, args.weight)]
     settings = tuple(args.set)
-    with ProcessPoolExecutor(2) as pool:
+    with _common.pool(2) as pool:
         common = (args.env, args.switching, args.penalty, args.timesteps)
         futures = [pool.submit(one_run, *common, s, w, args.episodes, settings) for s, w in jobs]
         rows = [f.result() for f in futures]

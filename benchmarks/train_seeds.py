@@ -41,7 +41,6 @@ import argparse
 import json
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -270,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
         for one in rows:
             print(json.dumps(one), flush=True)
     else:
-        with ProcessPoolExecutor(max_workers=max(1, args.parallel)) as pool:
+        with _common.pool(args.parallel) as pool:
             futures = [
                 pool.submit(
                     one_seed,
