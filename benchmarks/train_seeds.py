@@ -289,7 +289,8 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "benchmark": "train_seeds",
         **_common.machine(),
-        "parallel": args.parallel,
+        # how the kept runs were trained side by side is not in their metrics: not known here
+        "parallel": None if args.collect else args.parallel,
         **({"collected_from": str(args.collect)} if args.collect else {}),
         "config": args.config,
         **({"settings": args.set} if args.set else {}),

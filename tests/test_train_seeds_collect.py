@@ -45,6 +45,7 @@ def test_collect_rebuilds_the_rows_of_kept_runs(train_seeds, tmp_path):
     assert row["faster_than_oracle_comfort"] == evaluation["faster_than_oracle_comfort"]
     assert row["training_safety_episodes"] == 40 and row["seed"] == 1
     assert result["collected_from"] == str(tmp_path / "runs")
+    assert result["parallel"] is None  # how the kept runs were trained is not known here
     # a run kept before a field was reported: that field is None, the others kept
     del evaluation["faster_than_oracle_either"]
     kept_run(tmp_path / "older" / "seed_1", evaluation)
