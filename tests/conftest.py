@@ -1,8 +1,24 @@
+import os
+
 import pytest
 
 from safeswitch.training import train
 from safeswitch.training.callbacks import TrainingMonitor
 from safeswitch.training.generic import EnvMonitor
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _sb3_logs_in_the_session_tmp(tmp_path_factory):
+    """An SB3 model learning without a logger of its own (a test's bare ``PPO(...).learn``)
+    makes a folder ``/tmp/SB3-<time>`` per call; they go to the session's temporary folder
+    instead (``SB3_LOGDIR``, which SB3 reads; inherited by the commands tests start)."""
+    previous = os.environ.get("SB3_LOGDIR")
+    os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3"))
+    yield
+    if previous is None:
+        os.environ.pop("SB3_LOGDIR", None)
+    else:
+        os.environ["SB3_LOGDIR"] = previous
 
 
 @pytest.fixture
