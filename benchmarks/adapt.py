@@ -3,17 +3,22 @@
 ``certified``.
 
 Shifts (the policy was trained on an ego at 18–25 km/h starting 32–40 m before the conflict
-point and an oncoming car at 20–32 km/h; the defaults are the two on which the policy shipped
-until 2026-12-01, frozen, needed the safety action in at least 10 % of episodes):
+point and an oncoming car at 20–32 km/h; the default is the shift on which the policy shipped
+now, frozen, needs the safety action in at least 10 % of episodes, issue #40's condition):
 
-* ``north-fast`` (default): the oncoming car at 38–44 km/h (at 45 km/h some arrivals would
-  start the car before its route); the policy shipped since 2026-12-01 needs no safety action
-  there, and the run shows that adapting leaves such a policy as it is;
-* ``north-slow`` (default): the oncoming car at 6–12 km/h (a slow vehicle: it holds the
-  conflict zone longer);
+* ``north-fast``: the oncoming car at 38–44 km/h (at 45 km/h some arrivals would start the car
+  before its route); the defaults until 2026-12-06 with ``north-slow``, on which the policy
+  shipped until 2026-12-01 needed the safety action in at least 10 % of episodes; the policies
+  shipped since need none there, and the run shows that adapting leaves such a policy as it is;
+* ``north-slow``: the oncoming car at 6–12 km/h (a slow vehicle: it holds the conflict zone
+  longer);
 * ``ego-close``: the ego starting 22–28 m before the conflict point; ``ego-fast``: the ego
-  arriving at 28–30 km/h — on both the frozen policy needs the safety action in at least 10 %
-  of episodes and adapting does not help (its throttle cannot brake: docs/adapt.md);
+  arriving at 28–30 km/h — on both the throttle-only policies shipped until 2026-12-06 needed
+  the safety action in at least 10 % of episodes frozen, and adapting did not help them (a
+  throttle cannot brake: docs/adapt.md);
+* ``ego-close-fast`` (default): both at once, the ego starting 22–28 m out at 25–30 km/h —
+  the one shift on which the ``certified`` policy shipped since 2026-12-06 (its learned action
+  brakes too), frozen, needs the safety action in at least 10 % of episodes;
 * ``paper-north-fast``: the shipped ``paper`` policy deployed under ``certified``, the oncoming
   car at 36–43 km/h.
 
@@ -28,11 +33,11 @@ paused (settled). One torch thread per run; runs go two at a time (two cores). T
 (the first seed's runs) is written beside the JSON (``--out``).
 
 Run: ``python benchmarks/adapt.py [--episodes 20000]
-[--shifts north-fast north-slow ego-close ego-fast] [--noise STD] [--noise-decay SHARE]
-[--rehearsal SHARE] [--no-rollback] [--no-settle] [--n-envs N] [--eval-episodes N]
-[--seeds 1 2 3] [--out results/adapt.json]`` (the ``adapt`` options of the same names, for the
-ablations of docs/adapt.md; ``--replot results/adapt.json`` redraws the figure of a saved
-result).
+[--shifts ego-close-fast north-fast north-slow ego-close ego-fast] [--noise STD]
+[--noise-decay SHARE] [--rehearsal SHARE] [--no-rollback] [--no-settle] [--n-envs N]
+[--eval-episodes N] [--seeds 1 2 3] [--out results/adapt.json]`` (the ``adapt`` options of
+the same names, for the ablations of docs/adapt.md; ``--replot results/adapt.json`` redraws
+the figure of a saved result).
 """
 
 from __future__ import annotations
@@ -47,11 +52,15 @@ import _common
 SHIFTS = {
     "ego-close": ("certified", ["env.scenarios.ego_start_distance_m=[22, 28]"]),
     "ego-fast": ("certified", ["env.scenarios.ego_speed_kmh=[28, 30]"]),
+    "ego-close-fast": (
+        "certified",
+        ["env.scenarios.ego_start_distance_m=[22, 28]", "env.scenarios.ego_speed_kmh=[25, 30]"],
+    ),
     "north-fast": ("certified", ["env.scenarios.north_speed_kmh=[38, 44]"]),
     "north-slow": ("certified", ["env.scenarios.north_speed_kmh=[6, 12]"]),
     "paper-north-fast": ("paper", ["env.scenarios.north_speed_kmh=[36, 43]"]),
 }
-DEFAULT_SHIFTS = ["north-fast", "north-slow"]
+DEFAULT_SHIFTS = ["ego-close-fast"]
 SEEDS = (1, 2, 3)
 
 

@@ -5,7 +5,8 @@ cleared episodes and the efficiency against the oracle.
 
 The shifts: the training distribution itself, the oncoming car faster (32-38 and 38-44 km/h,
 ``benchmarks/adapt.py``'s north-fast) or slower (12-20 and 6-12 km/h, north-slow), the ego
-arriving at 28-30 km/h (ego-fast) and starting 22-28 m before the conflict point (ego-close).
+arriving at 28-30 km/h (ego-fast), starting 22-28 m before the conflict point (ego-close), and
+both at once at 25-30 km/h (ego-close-fast).
 
 Run: ``python benchmarks/shifts.py [--models certified RUN ...] [--at REV ...] [--episodes N]
 [--out results/shifts.json]``; ``--at REV`` adds the `certified` policy shipped at the git
@@ -32,6 +33,7 @@ SHIFTS = {  # adapt.py's shifts by their settings, and two between them and the 
     "north 6-12 km/h (north-slow)": ADAPT_SHIFTS["north-slow"][1],
     "ego 28-30 km/h (ego-fast)": ADAPT_SHIFTS["ego-fast"][1],
     "ego 22-28 m out (ego-close)": ADAPT_SHIFTS["ego-close"][1],
+    "ego 22-28 m out at 25-30 km/h (ego-close-fast)": ADAPT_SHIFTS["ego-close-fast"][1],
 }
 KEPT = ("episodes", "collisions", "failures", "safety_activation_episodes", "cleared_episodes",
         "mean_efficiency", "speeding_episodes", "comfort_violation_fraction")  # fmt: skip
