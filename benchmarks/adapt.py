@@ -43,7 +43,9 @@ the figure of a saved result).
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
+from concurrent.futures import as_completed
 from pathlib import Path
 from typing import Any
 
@@ -127,7 +129,12 @@ def main() -> None:
             for seed in args.seeds
         ]
         with _common.pool(2) as pool:
-            runs = list(pool.map(one, jobs))
+            futures = {pool.submit(one, job): job for job in jobs}
+            for future in as_completed(futures):  # a run takes minutes: say when each ends
+                shift, seed = futures[future][:2]
+                wall = future.result()["wall_time_s"]
+                print(f"{shift}, seed {seed}: adapted in {wall:.0f} s", file=sys.stderr, flush=True)
+            runs = [future.result() for future in futures]  # in the jobs' order
     rows = []
     for run in runs:
         last = run["blocks"][-1]
