@@ -17,3 +17,12 @@ def test_two_cpus_of_one_model_name_are_told_apart_by_their_vector_sets(benchmar
     assert common.cpu_simd(ZEN3) == ["avx2"]
     assert common.cpu_simd("model name\t: something without flags\n") == []
     assert set(common.machine()["simd"]) <= set(common.SIMD_FLAGS)
+
+
+def test_benchmark_pools_spawn_their_workers(benchmark_module):
+    """A forked worker of a process that has run Ray (an earlier test on the same pytest
+    worker) crashed in Ray's library; every benchmark's pool spawns its workers instead."""
+    common = benchmark_module("_common")
+    with common.pool(0) as pool:  # at least one worker
+        assert pool._mp_context.get_start_method() == "spawn"
+        assert pool._max_workers == 1
