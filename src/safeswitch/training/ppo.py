@@ -37,6 +37,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.utils import obs_as_tensor
 
+from safeswitch.leftturn.info import BatchInfos
 from safeswitch.training.interventions import recorder_of
 
 
@@ -152,6 +153,18 @@ class SwitchPPO(PPO):
         if recorder is not None:
             recorder.clear()  # the next update learns from this rollout's interventions only
         return bool(super().collect_rollouts(*args, **kwargs))
+
+    def _update_info_buffer(
+        self, infos: list[dict[str, Any]], dones: np.ndarray | None = None
+    ) -> None:
+        # SB3 reads ``episode`` and ``is_success`` from every environment's info, each step;
+        # the left turn's infos are built on access and carry those keys only where an
+        # episode ended, so only those are read (the same buffers; 3-5 % of a run's time).
+        if isinstance(infos, BatchInfos):
+            ended = np.flatnonzero(infos.done)
+            super()._update_info_buffer([infos[i] for i in ended], infos.done[ended])
+            return
+        super()._update_info_buffer(infos, dones)
 
     def train(self) -> None:
         if self.learning_paused:
