@@ -8,6 +8,13 @@ policy's decision for a single observation (normalisation + forward pass, median
 calls, 1 torch thread; a go predictor's probability, which the task computes, is not timed:
 ``benchmarks/runtime_latency.py`` times the whole decision). Run on an otherwise idle machine:
 ``python benchmarks/bench_train.py [--config FILE] [--timesteps N] [--json] [--out FILE]``.
+
+The machine this project runs on is a shared virtual machine whose speed changes from day to
+day (the same recipe took 278 s one day and 465 s the next), so the result also holds the
+machine's speed on the run's two halves, measured just before and just after the training:
+``reference`` — milliseconds per PPO update of a 3 × 128 tanh actor and critic on a minibatch of
+2,048 (one torch thread) and per step of the left turn's batched scene with 128 environments.
+Two runs' wall times compare through their references' ratio.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ import torch
 import _common
 from safeswitch.io import write_json
 from safeswitch.leftturn.make import build_task
+from safeswitch.leftturn.vec_env import LeftTurnVecEnv
 from safeswitch.training import train
 from safeswitch.training.config import load_config
 from safeswitch.training.policies import load_policy
@@ -50,6 +58,45 @@ def decision_latency_ms(run: Path, calls: int = 2000) -> float:
     return 1e3 * float(np.median(times))
 
 
+def machine_reference(updates: int = 100, steps: int = 300) -> dict[str, float]:
+    """Milliseconds per PPO-sized update and per batched step (the module docstring)."""
+    torch.set_num_threads(1)
+    torch.manual_seed(0)
+
+    def mlp(out: int) -> torch.nn.Sequential:
+        layers: list[torch.nn.Module] = []
+        width = 7
+        for _ in range(3):
+            layers += [torch.nn.Linear(width, 128), torch.nn.Tanh()]
+            width = 128
+        return torch.nn.Sequential(*layers, torch.nn.Linear(width, out))
+
+    actor, critic = mlp(1), mlp(1)
+    optimiser = torch.optim.Adam([*actor.parameters(), *critic.parameters()], lr=1e-4)
+    x, y = torch.randn(2048, 7), torch.randn(2048, 1)
+
+    def update() -> None:
+        loss = ((actor(x) - y) ** 2).mean() + ((critic(x) - y) ** 2).mean()
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+
+    env = LeftTurnVecEnv(128, switching="certified", seed=0)
+    env.reset()
+    action = np.ones((128, 1), dtype=np.float32)
+    update()
+    env.step(action)
+    t0 = time.perf_counter()
+    for _ in range(updates):
+        update()
+    t1 = time.perf_counter()
+    for _ in range(steps):
+        env.step(action)
+    t2 = time.perf_counter()
+    env.close()
+    return {"update_ms": 1e3 * (t1 - t0) / updates, "env_step_ms": 1e3 * (t2 - t1) / steps}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="paper_scratch")
@@ -61,8 +108,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.timesteps:
         config = replace(config, timesteps=args.timesteps)
     config = replace(config, eval_episodes=0)
+    before = machine_reference()
     with tempfile.TemporaryDirectory() as tmp:
         metrics = train(config, Path(tmp) / "run", progress_bar=False)
+        after = machine_reference()
         latency = decision_latency_ms(Path(tmp) / "run")
     result = {
         "benchmark": "train",
@@ -75,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         "warm_start_wall_time_s": (metrics["warm_start"] or {}).get("wall_time_s", 0.0),
         "steps_per_s": metrics["steps_per_s"],
         "decision_latency_ms": latency,
+        "reference": {"before": before, "after": after},
     }
     if args.out:
         write_json(args.out, result)
@@ -89,6 +139,11 @@ def main(argv: list[str] | None = None) -> int:
     if result["warm_start_wall_time_s"]:
         print(f"  of which the warm start: {result['warm_start_wall_time_s']:.0f} s")
     print(f"decision latency, one observation, 1 torch thread: {latency:.3f} ms")
+    print(
+        "the machine before / after: "
+        f"{before['update_ms']:.1f} / {after['update_ms']:.1f} ms per update, "
+        f"{before['env_step_ms']:.2f} / {after['env_step_ms']:.2f} ms per step"
+    )
     return 0
 
 
