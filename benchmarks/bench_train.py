@@ -11,10 +11,10 @@ calls, 1 torch thread; a go predictor's probability, which the task computes, is
 
 The machine this project runs on is a shared virtual machine whose speed changes from day to
 day (the same recipe took 278 s one day and 465 s the next), so the result also holds the
-machine's speed on the run's two halves, measured just before and just after the training:
-``reference`` — milliseconds per PPO update of a 3 × 128 tanh actor and critic on a minibatch of
-2,048 (one torch thread) and per step of the left turn's batched scene with 128 environments.
-Two runs' wall times compare through their references' ratio.
+machine's speed measured just before and just after the training: ``reference`` —
+milliseconds per PPO update of a 3 × 128 tanh actor and critic on a minibatch of 2,048 (one
+torch thread) and per step of the left turn's batched scene with 128 environments. Two runs'
+wall times compare through their references' ratio.
 """
 
 from __future__ import annotations
