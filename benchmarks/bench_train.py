@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from stable_baselines3.common.torch_layers import create_mlp
 
 import _common
 from safeswitch.io import write_json
@@ -63,15 +64,9 @@ def machine_reference(updates: int = 100, steps: int = 300) -> dict[str, float]:
     torch.set_num_threads(1)
     torch.manual_seed(0)
 
-    def mlp(out: int) -> torch.nn.Sequential:
-        layers: list[torch.nn.Module] = []
-        width = 7
-        for _ in range(3):
-            layers += [torch.nn.Linear(width, 128), torch.nn.Tanh()]
-            width = 128
-        return torch.nn.Sequential(*layers, torch.nn.Linear(width, out))
-
-    actor, critic = mlp(1), mlp(1)
+    actor, critic = [
+        torch.nn.Sequential(*create_mlp(7, 1, [128] * 3, torch.nn.Tanh)) for _ in (0, 1)
+    ]
     optimiser = torch.optim.Adam([*actor.parameters(), *critic.parameters()], lr=1e-4)
     x, y = torch.randn(2048, 7), torch.randn(2048, 1)
 
